@@ -1,0 +1,40 @@
+"""decco-warp: soft-sphere DEM of self-gravitating rubble piles on NVIDIA Warp.
+
+>>> import decco_warp as dw
+>>> p = dw.Params(k_in=1e18, restitution=0.9, mu_k=0.3, mu_r=1e-3, dt=0.04)
+>>> s = dw.State.from_arrays(positions, velocities, omegas, radii, masses)
+>>> force, torque = dw.compute_forces(s, p, device="cpu")
+>>> sim = dw.Simulation(s, p, device="cpu"); sim.step(100)
+>>> dw.diagnostics(sim.state, p)
+"""
+
+import warp as _wp
+
+# Warp's start-up banner and per-module compile lines are noise for users.
+_wp.config.log_level = _wp.LOG_WARNING
+
+from ._version import __version__  # noqa: E402
+from .device import DeviceError, resolve_device  # noqa: E402
+from .diagnostics import diagnostics  # noqa: E402
+from .engine import Layout  # noqa: E402
+from .params import G_CGS, ROLLING_FRICTION_FORMS, Params  # noqa: E402
+from .simulation import Simulation, compute_forces  # noqa: E402
+from .stability import StabilityError, StabilityReport, check_stability  # noqa: E402
+from .state import State  # noqa: E402
+
+__all__ = [
+    "__version__",
+    "DeviceError",
+    "G_CGS",
+    "Layout",
+    "Params",
+    "ROLLING_FRICTION_FORMS",
+    "Simulation",
+    "StabilityError",
+    "StabilityReport",
+    "State",
+    "check_stability",
+    "compute_forces",
+    "diagnostics",
+    "resolve_device",
+]

@@ -1,0 +1,85 @@
+"""Which Warp device a run uses.
+
+``device=None`` means the ``DECCO_DEVICE`` environment variable if set, else
+CUDA when Warp finds a GPU, else the CPU.  An explicit device always wins.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+import tempfile
+
+import warp as wp
+
+ENV_VARIABLE = "DECCO_DEVICE"
+
+# Warp's native library prints this on every start on a machine without an
+# NVIDIA driver; running on the CPU there is normal, not worth a warning.
+_NO_DRIVER_NOTICE = "Could not find or load the NVIDIA CUDA driver"
+
+
+def init_warp() -> None:
+    """Initialise Warp once, dropping only the no-driver notice from its native stderr."""
+    if wp._src.context.runtime is not None:
+        return
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile(mode="w+b") as captured:
+        os.dup2(captured.fileno(), 2)
+        try:
+            wp.init()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        captured.seek(0)
+        for line in captured.read().decode(errors="replace").splitlines():
+            if _NO_DRIVER_NOTICE not in line:
+                print(line, file=sys.stderr)
+
+
+class DeviceError(ValueError):
+    """A device name that is malformed or not present on this machine."""
+
+
+def cuda_device_count() -> int:
+    init_warp()
+    return wp.get_cuda_device_count()
+
+
+def resolve_device(device: str | None = None) -> str:
+    """Return a Warp device name ("cpu" or "cuda:N") for a user's choice.
+
+    >>> resolve_device("cpu")
+    'cpu'
+    """
+    init_warp()
+    source = "device"
+    if device is None:
+        device = os.environ.get(ENV_VARIABLE) or None
+        source = ENV_VARIABLE
+    if device is None:
+        return "cuda:0" if cuda_device_count() > 0 else "cpu"
+    name = str(device).strip().lower()
+    if name == "cpu":
+        return "cpu"
+    match = re.fullmatch(r"cuda(?::(\d+))?", name)
+    if not match:
+        raise DeviceError(f"{source} must be cpu, cuda or cuda:N; got {device!r}")
+    index = int(match.group(1) or 0)
+    count = cuda_device_count()
+    if count == 0:
+        raise DeviceError(f"{source} {device!r} asks for CUDA, but Warp finds no CUDA device here; use cpu")
+    if index >= count:
+        raise DeviceError(f"{source} {device!r}: there are only {count} CUDA device(s), cuda:0 to cuda:{count - 1}")
+    return f"cuda:{index}"
+
+
+def describe_devices() -> list[dict]:
+    """Name and kind of every device Warp can use."""
+    init_warp()
+    return [
+        {"name": d.alias, "description": d.name, "is_cuda": d.is_cuda}
+        for d in wp.get_devices()
+    ]

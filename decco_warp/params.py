@@ -1,0 +1,76 @@
+"""Material and run constants of the DECCO model (paper Table 1, physics.md)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+
+#: Gravitational constant [cm^3 g^-1 s^-2] (CODATA 2018).
+G_CGS = 6.67430e-8
+
+#: Rolling-friction forms (physics.md): "couple" opposes relative rolling and is
+#: the default; "paper" is the force printed as the paper's eq. 9, for comparison.
+ROLLING_FRICTION_FORMS = ("couple", "paper")
+
+
+@dataclass(frozen=True)
+class Params:
+    """Constants of a run, in cgs.  Defaults are the paper's (Table 1, sect. 3.1).
+
+    >>> p = Params(k_in=1e18, restitution=0.9, mu_k=0.3, mu_r=1e-3, dt=0.04)
+    >>> p.k_out
+    8.1e+17
+    """
+
+    k_in: float = 1e18
+    """Spring constant while two spheres approach [dyne/cm]."""
+    restitution: float = 0.9
+    """Coefficient of restitution eps; the receding spring is k_out = eps^2 k_in (paper eq. 4)."""
+    mu_k: float = 0.3
+    """Sliding (kinetic) friction coefficient."""
+    mu_r: float = 1e-3
+    """Rolling friction coefficient."""
+    dt: float = 0.04
+    """Time step [s]."""
+    G: float = G_CGS
+    """Gravitational constant [cm^3 g^-1 s^-2]; 0 switches gravity off."""
+    rolling_friction: str = "couple"
+    """Form of rolling friction, one of ROLLING_FRICTION_FORMS."""
+
+    def __post_init__(self):
+        _require(self, "k_in", lambda v: v > 0, "> 0 [dyne/cm]")
+        _require(self, "restitution", lambda v: 0 < v <= 1, "in (0, 1]")
+        _require(self, "mu_k", lambda v: v >= 0, ">= 0")
+        _require(self, "mu_r", lambda v: v >= 0, ">= 0")
+        _require(self, "dt", lambda v: v > 0, "> 0 [s]")
+        _require(self, "G", lambda v: v >= 0, ">= 0 [cm^3 g^-1 s^-2]")
+        if self.rolling_friction not in ROLLING_FRICTION_FORMS:
+            raise ValueError(
+                f"rolling_friction must be one of {', '.join(ROLLING_FRICTION_FORMS)}; got {self.rolling_friction!r}"
+            )
+
+    @property
+    def k_out(self) -> float:
+        """Spring constant while receding or at rest, eps^2 k_in [dyne/cm]."""
+        return self.restitution**2 * self.k_in
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, values: dict) -> "Params":
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"unknown parameter(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
+        return cls(**values)
+
+
+def _require(params: Params, name: str, ok, allowed: str) -> None:
+    value = getattr(params, name)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{name} must be a number {allowed}; got {value!r}")
+    value = float(value)
+    if not math.isfinite(value) or not ok(value):
+        raise ValueError(f"{name} must be {allowed}; got {value!r}")
+    object.__setattr__(params, name, value)

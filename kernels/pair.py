@@ -1,0 +1,255 @@
+"""The physics of one pair of spheres, as small Warp functions (physics.md).
+
+Every function here is pure: it takes the state of spheres i and j and returns
+what i receives from j.  The kernels in :mod:`decco_warp.kernels.forces` only
+gather pairs and sum.  Everything in contact is float64: the overlap of two
+~1e6 cm spheres is ~1e2 cm, and its velocity-dependent terms (the k_in/k_out
+switch, the slip) need the same resolution.
+
+Sign conventions (physics.md, "Pair geometry"):
+    r_ij = x_i - x_j,  d = |r_ij|,  n = r_ij / d  (unit vector from j to i)
+    overlap delta = R_i + R_j - d   (in contact when > 0)
+    lever arms to the contact point c = (R_j x_i + R_i x_j) / (R_i + R_j):
+        a_i = -(R_i / (R_i + R_j)) r_ij,   a_j = +(R_j / (R_i + R_j)) r_ij
+
+Each result is exactly antisymmetric under i <-> j in floating point (the same
+operations on negated operands), so computing every pair twice, once from each
+side, still conserves momentum to round-off.
+"""
+
+import warp as wp
+
+wp.set_module_options({"enable_backward": False})
+
+vec3d = wp.vec3d
+f64 = wp.float64
+
+
+@wp.struct
+class ContactModel:
+    """Constants of the contact and gravity model (cgs, float64), passed to every force kernel."""
+
+    G: wp.float64  # gravitational constant [cm^3 g^-1 s^-2]
+    k_in: wp.float64  # spring constant while approaching [dyne/cm]
+    k_out: wp.float64  # spring constant while receding, restitution^2 * k_in [dyne/cm]
+    mu_k: wp.float64  # sliding (kinetic) friction coefficient
+    mu_r: wp.float64  # rolling friction coefficient
+
+
+# --- gravity (paper eq. 2) ---------------------------------------------------
+
+
+@wp.func
+def gravity(r_ij: wp.vec3f, g_mass_mass: wp.float32) -> wp.vec3f:
+    """Gravity on i from j, -G m_i m_j / d^2 n, in float32 (the fast default)."""
+    d2 = wp.dot(r_ij, r_ij)
+    inv_d = 1.0 / wp.sqrt(d2)
+    return (-g_mass_mass * inv_d * inv_d * inv_d) * r_ij
+
+
+@wp.func
+def gravity(r_ij: wp.vec3d, g_mass_mass: wp.float64) -> wp.vec3d:
+    """Gravity on i from j, -G m_i m_j / d^2 n, in float64."""
+    d2 = wp.dot(r_ij, r_ij)
+    inv_d = f64(1.0) / wp.sqrt(d2)
+    return (-g_mass_mass * inv_d * inv_d * inv_d) * r_ij
+
+
+# --- contact geometry ----------------------------------------------------------
+
+
+@wp.func
+def overlap(distance: wp.float64, radius_i: wp.float64, radius_j: wp.float64) -> wp.float64:
+    """delta = R_i + R_j - d; positive when the spheres touch."""
+    return radius_i + radius_j - distance
+
+
+@wp.func
+def in_contact(d2: wp.float64, radius_i: wp.float64, radius_j: wp.float64) -> bool:
+    """True when delta > 0, tested on d^2 so that no square root is taken for distant pairs."""
+    reach = radius_i + radius_j
+    return d2 < reach * reach
+
+
+@wp.func
+def lever_arm(r_ij: wp.vec3d, radius_i: wp.float64, radius_j: wp.float64) -> wp.vec3d:
+    """a_i = -(R_i / (R_i + R_j)) r_ij: from the centre of i to the shared contact point."""
+    return (-radius_i / (radius_i + radius_j)) * r_ij
+
+
+# --- normal spring (paper eqs. 4-5) --------------------------------------------
+
+
+@wp.func
+def spring_constant(normal_speed: wp.float64, k_in: wp.float64, k_out: wp.float64) -> wp.float64:
+    """k_in while approaching ((v_i - v_j).n < 0), k_out = eps^2 k_in while receding or at rest."""
+    if normal_speed < f64(0.0):
+        return k_in
+    return k_out
+
+
+@wp.func
+def normal_force_magnitude(delta: wp.float64, k: wp.float64) -> wp.float64:
+    """|F_N| = (k/2) delta: two springs in series, one per sphere."""
+    return f64(0.5) * k * delta
+
+
+# --- sliding friction (paper eqs. 6-8, signs of physics.md) --------------------
+
+
+@wp.func
+def surface_slip(
+    n: wp.vec3d,
+    velocity_i: wp.vec3d,
+    omega_i: wp.vec3d,
+    arm_i: wp.vec3d,
+    velocity_j: wp.vec3d,
+    omega_j: wp.vec3d,
+    arm_j: wp.vec3d,
+) -> wp.vec3d:
+    """Tangential velocity of i's surface relative to j's at the contact point."""
+    g = (velocity_i + wp.cross(omega_i, arm_i)) - (velocity_j + wp.cross(omega_j, arm_j))
+    return g - wp.dot(g, n) * n
+
+
+@wp.func
+def sliding_friction(slip: wp.vec3d, normal_magnitude: wp.float64, mu_k: wp.float64) -> wp.vec3d:
+    """F_S = -mu_k |F_N| s/|s| on i: opposes the slip; zero without slip."""
+    speed = wp.length(slip)
+    if speed > f64(0.0):
+        return (-mu_k * normal_magnitude / speed) * slip
+    return vec3d()
+
+
+# --- rolling friction (paper eq. 9) ---------------------------------------------
+
+
+@wp.func
+def rolling_couple(
+    n: wp.vec3d,
+    omega_i: wp.vec3d,
+    omega_j: wp.vec3d,
+    normal_magnitude: wp.float64,
+    mu_r: wp.float64,
+    reduced_radius: wp.float64,
+) -> wp.vec3d:
+    """Torque on i, -mu_r |F_N| R* W/|W| with W the relative rotation without twist.
+
+    A pure couple (physics.md default): it opposes relative rolling and moves no
+    momentum or angular momentum between the spheres.
+    """
+    relative = omega_i - omega_j
+    rolling = relative - wp.dot(relative, n) * n
+    rate = wp.length(rolling)
+    if rate > f64(0.0):
+        return (-mu_r * normal_magnitude * reduced_radius / rate) * rolling
+    return vec3d()
+
+
+@wp.func
+def rolling_force_printed(
+    r_ij: wp.vec3d,
+    omega_i: wp.vec3d,
+    omega_j: wp.vec3d,
+    normal_magnitude: wp.float64,
+    mu_r: wp.float64,
+    i_is_first: bool,
+) -> wp.vec3d:
+    """The paper's printed eq. 9, -mu_r |F_N| (w_i - w_j) x r_ij / |...|, as a force on i.
+
+    The printed expression is symmetric in i <-> j, so taken literally both spheres
+    would get the same force.  The paper says j gets the opposite one; we apply it
+    to the lower-index sphere of the pair and its negative to the other, so that
+    momentum is conserved.  Kept for comparison only (physics.md).
+    """
+    direction = wp.cross(omega_i - omega_j, r_ij)
+    size = wp.length(direction)
+    if size > f64(0.0):
+        force = (-mu_r * normal_magnitude / size) * direction
+        if i_is_first:
+            return force
+        return -force
+    return vec3d()
+
+
+# --- one contact, composed ------------------------------------------------------
+
+
+@wp.func
+def normal_and_sliding(
+    model: ContactModel,
+    r_ij: wp.vec3d,
+    d2: wp.float64,
+    radius_i: wp.float64,
+    velocity_i: wp.vec3d,
+    omega_i: wp.vec3d,
+    radius_j: wp.float64,
+    velocity_j: wp.vec3d,
+    omega_j: wp.vec3d,
+):
+    """Spring and sliding friction on i from j, for a pair in contact.
+
+    Returns (force on i, torque on i about its centre, n, |F_N|, a_i).
+    """
+    d = wp.sqrt(d2)
+    n = r_ij / d
+    delta = overlap(d, radius_i, radius_j)
+    k = spring_constant(wp.dot(velocity_i - velocity_j, n), model.k_in, model.k_out)
+    normal_magnitude = normal_force_magnitude(delta, k)
+    arm_i = lever_arm(r_ij, radius_i, radius_j)
+    arm_j = lever_arm(-r_ij, radius_j, radius_i)  # j's own arm, seen from j
+    slip = surface_slip(n, velocity_i, omega_i, arm_i, velocity_j, omega_j, arm_j)
+    friction = sliding_friction(slip, normal_magnitude, model.mu_k)
+    force = normal_magnitude * n + friction
+    torque = wp.cross(arm_i, friction)
+    return force, torque, n, normal_magnitude, arm_i
+
+
+@wp.func
+def contact_with_rolling_couple(
+    model: ContactModel,
+    r_ij: wp.vec3d,
+    d2: wp.float64,
+    radius_i: wp.float64,
+    velocity_i: wp.vec3d,
+    omega_i: wp.vec3d,
+    radius_j: wp.float64,
+    velocity_j: wp.vec3d,
+    omega_j: wp.vec3d,
+    i_is_first: bool,
+):
+    """Force and torque on i from a touching j; rolling friction as a couple (default)."""
+    force, torque, n, normal_magnitude, arm_i = normal_and_sliding(
+        model, r_ij, d2, radius_i, velocity_i, omega_i, radius_j, velocity_j, omega_j
+    )
+    reduced_radius = radius_i * radius_j / (radius_i + radius_j)
+    torque += rolling_couple(n, omega_i, omega_j, normal_magnitude, model.mu_r, reduced_radius)
+    return force, torque
+
+
+@wp.func
+def contact_with_printed_rolling(
+    model: ContactModel,
+    r_ij: wp.vec3d,
+    d2: wp.float64,
+    radius_i: wp.float64,
+    velocity_i: wp.vec3d,
+    omega_i: wp.vec3d,
+    radius_j: wp.float64,
+    velocity_j: wp.vec3d,
+    omega_j: wp.vec3d,
+    i_is_first: bool,
+):
+    """Force and torque on i from a touching j; rolling friction as the paper prints it."""
+    force, torque, n, normal_magnitude, arm_i = normal_and_sliding(
+        model, r_ij, d2, radius_i, velocity_i, omega_i, radius_j, velocity_j, omega_j
+    )
+    rolling = rolling_force_printed(r_ij, omega_i, omega_j, normal_magnitude, model.mu_r, i_is_first)
+    return force + rolling, torque + wp.cross(arm_i, rolling)
+
+
+# Rolling-friction forms by name (Params.rolling_friction).
+CONTACT_FUNCTIONS = {
+    "couple": contact_with_rolling_couple,
+    "paper": contact_with_printed_rolling,
+}
