@@ -1,0 +1,89 @@
+"""An independent float64 NumPy implementation of physics.md, the yardstick for the kernels.
+
+Written from physics.md directly, one pair at a time, sharing no code with the
+kernels.  Slow (a Python loop over contacts) but plain.
+"""
+
+import numpy as np
+
+
+def pair_loop_forces(x, v, w, radii, masses, k_in, restitution, mu_k, mu_r, G, rolling="couple"):
+    """Force and torque on every particle, plus each particle's largest pair force and torque.
+
+    Returns (force, torque, force_scale, torque_scale), all float64.
+    """
+    n = len(radii)
+    force = np.zeros((n, 3))
+    torque = np.zeros((n, 3))
+    force_scale = np.zeros(n)
+    torque_scale = np.zeros(n)
+    k_out = restitution**2 * k_in
+    for i in range(n):
+        r = x[i] - x  # r_ij for every j
+        d = np.sqrt((r * r).sum(axis=1))
+        others = np.arange(n) != i
+        # gravity, paper eq. 2: -G m_i m_j / d^2 n
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pair_gravity = (-G * masses[i] * masses / d**3)[:, None] * r
+        pair_gravity[~others] = 0.0
+        force[i] += pair_gravity.sum(axis=0)
+        force_scale[i] = np.sqrt((pair_gravity**2).sum(axis=1)).max() if n > 1 else 0.0
+        touching = np.flatnonzero(others & (radii[i] + radii - d > 0))
+        for j in touching:
+            nij = r[j] / d[j]
+            delta = radii[i] + radii[j] - d[j]
+            approaching = np.dot(v[i] - v[j], nij) < 0
+            k = k_in if approaching else k_out
+            fn = 0.5 * k * delta
+            arm_i = -(radii[i] / (radii[i] + radii[j])) * r[j]
+            arm_j = (radii[j] / (radii[i] + radii[j])) * r[j]
+            g = (v[i] + np.cross(w[i], arm_i)) - (v[j] + np.cross(w[j], arm_j))
+            slip = g - np.dot(g, nij) * nij
+            slip_speed = np.linalg.norm(slip)
+            f_slide = -mu_k * fn * slip / slip_speed if slip_speed > 0 else np.zeros(3)
+            f_pair = fn * nij + f_slide
+            t_pair = np.cross(arm_i, f_slide)
+            if rolling == "couple":
+                rel = w[i] - w[j]
+                roll = rel - np.dot(rel, nij) * nij
+                rate = np.linalg.norm(roll)
+                if rate > 0:
+                    reduced = radii[i] * radii[j] / (radii[i] + radii[j])
+                    t_pair = t_pair - mu_r * fn * reduced * roll / rate
+            elif rolling == "paper":
+                direction = np.cross(w[i] - w[j], r[j])
+                size = np.linalg.norm(direction)
+                if size > 0:
+                    f_roll = -mu_r * fn * direction / size
+                    if i > j:  # the printed force acts on the lower index, its opposite on the other
+                        f_roll = -f_roll
+                    f_pair = f_pair + f_roll
+                    t_pair = t_pair + np.cross(arm_i, f_roll)
+            else:
+                raise ValueError(rolling)
+            force[i] += f_pair
+            torque[i] += t_pair
+            force_scale[i] = max(force_scale[i], np.linalg.norm(f_pair + pair_gravity[j]))
+            torque_scale[i] = max(torque_scale[i], np.linalg.norm(t_pair))
+    return force, torque, force_scale, torque_scale
+
+
+def energies(x, v, w, radii, masses, k_in, restitution, G):
+    """Kinetic, rotational, potential and elastic energy in float64 (physics.md conventions)."""
+    inertia = 0.4 * masses * radii**2
+    kinetic = 0.5 * (masses * (v * v).sum(axis=1)).sum()
+    rotational = 0.5 * (inertia * (w * w).sum(axis=1)).sum()
+    potential = 0.0
+    elastic = 0.0
+    n = len(radii)
+    for i in range(n - 1):
+        r = x[i] - x[i + 1 :]
+        d = np.sqrt((r * r).sum(axis=1))
+        potential -= (G * masses[i] * masses[i + 1 :] / d).sum()
+        delta = radii[i] + radii[i + 1 :] - d
+        for jj in np.flatnonzero(delta > 0):
+            j = i + 1 + jj
+            approaching = np.dot(v[i] - v[j], r[jj] / d[jj]) < 0
+            k = k_in if approaching else restitution**2 * k_in
+            elastic += 0.25 * k * delta[jj] ** 2
+    return kinetic, rotational, potential, elastic

@@ -1,0 +1,136 @@
+"""The pinned Python API, input checking, device choice and the CLI."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from scenes import contact_cluster
+
+import decco_warp as dw
+from decco_warp.cli import app
+
+
+def _arrays(n=3):
+    rng = np.random.default_rng(0)
+    return (rng.normal(size=(n, 3)) * 1e7, np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, 1e6), np.full(n, 1e19))
+
+
+def test_state_from_arrays_copies_and_types():
+    x, v, w, r, m = _arrays()
+    state = dw.State.from_arrays(x, v, w, r, m)
+    x[0, 0] = 0.0
+    assert state.positions[0, 0] != 0.0
+    assert state.positions.dtype == np.float64 and state.n == 3
+    np.testing.assert_allclose(state.inertia, 0.4 * m * r**2)
+    assert state.pile_id.dtype == np.int32 and np.all(state.pile_id == 0)
+
+
+@pytest.mark.parametrize(
+    "change, match",
+    [
+        (lambda a: a.__setitem__(3, np.array([1e6, -1.0, 1e6])), "radii must be > 0; particle 1"),
+        (lambda a: a.__setitem__(4, np.array([1e19, 1e19, 0.0])), "masses must be > 0; particle 2"),
+        (lambda a: a.__setitem__(0, np.zeros((3, 2))), r"positions must have shape \(3, 3\)"),
+        (lambda a: a.__setitem__(1, np.full((3, 3), np.nan)), "velocities must be finite"),
+        (lambda a: a.__setitem__(2, "spin"), "omegas must be numeric"),
+        (lambda a: a.__setitem__(3, np.zeros(0)), "at least one particle"),
+    ],
+)
+def test_state_rejects_bad_arrays(change, match):
+    arrays = list(_arrays())
+    change(arrays)
+    with pytest.raises(ValueError, match=match):
+        dw.State.from_arrays(*arrays)
+
+
+def test_params_defaults_and_checks():
+    p = dw.Params()
+    assert (p.k_in, p.restitution, p.mu_k, p.mu_r, p.dt, p.G) == (1e18, 0.9, 0.3, 1e-3, 0.04, 6.67430e-8)
+    assert p.k_out == pytest.approx(0.81e18)
+    for bad, match in [
+        (dict(k_in=0), "k_in must be > 0"),
+        (dict(restitution=1.5), r"restitution must be in \(0, 1\]"),
+        (dict(mu_k=-0.1), "mu_k must be >= 0"),
+        (dict(dt=float("nan")), "dt must be > 0"),
+        (dict(rolling_friction="spiral"), "rolling_friction must be one of couple, paper"),
+        (dict(k_in="stiff"), "k_in must be a number"),
+    ]:
+        with pytest.raises(ValueError, match=match):
+            dw.Params(**bad)
+    assert dw.Params.from_dict(p.to_dict()) == p
+    with pytest.raises(ValueError, match="unknown parameter"):
+        dw.Params.from_dict({"k": 1.0})
+
+
+def test_device_choice(monkeypatch):
+    monkeypatch.delenv("DECCO_DEVICE", raising=False)
+    expected = "cuda:0" if dw.device.cuda_device_count() else "cpu"
+    assert dw.resolve_device(None) == expected
+    monkeypatch.setenv("DECCO_DEVICE", "cpu")
+    assert dw.resolve_device(None) == "cpu"
+    assert dw.resolve_device("CPU") == "cpu"  # an explicit choice wins over the environment
+    for bad in ["gpu", "cuda:x", "cuda:99"]:
+        with pytest.raises(dw.DeviceError):
+            dw.resolve_device(bad)
+    monkeypatch.setenv("DECCO_DEVICE", "tpu")
+    with pytest.raises(dw.DeviceError, match="DECCO_DEVICE"):
+        dw.resolve_device(None)
+
+
+def test_simulation_bookkeeping_and_compute_forces_agree(device):
+    state = contact_cluster(20, seed=2)
+    params = dw.Params()
+    sim = dw.Simulation(state, params, device=device)
+    force, torque = dw.compute_forces(state, params, device=device)
+    np.testing.assert_array_equal(sim.forces()[0], force)
+    np.testing.assert_array_equal(sim.forces()[1], torque)
+    sim.step(0)
+    assert sim.state.step == 0 and np.array_equal(sim.state.positions, state.positions)
+    sim.step(3)
+    sim.step(4)
+    assert sim.step_count == 7 and sim.time == pytest.approx(7 * params.dt)
+    snapshot = sim.state
+    snapshot.positions[:] = 0.0  # a copy: the simulation is untouched
+    assert not np.array_equal(sim.state.positions, snapshot.positions)
+    with pytest.raises(ValueError, match="non-negative integer"):
+        sim.step(-1)
+    with pytest.raises(ValueError, match="precision"):
+        dw.compute_forces(state, params, device=device, precision="half")
+
+
+def test_split_steps_equal_one_run(device):
+    """Steps are steps: 3 + 60 + 7 (graph replays on CUDA, launches elsewhere) equal 70 in one call."""
+    state = contact_cluster(30, seed=4)
+    a = dw.Simulation(state, dw.Params(), device=device)
+    a.step(70)
+    b = dw.Simulation(state, dw.Params(), device=device)
+    for n in (3, 60, 7):
+        b.step(n)
+    np.testing.assert_array_equal(a.state.positions, b.state.positions)
+    np.testing.assert_array_equal(a.state.omegas, b.state.omegas)
+
+
+def _cli(*args, env=None):
+    return subprocess.run(
+        [sys.executable, "-c", "from decco_warp.cli import app; app()", *args],
+        capture_output=True,
+        text=True,
+        env=env,
+    )
+
+
+def test_cli_version_and_info():
+    out = _cli("--version")
+    assert out.returncode == 0 and out.stdout.strip() == f"decco-warp {dw.__version__}"
+    out = _cli("info", "--device", "cpu")
+    assert out.returncode == 0, out.stderr
+    assert "warp-lang" in out.stdout and "would use: cpu" in out.stdout
+    assert "Traceback" not in out.stderr
+
+
+def test_cli_rejects_bad_device_in_one_line():
+    out = _cli("info", "--device", "gpu0")
+    assert out.returncode == 2
+    assert out.stderr.strip().count("\n") == 0 and "cpu, cuda or cuda:N" in out.stderr
+    assert app.info.name == "decco-warp"

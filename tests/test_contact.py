@@ -1,0 +1,175 @@
+"""Contact physics in small scenes with known answers: restitution, friction, rolling."""
+
+import numpy as np
+import pytest
+from scenes import overlapping_cloud, sphere_mass, two_spheres
+
+import decco_warp as dw
+
+NO_GRAVITY = dict(G=0.0)
+
+
+def _relative_normal_speed(state):
+    n = state.positions[0] - state.positions[1]
+    n /= np.linalg.norm(n)
+    return float(np.dot(state.velocities[0] - state.velocities[1], n))
+
+
+def test_head_on_restitution_and_spring_switch(device):
+    """Two equal spheres meet head on: v_out / v_in = eps, loading with k_in and unloading with k_out."""
+    radius = 1.5e6
+    params = dw.Params(restitution=0.9, mu_k=0.3, mu_r=1e-3, **NO_GRAVITY)
+    state = two_spheres(2 * radius + 1e3, velocity_i=(100.0, 0, 0), velocity_j=(-100.0, 0, 0), radius=radius)
+    sim = dw.Simulation(state, params, device=device, precision="float64")
+    v_in = _relative_normal_speed(state)
+    stiffness_seen = []
+    for _ in range(2000):
+        sim.step(1)
+        now = sim.state
+        d = np.linalg.norm(now.positions[0] - now.positions[1])
+        overlap = 2 * radius - d
+        if overlap > 0:
+            force, _ = sim.forces()
+            # |F| = (k/2) overlap: recover k at this step.
+            stiffness_seen.append(2 * np.linalg.norm(force[0]) / overlap)
+        elif stiffness_seen:
+            break
+    v_out = _relative_normal_speed(sim.state)
+    assert v_in < 0 < v_out
+    assert abs(v_out / -v_in - params.restitution) <= 0.01 * params.restitution
+    stiffness_seen = np.array(stiffness_seen)
+    loading = np.isclose(stiffness_seen, params.k_in, rtol=1e-9)
+    unloading = np.isclose(stiffness_seen, params.k_out, rtol=1e-9)
+    assert np.all(loading | unloading)
+    # One switch, from k_in while approaching to k_out while receding.
+    first_unloading = np.argmax(unloading)
+    assert loading[:first_unloading].all() and unloading[first_unloading:].all()
+    assert 50 < first_unloading < len(stiffness_seen) - 50
+
+
+def _contact_pair(omega_i=(0, 0, 0), velocity_i=(0, 0, 0), overlap=100.0, radius=1.5e6):
+    return two_spheres(2 * radius - overlap, velocity_i=velocity_i, omega_i=omega_i, radius=radius)
+
+
+def test_sliding_friction_opposes_slip_with_magnitude_mu_k_times_normal(device):
+    radius = 1.5e6
+    params = dw.Params(mu_r=0.0, **NO_GRAVITY)
+    # i on the left, sliding along +y and spinning about z: slip at the contact along y.
+    state = _contact_pair(omega_i=(0, 0, 2e-5), velocity_i=(-1.0, 30.0, 0), radius=radius)
+    force, torque = dw.compute_forces(state, params, device=device, precision="float64")
+    n = np.array([-1.0, 0, 0])  # from j to i
+    normal = np.dot(force[0], n)
+    tangential = force[0] - normal * n
+    assert normal > 0  # repulsion
+    assert np.isclose(np.linalg.norm(tangential), params.mu_k * normal, rtol=1e-12)
+    # Slip of i's surface relative to j's at the contact point.
+    arm_i = np.array([radius, 0, 0]) - 50.0 * np.array([1, 0, 0])
+    arm_j = -arm_i
+    slip = state.velocities[0] + np.cross(state.omegas[0], arm_i)
+    slip -= np.dot(slip, n) * n
+    assert np.dot(tangential, slip) < 0
+    # The forces and torques on both spheres make the slip shrink.
+    inertia = state.inertia
+    accel = force[0] / state.masses[0] - force[1] / state.masses[1]
+    spin = np.cross(torque[0] / inertia[0], arm_i) - np.cross(torque[1] / inertia[1], arm_j)
+    slip_rate = accel + spin
+    slip_rate -= np.dot(slip_rate, n) * n
+    assert np.dot(slip_rate, slip) < 0
+
+
+def test_oblique_contact_friction_never_adds_energy(device):
+    """Elastic spring (eps = 1), so only friction can change the energy: it falls, never rises."""
+    radius = 1.5e6
+    offset = 1.2 * radius  # impact parameter: an oblique, sliding contact
+    state = two_spheres(
+        np.sqrt((2 * radius + 1e3) ** 2 - offset**2), velocity_i=(100.0, 0, 0), velocity_j=(-100.0, 0, 0), radius=radius
+    )
+    state.positions[0, 1] -= offset / 2
+    state.positions[1, 1] += offset / 2
+
+    def run(mu_k, mu_r):
+        params = dw.Params(restitution=1.0, mu_k=mu_k, mu_r=mu_r, **NO_GRAVITY)
+        sim = dw.Simulation(state, params, device=device, precision="float64")
+        energy = []
+        for _ in range(60):
+            sim.step(20)
+            e = dw.diagnostics(sim.state, params, device=device)
+            energy.append(e["kinetic_translational"] + e["kinetic_rotational"] + e["elastic"])
+        return np.array(energy), sim.state
+
+    e0 = dw.diagnostics(state, dw.Params(**NO_GRAVITY))["kinetic_translational"]
+    frictionless, _ = run(0.0, 0.0)
+    with_friction, final = run(0.3, 1e-3)
+    # Verlet's energy fluctuation during an elastic contact (~1e-5 of e0): the noise floor of this check.
+    noise = max(np.abs(frictionless - e0).max(), np.abs(np.diff(frictionless)).max())
+    assert 0 < noise < 1e-4 * e0
+    assert np.all(with_friction <= e0 + noise)
+    assert np.all(np.diff(with_friction) <= 2 * noise)
+    assert with_friction[-1] < e0 - 100 * noise  # friction really acted
+    assert np.linalg.norm(final.omegas, axis=1).min() > 0  # and spun the spheres up
+
+
+def test_friction_power_is_never_positive_in_a_cluster(device):
+    """Sum over particles of the friction forces' power: exactly the dissipation, always <= 0."""
+    state = overlapping_cloud(200, seed=11)
+    base = dw.Params(mu_k=0.0, mu_r=0.0)
+    f0, t0 = dw.compute_forces(state, base, device=device, precision="float64")
+    for mu_k, mu_r in [(0.3, 0.0), (0.0, 1e-3), (0.3, 1e-3)]:
+        params = dw.Params(mu_k=mu_k, mu_r=mu_r)
+        f, t = dw.compute_forces(state, params, device=device, precision="float64")
+        power = np.sum((f - f0) * state.velocities) + np.sum((t - t0) * state.omegas)
+        assert power < 0
+
+
+def test_rolling_couple_opposes_relative_rolling(device):
+    radius = 1.5e6
+    overlap = 100.0
+    params = dw.Params(mu_k=0.0, mu_r=1e-3, **NO_GRAVITY)
+    omega = np.array([0.0, 0.0, 1e-3])
+    state = _contact_pair(omega_i=omega, overlap=overlap, radius=radius)
+    force, torque = dw.compute_forces(state, params, device=device, precision="float64")
+    normal = 0.5 * params.k_out * overlap  # at rest: k_out
+    expected = -params.mu_r * normal * (radius / 2) * omega / np.linalg.norm(omega)
+    np.testing.assert_allclose(torque[0], expected, rtol=1e-12)
+    np.testing.assert_allclose(torque[1], -expected, rtol=1e-12)  # a pure couple
+    np.testing.assert_allclose(force[0], [-normal, 0, 0], rtol=1e-12)  # and no force
+    assert np.dot(torque[0], state.omegas[0]) + np.dot(torque[1], state.omegas[1]) < 0
+
+
+def test_rolling_couple_slows_relative_rotation_at_the_analytic_rate(device):
+    """Two spheres held in contact by gravity: |w_i - w_j| falls at mu_r F_N R* (1/I_i + 1/I_j)."""
+    radius = 1.5e6
+    params = dw.Params(mu_k=0.0, mu_r=1e-3)
+    mass = float(sphere_mass(radius))
+    # Equilibrium overlap: (k_out / 2) delta = G m^2 / d^2.
+    normal = params.G * mass**2 / (2 * radius) ** 2
+    overlap = normal / (0.5 * params.k_out)
+    state = _contact_pair(omega_i=(0, 0, 1e-3), overlap=overlap, radius=radius)
+    sim = dw.Simulation(state, params, device=device, precision="float64")
+    steps = 2000
+    rates = []
+    for _ in range(10):
+        sim.step(steps // 10)
+        w = sim.state.omegas
+        rates.append(np.linalg.norm(w[0] - w[1]))
+    assert np.all(np.diff(rates) < 0)
+    inertia = 0.4 * mass * radius**2
+    expected = params.mu_r * normal * (radius / 2) * (2 / inertia) * steps * params.dt
+    assert 1e-3 - rates[-1] == pytest.approx(expected, rel=0.02)
+
+
+def test_printed_rolling_form_is_the_papers_force_at_the_contact(device):
+    radius = 1.5e6
+    overlap = 100.0
+    params = dw.Params(mu_k=0.0, mu_r=1e-3, rolling_friction="paper", **NO_GRAVITY)
+    state = _contact_pair(omega_i=(0, 0, 1e-3), overlap=overlap, radius=radius)
+    force, torque = dw.compute_forces(state, params, device=device, precision="float64")
+    normal = 0.5 * params.k_out * overlap
+    r_ij = state.positions[0] - state.positions[1]
+    direction = np.cross(state.omegas[0] - state.omegas[1], r_ij)
+    rolling = -params.mu_r * normal * direction / np.linalg.norm(direction)
+    n = r_ij / np.linalg.norm(r_ij)
+    np.testing.assert_allclose(force[0], normal * n + rolling, rtol=1e-12)
+    np.testing.assert_allclose(force[1], -(normal * n + rolling), rtol=1e-12)
+    arm_i = -0.5 * r_ij
+    np.testing.assert_allclose(torque[0], np.cross(arm_i, rolling), rtol=1e-12)
