@@ -1,12 +1,25 @@
-"""Conserved and dissipated quantities of a state (float64)."""
+"""Conserved and dissipated quantities of a state (float64, host side).
+
+:func:`diagnostics` serves the public API; :func:`observables` adds what a run
+records at each output (energy ledger, stress shares).  Both take per-particle
+pair sums computed on the device by the engine.
+"""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
 from .engine import Engine
 from .params import Params
 from .state import State
+
+#: Fraction of particles counted as "most stressed" (paper sect. 4.1, Fig. 8).
+TOP_STRESS_FRACTION = 0.01
+
+#: Energy-ledger entries, in the order of the per-particle work columns.
+WORK_CHANNELS = ("gravity", "spring", "sliding", "rolling")
 
 
 def diagnostics(state: State, params: Params, device: str | None = None) -> dict:
@@ -19,6 +32,11 @@ def diagnostics(state: State, params: Params, device: str | None = None) -> dict
     (sum I w), number_of_contacts and max_overlap [cm].
     """
     pairs = Engine(state, params, device, force_kernel="reference").pair_observables()
+    return state_diagnostics(state, pairs)
+
+
+def state_diagnostics(state: State, pairs: dict[str, np.ndarray]) -> dict:
+    """:func:`diagnostics` from per-particle pair sums already computed (Engine.pair_observables)."""
     masses, inertia = state.masses, state.inertia
     kinetic_translational = 0.5 * float(np.sum(masses * np.einsum("ij,ij->i", state.velocities, state.velocities)))
     kinetic_rotational = 0.5 * float(np.sum(inertia * np.einsum("ij,ij->i", state.omegas, state.omegas)))
@@ -38,3 +56,40 @@ def diagnostics(state: State, params: Params, device: str | None = None) -> dict
         "number_of_contacts": int(pairs["contacts"].sum()) // 2,
         "max_overlap": float(pairs["max_overlap"].max()),
     }
+
+
+def energy_ledger(current: dict, start: dict, work: np.ndarray) -> dict:
+    """Where the energy went since ``start`` (a diagnostics dict), from per-particle channel work (N, 4).
+
+    The kinetic energy change equals the summed work exactly (kernels/integrate.py), so
+    total_energy + the four entries below equals the starting total energy to round-off:
+      dissipated_sliding, dissipated_rolling: minus the work of each friction;
+      dissipated_hysteresis: minus the spring work, less the change of elastic energy
+        (the k_in/k_out loss, plus the spring's own integration error);
+      integration_error: minus the work of gravity, less the change of potential energy.
+    """
+    total = work.sum(axis=0)
+    gravity, spring, sliding, rolling = (float(total[k]) for k in range(4))
+    return {
+        "dissipated_sliding": -sliding,
+        "dissipated_rolling": -rolling,
+        "dissipated_hysteresis": -spring - (current["elastic"] - start["elastic"]),
+        "integration_error": -gravity - (current["potential"] - start["potential"]),
+    }
+
+
+def stress_shares(max_overlap: np.ndarray, size_class: np.ndarray, classes: int) -> np.ndarray:
+    """100 N_c,top / N_c for each size class c, the top being the 1 % most stressed particles.
+
+    A particle's stress is its largest overlap (physics.md); the top holds
+    ceil(1 % of N) particles, ties broken by index so the result is deterministic.
+    A value of 1 everywhere means stress is shared evenly.  Classes with no
+    particles give NaN.
+    """
+    n = max_overlap.shape[0]
+    top = math.ceil(TOP_STRESS_FRACTION * n)
+    order = np.lexsort((np.arange(n), -max_overlap))[:top]
+    counts = np.bincount(size_class, minlength=classes)[:classes].astype(float)
+    top_counts = np.bincount(size_class[order], minlength=classes)[:classes].astype(float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(counts > 0, 100.0 * top_counts / counts, np.nan)

@@ -81,6 +81,7 @@ class Engine:
         precision: str = "mixed",
         force_kernel: str = "tiled",
         layout: Layout | None = None,
+        ledger: bool = False,
     ):
         if precision not in PRECISIONS:
             raise ValueError(f"precision must be one of {', '.join(PRECISIONS)}; got {precision!r}")
@@ -90,6 +91,7 @@ class Engine:
         self.params = params
         self.precision = precision
         self.force_kernel = force_kernel
+        self.ledger = ledger
         self.count = state.n
         self.layout = layout or choose_layout(self.count, self.device)
         self.model = contact_model(params)
@@ -110,20 +112,28 @@ class Engine:
         self.omega = vectors(state.omegas)
         self.force = wp.zeros(self.count, dtype=wp.vec3d, device=self.device)
         self.torque = wp.zeros(self.count, dtype=wp.vec3d, device=self.device)
+        # Energy ledger (kernels/integrate.py): contact channels of the last force
+        # evaluation, and the work of each channel since the start, per particle.
+        ledger_rows = self.count if ledger else 0
+        channel_count = len(force_kernels.LEDGER_CHANNELS)
+        self.channels = wp.zeros((ledger_rows, channel_count), dtype=wp.vec3d, device=self.device)
+        self.work = wp.zeros(ledger_rows, dtype=wp.vec4d, device=self.device)
 
         if force_kernel == "tiled":
             self._force_kernel = force_kernels.pair_forces_tiled(
-                self.layout.tile, self.layout.particles_per_block, precision, params.rolling_friction
+                self.layout.tile, self.layout.particles_per_block, precision, params.rolling_friction, ledger
             )
         else:
-            self._force_kernel = force_kernels.pair_forces_reference(precision, params.rolling_friction)
+            self._force_kernel = force_kernels.pair_forces_reference(precision, params.rolling_friction, ledger)
 
     # -- stages of a step -----------------------------------------------------------
 
     def eval_forces(self) -> None:
         """Force and torque on every particle at the current positions and velocities."""
         inputs = [self.model, self.count, self.radius, self.mass, self.position, self.velocity, self.omega]
-        outputs = [self.force, self.torque]
+        outputs = [self.force, self.torque, self.channels]
+        if self.ledger:
+            self.channels.zero_()
         if self.force_kernel == "tiled":
             per_block = self.layout.particles_per_block
             wp.launch_tiled(
@@ -142,8 +152,8 @@ class Engine:
         wp.launch(
             integrate.kick_drift,
             dim=self.count,
-            inputs=[wp.float64(self.params.dt), self.mass, self.inertia, self.force, self.torque],
-            outputs=[self.position, self.velocity, self.omega],
+            inputs=[wp.float64(self.params.dt), self.mass, self.inertia, self.force, self.torque, self.channels],
+            outputs=[self.position, self.velocity, self.omega, self.work],
             device=self.device,
         )
 
@@ -152,8 +162,8 @@ class Engine:
         wp.launch(
             integrate.kick,
             dim=self.count,
-            inputs=[wp.float64(self.params.dt), self.mass, self.inertia, self.force, self.torque],
-            outputs=[self.velocity, self.omega],
+            inputs=[wp.float64(self.params.dt), self.mass, self.inertia, self.force, self.torque, self.channels],
+            outputs=[self.velocity, self.omega, self.work],
             device=self.device,
         )
 
@@ -192,3 +202,37 @@ class Engine:
     def read_forces(self) -> tuple[np.ndarray, np.ndarray]:
         """The last evaluated force [dyne] and torque [dyne cm], copied to the host."""
         return self.force.numpy().copy(), self.torque.numpy().copy()
+
+    def read_work(self) -> np.ndarray:
+        """Work of (gravity, spring, sliding, rolling) on each particle since the start [erg], (N, 4)."""
+        return self.work.numpy().copy() if self.ledger else np.zeros((self.count, 4))
+
+    def snapshot(self) -> dict[str, np.ndarray]:
+        """Every array the next step depends on: enough to continue bit for bit."""
+        positions, velocities, omegas = self.read()
+        force, torque = self.read_forces()
+        return {
+            "positions": positions,
+            "velocities": velocities,
+            "omegas": omegas,
+            "force": force,
+            "torque": torque,
+            "channels": self.channels.numpy().copy(),
+            "work": self.work.numpy().copy(),
+        }
+
+    def restore(self, snapshot: dict[str, np.ndarray]) -> None:
+        """Load a :meth:`snapshot` back (same particle count and ledger setting)."""
+        for name, target in [
+            ("positions", self.position),
+            ("velocities", self.velocity),
+            ("omegas", self.omega),
+            ("force", self.force),
+            ("torque", self.torque),
+            ("channels", self.channels),
+            ("work", self.work),
+        ]:
+            values = np.asarray(snapshot[name], dtype=np.float64)
+            if values.shape != target.numpy().shape:
+                raise ValueError(f"snapshot {name} has shape {values.shape}; expected {target.numpy().shape}")
+            target.assign(wp.array(values, dtype=target.dtype, device=self.device))

@@ -7,6 +7,7 @@ from dataclasses import replace
 import numpy as np
 import warp as wp
 
+from .diagnostics import state_diagnostics
 from .engine import Engine, Layout
 from .params import Params
 from .stability import StabilityError, StabilityReport, check_stability
@@ -25,7 +26,9 @@ class Simulation:
     >>> diagnostics(later, sim.params)
 
     The set-up is checked against paper eqs. 15 and 17 first; an unstable one
-    raises :class:`StabilityError` unless ``allow_unstable=True``.
+    raises :class:`StabilityError` unless ``allow_unstable=True``.  With
+    ``ledger=True`` the work of each force channel is tracked, so that
+    :meth:`energy_ledger` accounts for every erg.
     """
 
     def __init__(
@@ -37,19 +40,55 @@ class Simulation:
         allow_unstable: bool = False,
         force_kernel: str = "tiled",
         layout: Layout | None = None,
+        ledger: bool = False,
     ):
         self.params = params
         self.stability: StabilityReport = check_stability(state, params)
         if not self.stability.stable and not allow_unstable:
             raise StabilityError(self.stability)
         self._static = state.copy()
-        self.engine = Engine(state, params, device, precision, force_kernel, layout)
-        self._time0 = state.time
-        self._step0 = state.step
-        self._steps = 0
+        self.engine = Engine(state, params, device, precision, force_kernel, layout, ledger)
+        # Time is origin + step * dt, never a running sum, so that a restarted run keeps the same clock.
+        self._time_origin = state.time - state.step * params.dt
+        self._step = state.step
         self._graph = None
         # Forces at x(0) with v(0): the first half kick needs them.
         self.engine.eval_forces()
+        self.energy_start: dict | None = self.diagnostics() if ledger else None
+        """Diagnostics when the ledger started: its reference point."""
+
+    @classmethod
+    def from_snapshot(
+        cls, state: State, params: Params, snapshot: dict, device: str | None = None, **options
+    ) -> "Simulation":
+        """Continue exactly where :meth:`snapshot` left off (``state`` gives the static arrays).
+
+        The stability check is not repeated: the run was accepted when it began.
+        """
+        options.setdefault("allow_unstable", True)
+        start = replace(
+            state,
+            positions=snapshot["positions"],
+            velocities=snapshot["velocities"],
+            omegas=snapshot["omegas"],
+            time=float(snapshot["time_origin"]) + int(snapshot["step"]) * params.dt,
+            step=int(snapshot["step"]),
+        )
+        sim = cls(start, params, device=device, ledger=bool(snapshot["ledger"]), **options)
+        sim.engine.restore(snapshot)
+        sim._time_origin = float(snapshot["time_origin"])
+        if sim.engine.ledger:
+            sim.energy_start = {key: float(snapshot[f"energy_start/{key}"]) for key in ("potential", "elastic", "total_energy")}
+        return sim
+
+    def snapshot(self) -> dict:
+        """Every array and number the next step depends on (host copies): a bit-exact restart point."""
+        snap = self.engine.snapshot()
+        snap.update(step=self._step, time_origin=self._time_origin, ledger=self.engine.ledger)
+        if self.energy_start is not None:
+            for key in ("potential", "elastic", "total_energy"):
+                snap[f"energy_start/{key}"] = self.energy_start[key]
+        return snap
 
     @property
     def device(self) -> str:
@@ -58,12 +97,12 @@ class Simulation:
     @property
     def step_count(self) -> int:
         """Steps taken since the run began (including those before a restart)."""
-        return self._step0 + self._steps
+        return self._step
 
     @property
     def time(self) -> float:
         """Simulated time [s]."""
-        return self._time0 + self._steps * self.params.dt
+        return self._time_origin + self._step * self.params.dt
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` steps of ``params.dt``.  On CUDA, whole blocks of steps replay a graph."""
@@ -74,10 +113,10 @@ class Simulation:
             while n >= GRAPH_STEPS:
                 wp.capture_launch(self._step_graph())
                 n -= GRAPH_STEPS
-                self._steps += GRAPH_STEPS
+                self._step += GRAPH_STEPS
         for _ in range(n):
             self.engine.step()
-            self._steps += 1
+            self._step += 1
 
     def _step_graph(self):
         if self._graph is None:
@@ -103,6 +142,20 @@ class Simulation:
     def forces(self) -> tuple[np.ndarray, np.ndarray]:
         """Force [dyne] and torque [dyne cm] of the last evaluation, (N, 3) float64 each."""
         return self.engine.read_forces()
+
+    def pair_observables(self) -> dict[str, np.ndarray]:
+        """Per particle: half its pair potential and elastic energy, its contacts and largest overlap."""
+        return self.engine.pair_observables()
+
+    def diagnostics(self, state: State | None = None, pairs: dict | None = None) -> dict:
+        """:func:`decco_warp.diagnostics` of the current state, computed on this simulation's device."""
+        state = self.state if state is None else state
+        pairs = self.pair_observables() if pairs is None else pairs
+        return state_diagnostics(state, pairs)
+
+    def work(self) -> np.ndarray:
+        """Work of (gravity, spring, sliding, rolling) on each particle since the ledger began [erg], (N, 4)."""
+        return self.engine.read_work()
 
 
 def compute_forces(

@@ -40,9 +40,19 @@ def _real_types(precision: str):
     return _REAL[precision]
 
 
+#: Per-particle contact channels written by the ledger variants, in this order
+#: (float64, summed over contacts); gravity is the rest of the force.
+LEDGER_CHANNELS = ("spring_force", "sliding_force", "sliding_torque", "rolling_force")
+
+
 @functools.cache
-def pair_interaction(precision: str, rolling: str):
-    """The Warp function giving (force, torque) on i from j for one precision and rolling form."""
+def pair_interaction(precision: str, rolling: str, ledger: bool):
+    """The Warp function giving (force, torque) on i from j for one precision and rolling form.
+
+    With ``ledger``, it also adds each contact's channels (LEDGER_CHANNELS) to row
+    i of ``channels_out`` with atomics: contacts are few, and these sums feed only
+    the energy ledger, never the motion.
+    """
     real, vec_real = _real_types(precision)
     contact = CONTACT_FUNCTIONS[rolling]
 
@@ -61,6 +71,7 @@ def pair_interaction(precision: str, rolling: str):
         omega_j: wp.vec3d,
         radius_j: wp.float64,
         mass_j: wp.float64,
+        channels_out: wp.array2d(dtype=wp.vec3d),
     ):
         # The separation is taken in float64: positions are ~1e7 cm, overlaps ~1e2 cm.
         r_ij = position_i - position_j
@@ -71,18 +82,25 @@ def pair_interaction(precision: str, rolling: str):
         if d2 > wp.float64(0.0):
             force = gravity(vec_real(r_ij), real(g_mass_i * mass_j))
             if in_contact(d2, radius_i, radius_j):
-                contact_force, contact_torque = wp.static(contact)(
+                spring, sliding, sliding_torque, rolling, rolling_torque = wp.static(contact)(
                     model, r_ij, d2, radius_i, velocity_i, omega_i, radius_j, velocity_j, omega_j, i < j
                 )
-                force += vec_real(contact_force)
-                torque = vec_real(contact_torque)
+                force += vec_real(spring + sliding + rolling)
+                torque = vec_real(sliding_torque + rolling_torque)
+                if wp.static(ledger):
+                    wp.atomic_add(channels_out, i, 0, spring)
+                    wp.atomic_add(channels_out, i, 1, sliding)
+                    wp.atomic_add(channels_out, i, 2, sliding_torque)
+                    wp.atomic_add(channels_out, i, 3, rolling)
         return force, torque
 
     return interaction
 
 
 @functools.cache
-def pair_forces_tiled(tile: int, particles_per_block: int, precision: str = "mixed", rolling: str = "couple"):
+def pair_forces_tiled(
+    tile: int, particles_per_block: int, precision: str = "mixed", rolling: str = "couple", ledger: bool = False
+):
     """Build the tiled all-pairs kernel for a layout; launch with ``wp.launch_tiled``.
 
     Launch dimension: ``ceil(N / particles_per_block)`` blocks.  On CUDA use
@@ -90,7 +108,7 @@ def pair_forces_tiled(tile: int, particles_per_block: int, precision: str = "mix
     per block, which then walks the whole tile.
     """
     real, _ = _real_types(precision)
-    interaction = pair_interaction(precision, rolling)
+    interaction = pair_interaction(precision, rolling, ledger)
     P = particles_per_block
     # Registers for the block's own particles and its partial sums: rows are particles.
     Rows3 = wp.types.matrix(shape=(P, 3), dtype=wp.float64)
@@ -112,6 +130,7 @@ def pair_forces_tiled(tile: int, particles_per_block: int, precision: str = "mix
         # Out:
         force_out: wp.array(dtype=wp.vec3d),
         torque_out: wp.array(dtype=wp.vec3d),
+        channels_out: wp.array2d(dtype=wp.vec3d),  # (N, 4) with ledger, else empty; zeroed by the caller
     ):
         block, lane = wp.tid()
         first = block * wp.static(P)
@@ -147,6 +166,8 @@ def pair_forces_tiled(tile: int, particles_per_block: int, precision: str = "mix
                     radius_j = radius_t[k]
                     mass_j = mass_t[k]
                     for p in range(wp.static(P)):
+                        if first + p >= count:
+                            continue  # a padding row of the last block
                         f, t = wp.static(interaction)(
                             model,
                             first + p,
@@ -161,6 +182,7 @@ def pair_forces_tiled(tile: int, particles_per_block: int, precision: str = "mix
                             omega_j,
                             radius_j,
                             mass_j,
+                            channels_out,
                         )
                         sums[p] = sums[p] + Sum(f[0], f[1], f[2], t[0], t[1], t[2])
 
@@ -177,10 +199,10 @@ def pair_forces_tiled(tile: int, particles_per_block: int, precision: str = "mix
 
 
 @functools.cache
-def pair_forces_reference(precision: str = "mixed", rolling: str = "couple"):
+def pair_forces_reference(precision: str = "mixed", rolling: str = "couple", ledger: bool = False):
     """Build the one-thread-per-particle kernel of the same physics; launch with ``dim=N``."""
     _, vec_real = _real_types(precision)
-    interaction = pair_interaction(precision, rolling)
+    interaction = pair_interaction(precision, rolling, ledger)
 
     @wp.kernel(module="unique", enable_backward=False)
     def pair_forces_reference_kernel(
@@ -196,6 +218,7 @@ def pair_forces_reference(precision: str = "mixed", rolling: str = "couple"):
         # Out:
         force_out: wp.array(dtype=wp.vec3d),
         torque_out: wp.array(dtype=wp.vec3d),
+        channels_out: wp.array2d(dtype=wp.vec3d),  # (N, 4) with ledger, else empty; zeroed by the caller
     ):
         i = wp.tid()
         position_i = position_in[i]
@@ -220,6 +243,7 @@ def pair_forces_reference(precision: str = "mixed", rolling: str = "couple"):
                 omega_in[j],
                 radius_in[j],
                 mass_in[j],
+                channels_out,
             )
             force += f
             torque += t

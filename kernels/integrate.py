@@ -3,11 +3,82 @@
 One step is ``kick_drift`` (half kick with the forces of the previous evaluation,
 then a full drift), the force evaluation at the new positions with the half-step
 velocities, and ``kick`` (the second half kick).  All in float64.
+
+Energy ledger: a half kick changes a particle's kinetic energy by exactly
+F . (v_old + v_new)/2 dt/2 (and T . (w_old + w_new)/2 dt/2), which is linear in
+F and T and so splits exactly into the work of each force channel.  With the
+ledger on, each kick adds those works to ``work_inout`` per particle, as
+(gravity, spring, sliding friction, rolling friction).
 """
 
 import warp as wp
 
 wp.set_module_options({"enable_backward": False})
+
+
+@wp.func
+def half_kick_work(
+    force: wp.vec3d,
+    torque: wp.vec3d,
+    spring_force: wp.vec3d,
+    sliding_force: wp.vec3d,
+    sliding_torque: wp.vec3d,
+    rolling_force: wp.vec3d,
+    velocity_old: wp.vec3d,
+    velocity_new: wp.vec3d,
+    omega_old: wp.vec3d,
+    omega_new: wp.vec3d,
+    half_dt: wp.float64,
+) -> wp.vec4d:
+    """Work of (gravity, spring, sliding, rolling) during one half kick; sums to the kinetic energy change."""
+    v = wp.float64(0.5) * (velocity_old + velocity_new)
+    w = wp.float64(0.5) * (omega_old + omega_new)
+    gravity = force - spring_force - sliding_force - rolling_force  # the rest of the force
+    return half_dt * wp.vec4d(
+        wp.dot(gravity, v),
+        wp.dot(spring_force, v),
+        wp.dot(sliding_force, v) + wp.dot(sliding_torque, w),
+        wp.dot(rolling_force, v) + wp.dot(torque - sliding_torque, w),
+    )
+
+
+@wp.func
+def half_kick(
+    i: int,
+    half_dt: wp.float64,
+    mass_in: wp.array(dtype=wp.float64),
+    inertia_in: wp.array(dtype=wp.float64),
+    force_in: wp.array(dtype=wp.vec3d),
+    torque_in: wp.array(dtype=wp.vec3d),
+    channels_in: wp.array2d(dtype=wp.vec3d),
+    velocity_inout: wp.array(dtype=wp.vec3d),
+    omega_inout: wp.array(dtype=wp.vec3d),
+    work_inout: wp.array(dtype=wp.vec4d),
+) -> wp.vec3d:
+    """v += F/m dt/2, w += T/I dt/2 for particle i, with its ledger; returns the new velocity."""
+    force = force_in[i]
+    torque = torque_in[i]
+    velocity_old = velocity_inout[i]
+    omega_old = omega_inout[i]
+    velocity = velocity_old + (half_dt / mass_in[i]) * force
+    omega = omega_old + (half_dt / inertia_in[i]) * torque
+    velocity_inout[i] = velocity
+    omega_inout[i] = omega
+    if work_inout.shape[0] > 0:
+        work_inout[i] = work_inout[i] + half_kick_work(
+            force,
+            torque,
+            channels_in[i, 0],
+            channels_in[i, 1],
+            channels_in[i, 2],
+            channels_in[i, 3],
+            velocity_old,
+            velocity,
+            omega_old,
+            omega,
+            half_dt,
+        )
+    return velocity
 
 
 @wp.kernel
@@ -19,16 +90,17 @@ def kick_drift(
     # Data in:
     force_in: wp.array(dtype=wp.vec3d),
     torque_in: wp.array(dtype=wp.vec3d),
+    channels_in: wp.array2d(dtype=wp.vec3d),  # (N, 4) with the ledger, else empty
     # Data in/out:
     position_inout: wp.array(dtype=wp.vec3d),
     velocity_inout: wp.array(dtype=wp.vec3d),
     omega_inout: wp.array(dtype=wp.vec3d),
+    work_inout: wp.array(dtype=wp.vec4d),  # (N,) with the ledger, else empty
 ):
     i = wp.tid()
-    half_dt = wp.float64(0.5) * dt
-    velocity = velocity_inout[i] + (half_dt / mass_in[i]) * force_in[i]
-    velocity_inout[i] = velocity
-    omega_inout[i] = omega_inout[i] + (half_dt / inertia_in[i]) * torque_in[i]
+    velocity = half_kick(
+        i, wp.float64(0.5) * dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout
+    )
     position_inout[i] = position_inout[i] + dt * velocity
 
 
@@ -41,11 +113,13 @@ def kick(
     # Data in:
     force_in: wp.array(dtype=wp.vec3d),
     torque_in: wp.array(dtype=wp.vec3d),
+    channels_in: wp.array2d(dtype=wp.vec3d),
     # Data in/out:
     velocity_inout: wp.array(dtype=wp.vec3d),
     omega_inout: wp.array(dtype=wp.vec3d),
+    work_inout: wp.array(dtype=wp.vec4d),
 ):
     i = wp.tid()
-    half_dt = wp.float64(0.5) * dt
-    velocity_inout[i] = velocity_inout[i] + (half_dt / mass_in[i]) * force_in[i]
-    omega_inout[i] = omega_inout[i] + (half_dt / inertia_in[i]) * torque_in[i]
+    half_kick(
+        i, wp.float64(0.5) * dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout
+    )

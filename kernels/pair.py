@@ -189,7 +189,7 @@ def normal_and_sliding(
 ):
     """Spring and sliding friction on i from j, for a pair in contact.
 
-    Returns (force on i, torque on i about its centre, n, |F_N|, a_i).
+    Returns (spring force on i, sliding force on i, its torque on i, n, |F_N|, a_i).
     """
     d = wp.sqrt(d2)
     n = r_ij / d
@@ -200,9 +200,12 @@ def normal_and_sliding(
     arm_j = lever_arm(-r_ij, radius_j, radius_i)  # j's own arm, seen from j
     slip = surface_slip(n, velocity_i, omega_i, arm_i, velocity_j, omega_j, arm_j)
     friction = sliding_friction(slip, normal_magnitude, model.mu_k)
-    force = normal_magnitude * n + friction
-    torque = wp.cross(arm_i, friction)
-    return force, torque, n, normal_magnitude, arm_i
+    return normal_magnitude * n, friction, wp.cross(arm_i, friction), n, normal_magnitude, arm_i
+
+
+# A contact returns its force and torque on i split by channel, so that the
+# energy ledger can follow each: (spring force, sliding force, sliding torque,
+# rolling force, rolling torque).
 
 
 @wp.func
@@ -218,13 +221,13 @@ def contact_with_rolling_couple(
     omega_j: wp.vec3d,
     i_is_first: bool,
 ):
-    """Force and torque on i from a touching j; rolling friction as a couple (default)."""
-    force, torque, n, normal_magnitude, arm_i = normal_and_sliding(
+    """Channels of a touching j's action on i; rolling friction as a couple (default)."""
+    spring, sliding, sliding_torque, n, normal_magnitude, arm_i = normal_and_sliding(
         model, r_ij, d2, radius_i, velocity_i, omega_i, radius_j, velocity_j, omega_j
     )
     reduced_radius = radius_i * radius_j / (radius_i + radius_j)
-    torque += rolling_couple(n, omega_i, omega_j, normal_magnitude, model.mu_r, reduced_radius)
-    return force, torque
+    rolling_torque = rolling_couple(n, omega_i, omega_j, normal_magnitude, model.mu_r, reduced_radius)
+    return spring, sliding, sliding_torque, vec3d(), rolling_torque
 
 
 @wp.func
@@ -240,12 +243,12 @@ def contact_with_printed_rolling(
     omega_j: wp.vec3d,
     i_is_first: bool,
 ):
-    """Force and torque on i from a touching j; rolling friction as the paper prints it."""
-    force, torque, n, normal_magnitude, arm_i = normal_and_sliding(
+    """Channels of a touching j's action on i; rolling friction as the paper prints it."""
+    spring, sliding, sliding_torque, n, normal_magnitude, arm_i = normal_and_sliding(
         model, r_ij, d2, radius_i, velocity_i, omega_i, radius_j, velocity_j, omega_j
     )
     rolling = rolling_force_printed(r_ij, omega_i, omega_j, normal_magnitude, model.mu_r, i_is_first)
-    return force + rolling, torque + wp.cross(arm_i, rolling)
+    return spring, sliding, sliding_torque, rolling, wp.cross(arm_i, rolling)
 
 
 # Rolling-friction forms by name (Params.rolling_friction).
