@@ -14,10 +14,13 @@ import warp as _wp
 _wp.config.log_level = _wp.LOG_WARNING
 
 from ._version import __version__  # noqa: E402
+from .collision import setup_collision  # noqa: E402
 from .device import DeviceError, resolve_device  # noqa: E402
 from .diagnostics import diagnostics  # noqa: E402
 from .engine import Layout  # noqa: E402
+from .io import load_pile, read_trajectory, save_pile  # noqa: E402
 from .params import G_CGS, ROLLING_FRICTION_FORMS, Params  # noqa: E402
+from .pile import form_pile  # noqa: E402
 from .simulation import Simulation, compute_forces  # noqa: E402
 from .stability import StabilityError, StabilityReport, check_stability  # noqa: E402
 from .state import State  # noqa: E402
@@ -36,5 +39,10 @@ __all__ = [
     "check_stability",
     "compute_forces",
     "diagnostics",
+    "form_pile",
+    "load_pile",
+    "read_trajectory",
     "resolve_device",
+    "save_pile",
+    "setup_collision",
 ]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Optional
 
 import typer
@@ -66,3 +67,236 @@ def info(device: Optional[str] = DeviceOption) -> None:
         f"force kernel layout at N = 10 240: tile {layout.tile}, {layout.particles_per_block} particle(s) "
         f"per block, {layout.block_dim} thread(s) per block"
     )
+
+
+# --- progress displays -----------------------------------------------------------------
+
+
+def _progress_bar(description: str, *fields: str):
+    """A rich progress bar with elapsed and estimated remaining time, on stderr."""
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    columns = [TextColumn("[bold]{task.description}"), BarColumn()]
+    columns += [TextColumn(f"{{task.fields[{name}]}}") for name in fields]
+    columns += [TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn()]
+    return Progress(*columns, console=Console(stderr=True), transient=False)
+
+
+# --- pile ------------------------------------------------------------------------------
+
+
+def _floats(text: str, what: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        fail(f"{what} must be comma-separated numbers; got {text!r}")
+    if not values:
+        fail(f"{what} must list at least one number")
+    return values
+
+
+@app.command()
+def pile(
+    out: Path = typer.Option(..., "--out", "-o", help="Pile file to write (HDF5)."),
+    particles: int = typer.Option(5000, "--particles", "-n", help="Number of particles."),
+    seed: int = typer.Option(1, "--seed", help="Random seed: the same seed gives the same pile."),
+    radii: str = typer.Option("0.75e6,1.5e6,2.25e6", "--radii", help="Particle radii of the size classes [cm]."),
+    density: float = typer.Option(2.7, "--density", help="Particle density [g/cm^3]."),
+    ke_threshold: float = typer.Option(1e-5, "--ke-threshold", help="Stop when kinetic energy < this x |U|."),
+    fill: float = typer.Option(0.3, "--fill", help="Volume fraction of the seeding sphere."),
+    max_steps: int = typer.Option(5_000_000, "--max-steps", help="Give up after this many steps."),
+    k_in: float = typer.Option(1e18, "--k-in", help="Spring constant while approaching [dyne/cm]."),
+    restitution: float = typer.Option(0.9, "--restitution", help="Coefficient of restitution."),
+    mu_k: float = typer.Option(0.3, "--mu-k", help="Sliding friction coefficient."),
+    mu_r: float = typer.Option(1e-3, "--mu-r", help="Rolling friction coefficient."),
+    dt: float = typer.Option(0.04, "--dt", help="Time step [s]."),
+    precision: str = typer.Option("mixed", "--precision", help="mixed or float64."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing pile file."),
+    device: Optional[str] = DeviceOption,
+) -> None:
+    """Build a rubble pile: seed spheres without overlaps, collapse under gravity until settled."""
+    from .device import DeviceError, resolve_device
+    from .diagnostics import diagnostics
+    from .io import save_pile
+    from .params import Params
+    from .pile import FormationError, form_pile
+
+    if out.exists() and not overwrite:
+        fail(f"{out} already exists; use --overwrite to replace it")
+    if not out.parent.exists() and str(out.parent) not in ("", "."):
+        out.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        chosen = resolve_device(device)
+        params = Params(k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt)
+    except (DeviceError, ValueError) as error:
+        fail(str(error))
+    typer.echo(f"forming a {particles}-particle pile on {chosen} (seed {seed})", err=True)
+    bar = _progress_bar("forming", "step", "ratio")
+    with bar:
+        task = bar.add_task("collapse", total=1.0, step="", ratio="")
+
+        def show(p):
+            bar.update(
+                task,
+                completed=p.fraction_done,
+                step=f"step {p.step}",
+                ratio=f"KE/|U| {p.ke_over_u:.2e} (stop < {p.threshold:.0e})",
+                description="settling" if p.peak_ke_over_u >= 1e-3 else "collapsing",
+            )
+
+        try:
+            formed = form_pile(
+                n_particles=particles,
+                seed=seed,
+                device=chosen,
+                radii=_floats(radii, "--radii"),
+                density=density,
+                params=params,
+                ke_threshold=ke_threshold,
+                fill=fill,
+                max_steps=max_steps,
+                precision=precision,
+                progress=show,
+            )
+        except ValueError as error:
+            fail(str(error))
+        except FormationError as error:
+            fail(str(error), code=1)
+    formed.metadata["potential"] = diagnostics(formed, params, chosen)["potential"]
+    save_pile(formed, out)
+    from .collision import pile_radius
+
+    meta = formed.metadata
+    typer.echo(
+        f"wrote {out}: {formed.n} particles {tuple(int(c) for c in meta['size_counts'])}, "
+        f"mass {formed.total_mass:.4g} g, radius {pile_radius(formed) / 1e5:.4g} km, U {meta['potential']:.4g} erg; "
+        f"{meta['formation_steps']} steps ({meta['formation_time']:.4g} s simulated) in "
+        f"{meta['formation_wall_seconds']:.1f} s"
+    )
+
+
+# --- simulate, resume ----------------------------------------------------------------------
+
+
+def _spin_option(text: Optional[str], which: str) -> dict:
+    if text is None:
+        return {}
+    fraction, _, axis = text.partition(",")
+    try:
+        values = {f"{which}_spin": float(fraction)}
+    except ValueError:
+        fail(f"--spin-{which} must be FRACTION[,AXIS], e.g. 0.5,+z; got {text!r}")
+    if axis:
+        values[f"{which}_spin_axis"] = axis.strip()
+    return values
+
+
+def _run_with_progress(prepare, *args, **kwargs):
+    """Prepare a run (every input problem exits with code 2, nothing written), then run it with a progress bar."""
+    from .device import DeviceError
+    from .io import FileFormatError
+    from .run import RunError, execute
+    from .spec import SpecError
+    from .stability import StabilityError
+
+    try:
+        prepared = prepare(*args, **kwargs)
+    except StabilityError as error:
+        fail(f"{error}; set allow_unstable = true in [run] to run it anyway")
+    except (SpecError, RunError, FileFormatError, DeviceError, ValueError) as error:
+        fail(str(error))
+    bar = _progress_bar("simulating", "step", "time")
+    with bar:
+        task = bar.add_task("run", total=None, step="", time="")
+
+        def show(p):
+            bar.update(
+                task,
+                total=p.total_steps - p.first_step,
+                completed=p.step - p.first_step,
+                step=f"step {p.step}/{p.total_steps}",
+                time=f"t {p.time:.0f} s",
+            )
+
+        try:
+            return execute(prepared, progress=show)
+        except (RunError, FileFormatError) as error:
+            fail(str(error))
+
+
+def _report(result) -> None:
+    run_dir = result.run_dir
+    typer.echo(
+        f"done: {result.steps} steps, {result.time:.6g} s simulated, {result.wall_seconds:.1f} s wall "
+        f"({result.steps_this_session} steps this session)"
+    )
+    typer.echo(f"outputs in {run_dir}/: spec.toml, trajectory.h5 (H5MD), checkpoint.h5, run.log")
+    typer.echo(f"inspect: h5ls -r {run_dir}/trajectory.h5   |   python: decco_warp.io.read_trajectory('{run_dir}/trajectory.h5')")
+
+
+@app.command()
+def simulate(
+    config: Optional[Path] = typer.Argument(None, help="Run specification (TOML); default: the shipped demo collision."),
+    name: Optional[str] = typer.Option(None, "--name", help="Run name: the folder under --out."),
+    target: Optional[str] = typer.Option(None, "--target", help="Target pile file (or builtin:target)."),
+    projectile: Optional[str] = typer.Option(None, "--projectile", help="Projectile pile file (or builtin:projectile)."),
+    eta: Optional[float] = typer.Option(None, "--eta", help="KE / |U| of the collision (paper eq. 18)."),
+    speed: Optional[float] = typer.Option(None, "--speed", help="Relative speed [cm/s] instead of --eta."),
+    theta: Optional[float] = typer.Option(None, "--theta", help="Impact angle [degrees]."),
+    gap: Optional[float] = typer.Option(None, "--gap", help="Initial surface gap along x [cm]."),
+    spin_target: Optional[str] = typer.Option(None, "--spin-target", help="FRACTION[,AXIS] of breakup spin, e.g. 0.5,+z."),
+    spin_projectile: Optional[str] = typer.Option(None, "--spin-projectile", help="FRACTION[,AXIS] of breakup spin."),
+    steps: Optional[int] = typer.Option(None, "--steps", help="Steps to run."),
+    duration: Optional[float] = typer.Option(None, "--duration", help="Simulated time to run [s], instead of --steps."),
+    dt: Optional[float] = typer.Option(None, "--dt", help="Time step [s]."),
+    output_every: Optional[int] = typer.Option(None, "--output-every", help="Steps between trajectory frames."),
+    checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Steps between checkpoints."),
+    precision: Optional[str] = typer.Option(None, "--precision", help="mixed or float64."),
+    out: Optional[str] = typer.Option(None, "--out", help="Parent folder of run folders (default runs/out)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing run folder."),
+    device: Optional[str] = DeviceOption,
+) -> None:
+    """Run a collision: the shipped demo, a TOML specification, and/or options (options win)."""
+    from . import spec as specs
+    from .run import prepare_start
+
+    try:
+        raw = specs.load_spec_file(config) if config is not None else {}
+        if steps is not None and duration is not None:
+            raise specs.SpecError("give --steps or --duration, not both")
+        run_overrides = {"name": name, "output_every": output_every, "checkpoint_every": checkpoint_every}
+        run_overrides.update(precision=precision, out=out, device=device)
+        if steps is not None or duration is not None:  # a command-line length replaces the file's
+            raw.get("run", {}).pop("steps", None)
+            raw.get("run", {}).pop("duration", None)
+            run_overrides.update(steps=steps, duration=duration)
+        collision = {"theta_deg": theta, "gap": gap, **_spin_option(spin_target, "target"), **_spin_option(spin_projectile, "projectile")}
+        if eta is not None or speed is not None:
+            raw.get("collision", {}).pop("eta", None)
+            raw.get("collision", {}).pop("speed", None)
+            collision.update(eta=eta, speed=speed)
+        overrides = {
+            "run": run_overrides,
+            "piles": {"target": target, "projectile": projectile},
+            "collision": collision,
+            "params": {"dt": dt},
+        }
+        spec = specs.resolve_spec(raw, overrides)
+    except specs.SpecError as error:
+        fail(str(error))
+    result = _run_with_progress(prepare_start, spec, overwrite=overwrite)
+    _report(result)
+
+
+@app.command()
+def resume(
+    run_dir: Path = typer.Argument(..., help="Run folder to continue."),
+    steps: Optional[int] = typer.Option(None, "--steps", help="New total number of steps (to extend a run)."),
+    device: Optional[str] = DeviceOption,
+) -> None:
+    """Continue a stopped or killed run from its last checkpoint."""
+    from .run import prepare_resume
+
+    result = _run_with_progress(prepare_resume, run_dir, steps=steps, device=device)
+    _report(result)

@@ -78,7 +78,7 @@ class Simulation:
         sim.engine.restore(snapshot)
         sim._time_origin = float(snapshot["time_origin"])
         if sim.engine.ledger:
-            sim.energy_start = {key: float(snapshot[f"energy_start/{key}"]) for key in ("potential", "elastic", "total_energy")}
+            sim.energy_start = {key: float(value) for key, value in snapshot["energy_start"].items()}
         return sim
 
     def snapshot(self) -> dict:
@@ -86,8 +86,7 @@ class Simulation:
         snap = self.engine.snapshot()
         snap.update(step=self._step, time_origin=self._time_origin, ledger=self.engine.ledger)
         if self.energy_start is not None:
-            for key in ("potential", "elastic", "total_energy"):
-                snap[f"energy_start/{key}"] = self.energy_start[key]
+            snap["energy_start"] = {key: self.energy_start[key] for key in ("potential", "elastic", "total_energy")}
         return snap
 
     @property

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -33,6 +34,8 @@ class State:
     """Simulated time [s]."""
     step: int = 0
     """Number of steps taken since the run began."""
+    metadata: dict = field(default_factory=dict)
+    """What made this state (pile formation, collision set-up): plain numbers, strings and arrays."""
 
     @classmethod
     def from_arrays(
@@ -46,6 +49,7 @@ class State:
         size_class=None,
         time: float = 0.0,
         step: int = 0,
+        metadata: dict | None = None,
     ) -> "State":
         """Copy and check arrays into a State; raises ValueError naming the bad input."""
         radii = _float_array("radii", radii, None)
@@ -62,6 +66,7 @@ class State:
             size_class=_int_array("size_class", size_class, n),
             time=float(time),
             step=int(step),
+            metadata=copy.deepcopy(metadata) if metadata else {},
         )
         for name in ("radii", "masses"):
             values = getattr(state, name)
@@ -80,14 +85,28 @@ class State:
         """Moments of inertia I_i = 2/5 m_i R_i^2 [g cm^2], (N,)."""
         return 0.4 * self.masses * self.radii**2
 
+    @property
+    def total_mass(self) -> float:
+        return float(self.masses.sum())
+
+    @property
+    def centre_of_mass(self) -> np.ndarray:
+        """Mass-weighted mean position [cm], (3,)."""
+        return (self.masses[:, None] * self.positions).sum(axis=0) / self.total_mass
+
+    @property
+    def bulk_velocity(self) -> np.ndarray:
+        """Velocity of the centre of mass [cm/s], (3,)."""
+        return (self.masses[:, None] * self.velocities).sum(axis=0) / self.total_mass
+
     def copy(self) -> "State":
-        return replace(
-            self,
-            **{
-                name: getattr(self, name).copy()
-                for name in ("positions", "velocities", "omegas", "radii", "masses", "pile_id", "size_class")
-            },
-        )
+        arrays = ("positions", "velocities", "omegas", "radii", "masses", "pile_id", "size_class")
+        return replace(self, **{name: getattr(self, name).copy() for name in arrays}, metadata=copy.deepcopy(self.metadata))
+
+    def subset(self, mask) -> "State":
+        """The particles selected by a boolean mask or index array (a copy)."""
+        arrays = ("positions", "velocities", "omegas", "radii", "masses", "pile_id", "size_class")
+        return replace(self, **{name: getattr(self, name)[mask].copy() for name in arrays}, metadata={})
 
 
 def _float_array(name: str, values, shape) -> np.ndarray:

@@ -1,0 +1,163 @@
+"""Collision set-up (paper sect. 3.1 and 4.2, physics.md).
+
+The target (the more massive pile) sits ahead of the projectile along +x; the
+projectile's centre is offset by the impact parameter b = (R_p + R_t) sin(theta)
+along +y and starts with its bounding sphere ``gap`` short of the target's along
+x.  Everything is in the centre-of-mass frame, with the centre of mass at the
+origin and the relative velocity along +x (the projectile moves towards +x).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .diagnostics import diagnostics
+from .params import G_CGS, Params
+from .state import State
+
+SPIN_AXES = {
+    "+x": (1.0, 0.0, 0.0),
+    "-x": (-1.0, 0.0, 0.0),
+    "+y": (0.0, 1.0, 0.0),
+    "-y": (0.0, -1.0, 0.0),
+    "+z": (0.0, 0.0, 1.0),
+    "-z": (0.0, 0.0, -1.0),
+}
+
+
+def pile_radius(state: State) -> float:
+    """Largest |x_k - x_cm| + R_k over the pile's particles [cm] (physics.md)."""
+    return float((np.linalg.norm(state.positions - state.centre_of_mass, axis=1) + state.radii).max())
+
+
+def breakup_spin(state: State, G: float = G_CGS) -> float:
+    """sqrt(G M / R^3): the angular velocity at which the pile's surface would orbit [rad/s]."""
+    return math.sqrt(G * state.total_mass / pile_radius(state) ** 3)
+
+
+def _spin_vector(spin, state: State, G: float, which: str) -> np.ndarray | None:
+    if spin is None:
+        return None
+    try:
+        fraction, axis = spin
+    except (TypeError, ValueError):
+        raise ValueError(f"{which}_spin must be (fraction, axis), e.g. (0.5, '+z'); got {spin!r}") from None
+    if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or not 0 <= fraction <= 1:
+        raise ValueError(f"{which}_spin fraction of breakup must be in [0, 1]; got {fraction!r}")
+    if axis not in SPIN_AXES:
+        raise ValueError(f"{which}_spin axis must be one of {', '.join(SPIN_AXES)}; got {axis!r}")
+    return fraction * breakup_spin(state, G) * np.array(SPIN_AXES[axis])
+
+
+def setup_collision(
+    target: State,
+    projectile: State,
+    eta: float | None = None,
+    theta_deg: float = 0.0,
+    gap: float = 1e5,
+    target_spin=None,
+    projectile_spin=None,
+    speed: float | None = None,
+    G: float = G_CGS,
+    device: str | None = None,
+) -> State:
+    """Both piles in the centre-of-mass frame, set to collide.
+
+    ``eta`` = KE / |U| (paper eq. 18): KE is the translational kinetic energy of
+    the two piles' centres, U the sum of their self-potential energies.  Give
+    either ``eta`` or ``speed`` (the relative speed [cm/s]).  ``theta_deg`` is
+    the impact angle, ``gap`` [cm] the initial surface separation along x, and a
+    spin is (fraction of breakup, axis) with axis one of +x, -x, +y, -y, +z, -z.
+
+    The result has ``pile_id`` 0 (target) and 1 (projectile), and ``metadata``
+    holding eta, speed, b, both radii and masses, KE, both self-potentials and
+    the cross term at t = 0.
+
+    >>> s = setup_collision(target, projectile, eta=2.0, theta_deg=22.0, gap=1e5,
+    ...                     target_spin=None, projectile_spin=(0.5, "+z"))
+    """
+    if (eta is None) == (speed is None):
+        raise ValueError("give exactly one of eta (KE/|U|) or speed (relative speed in cm/s)")
+    if eta is not None and not (_is_number(eta) and eta > 0):
+        raise ValueError(f"eta must be > 0; got {eta!r}")
+    if speed is not None and not (_is_number(speed) and speed > 0):
+        raise ValueError(f"speed must be > 0 cm/s; got {speed!r}")
+    if not (_is_number(theta_deg) and 0 <= theta_deg < 90):
+        raise ValueError(f"theta_deg must be in [0, 90); got {theta_deg!r}")
+    if not (_is_number(gap) and gap >= 0):
+        raise ValueError(f"gap must be >= 0 cm; got {gap!r}")
+    if projectile.total_mass > target.total_mass:
+        raise ValueError(
+            f"the target must be the more massive pile: target {target.total_mass:.4g} g < "
+            f"projectile {projectile.total_mass:.4g} g; swap them"
+        )
+    target_spin_vector = _spin_vector(target_spin, target, G, "target")
+    projectile_spin_vector = _spin_vector(projectile_spin, projectile, G, "projectile")
+
+    params = Params(G=G)
+    piles = []
+    for pile, spin in ((target, target_spin_vector), (projectile, projectile_spin_vector)):
+        pile = pile.copy()
+        pile.positions -= pile.centre_of_mass
+        pile.velocities -= pile.bulk_velocity
+        if spin is not None:
+            pile.velocities += np.cross(spin, pile.positions)
+            pile.omegas[:] = spin
+        piles.append(pile)
+    target, projectile = piles
+    radius_t, radius_p = pile_radius(target), pile_radius(projectile)
+    mass_t, mass_p = target.total_mass, projectile.total_mass
+    potential_t = diagnostics(target, params, device)["potential"]
+    potential_p = diagnostics(projectile, params, device)["potential"]
+
+    reduced_mass = mass_t * mass_p / (mass_t + mass_p)
+    if speed is None:
+        speed = math.sqrt(2.0 * eta * abs(potential_t + potential_p) / reduced_mass)
+    kinetic = 0.5 * reduced_mass * speed**2
+    theta = math.radians(theta_deg)
+    impact_parameter = (radius_t + radius_p) * math.sin(theta)
+    separation_x = (radius_t + radius_p) * math.cos(theta) + gap
+
+    # Projectile at (-separation_x, b) relative to the target; then both about the common centre.
+    offset = np.array([-separation_x, impact_parameter, 0.0])
+    shift_t = -mass_p / (mass_t + mass_p) * offset
+    shift_p = mass_t / (mass_t + mass_p) * offset
+    target.positions += shift_t
+    projectile.positions += shift_p
+    target.velocities[:, 0] -= speed * mass_p / (mass_t + mass_p)
+    projectile.velocities[:, 0] += speed * mass_t / (mass_t + mass_p)
+
+    combined = State.from_arrays(
+        np.concatenate([target.positions, projectile.positions]),
+        np.concatenate([target.velocities, projectile.velocities]),
+        np.concatenate([target.omegas, projectile.omegas]),
+        np.concatenate([target.radii, projectile.radii]),
+        np.concatenate([target.masses, projectile.masses]),
+        pile_id=np.repeat(np.array([0, 1], dtype=np.int32), [target.n, projectile.n]),
+        size_class=np.concatenate([target.size_class, projectile.size_class]),
+    )
+    potential_total = diagnostics(combined, params, device)["potential"]
+    combined.metadata = {
+        "eta": kinetic / abs(potential_t + potential_p),
+        "speed": speed,
+        "theta_deg": float(theta_deg),
+        "impact_parameter": impact_parameter,
+        "gap": float(gap),
+        "target_radius": radius_t,
+        "projectile_radius": radius_p,
+        "target_mass": mass_t,
+        "projectile_mass": mass_p,
+        "target_spin": np.zeros(3) if target_spin_vector is None else target_spin_vector,
+        "projectile_spin": np.zeros(3) if projectile_spin_vector is None else projectile_spin_vector,
+        "kinetic_energy": kinetic,
+        "target_potential": potential_t,
+        "projectile_potential": potential_p,
+        "cross_potential": potential_total - potential_t - potential_p,
+    }
+    return combined
+
+
+def _is_number(value) -> bool:
+    return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)

@@ -1,0 +1,395 @@
+"""HDF5 files: piles, run trajectories (H5MD layout) and checkpoints.
+
+Nothing here imports Warp: these functions read and write NumPy snapshots.
+
+* A pile file holds one formed rubble pile and how it was made.
+* A trajectory follows H5MD 1.1: ``/h5md`` metadata, ``/particles/all`` with the
+  time-dependent elements ``position``, ``velocity``, ``omega``, ``stress``
+  (each ``step``, ``time``, ``value``) and the static ``radius``, ``mass``,
+  ``species`` (size class) and ``pile_id``; ``/observables`` time series; and
+  ``/parameters`` with the resolved run specification.  It is written in SWMR
+  mode and flushed after every frame, so it can be read while the run goes on
+  (open it with ``swmr=True``) and stays readable if the run is killed.
+* A checkpoint is replaced atomically (temporary file, fsync, rename).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from ._version import __version__
+from .state import State
+
+PILE_FORMAT = "decco-warp pile"
+CHECKPOINT_FORMAT = "decco-warp checkpoint"
+FORMAT_VERSION = 1
+
+_STATE_ARRAYS = ("positions", "velocities", "omegas", "radii", "masses", "size_class")
+
+
+class FileFormatError(ValueError):
+    """A file that is missing, unreadable, or not what it claims to be."""
+
+
+# --- plain dictionaries <-> HDF5 groups ------------------------------------------
+
+
+def write_dict(group: h5py.Group, values: dict) -> None:
+    """Scalars and strings as attributes, arrays as datasets, dicts as subgroups."""
+    for key, value in values.items():
+        if isinstance(value, dict):
+            write_dict(group.require_group(key), value)
+        elif isinstance(value, np.ndarray) and value.ndim > 0:
+            group.create_dataset(key, data=value)
+        elif isinstance(value, (list, tuple)):
+            group.attrs[key] = np.asarray(value)
+        elif value is None:
+            continue
+        else:
+            group.attrs[key] = value
+
+
+def read_dict(group: h5py.Group) -> dict:
+    values: dict = {}
+    for key, value in group.attrs.items():
+        values[key] = _plain(value)
+    for key, item in group.items():
+        values[key] = read_dict(item) if isinstance(item, h5py.Group) else item[()]
+    return values
+
+
+def _plain(value):
+    if isinstance(value, bytes):
+        return value.decode()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+@contextlib.contextmanager
+def atomic_h5(path: Path):
+    """Write an HDF5 file under a temporary name, fsync it, then rename it into place."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(handle)
+    try:
+        with h5py.File(temporary, "w") as f:
+            yield f
+        with open(temporary, "rb") as f:
+            os.fsync(f.fileno())
+        os.chmod(temporary, 0o666 & ~_umask())  # mkstemp made it private; give it the usual mode
+        os.replace(temporary, path)
+        _fsync_directory(path.parent)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(temporary)
+        raise
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _fsync_directory(directory: Path) -> None:
+    with contextlib.suppress(OSError):
+        fd = os.open(directory, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+@contextlib.contextmanager
+def open_h5(path, what: str, mode: str = "r", **options):
+    """Open an HDF5 file, turning every way it can fail into a one-line FileFormatError."""
+    path = Path(path)
+    if mode == "r" and not path.is_file():
+        raise FileFormatError(f"{what} {path} does not exist")
+    try:
+        f = h5py.File(path, mode, **options)
+    except OSError as error:
+        raise FileFormatError(f"{what} {path} is not a readable HDF5 file ({_first_line(error)})") from None
+    with f:
+        try:
+            yield f
+        except (KeyError, OSError, TypeError) as error:
+            raise FileFormatError(f"{what} {path} is incomplete or corrupted ({_first_line(error)})") from None
+
+
+def _first_line(error: BaseException) -> str:
+    text = str(error).strip().splitlines()
+    return text[0] if text else type(error).__name__
+
+
+# --- piles ----------------------------------------------------------------------
+
+
+def save_pile(pile: State, path) -> None:
+    """Write a formed pile (State with size_class and formation metadata) to ``path`` atomically."""
+    with atomic_h5(Path(path)) as f:
+        f.attrs["format"] = PILE_FORMAT
+        f.attrs["format_version"] = FORMAT_VERSION
+        f.attrs["creator"] = f"decco-warp {__version__}"
+        group = f.create_group("pile")
+        for name in _STATE_ARRAYS:
+            group.create_dataset(name, data=getattr(pile, name))
+        from .collision import pile_radius
+
+        summary = {"n_particles": pile.n, "mass": pile.total_mass, "radius": pile_radius(pile)}
+        if "potential" in pile.metadata:
+            summary["potential"] = pile.metadata["potential"]
+        write_dict(group.create_group("summary"), summary)
+        write_dict(group.create_group("formation"), pile.metadata)
+
+
+def load_pile(path) -> State:
+    """Read a pile file written by :func:`save_pile`; raises FileFormatError naming what is wrong."""
+    with open_h5(path, "pile file") as f:
+        if f.attrs.get("format") != PILE_FORMAT or "pile" not in f:
+            raise FileFormatError(f"pile file {path} is not a decco-warp pile (no 'pile' group or format mark)")
+        group = f["pile"]
+        missing = [name for name in _STATE_ARRAYS if name not in group]
+        if missing:
+            raise FileFormatError(f"pile file {path} lacks {', '.join(missing)}")
+        arrays = {name: group[name][()] for name in _STATE_ARRAYS}
+        metadata = read_dict(group["formation"]) if "formation" in group else {}
+    try:
+        return State.from_arrays(
+            arrays["positions"],
+            arrays["velocities"],
+            arrays["omegas"],
+            arrays["radii"],
+            arrays["masses"],
+            size_class=arrays["size_class"],
+            metadata=metadata,
+        )
+    except ValueError as error:
+        raise FileFormatError(f"pile file {path}: {error}") from None
+
+
+# --- trajectories (H5MD) -----------------------------------------------------------
+
+
+def _time_series(group: h5py.Group, name: str, shape: tuple, dtype) -> None:
+    element = group.create_group(name)
+    element.create_dataset("step", shape=(0,), maxshape=(None,), dtype=np.int64, chunks=(1024,))
+    element.create_dataset("time", shape=(0,), maxshape=(None,), dtype=np.float64, chunks=(1024,))
+    element["time"].attrs["unit"] = "s"
+    chunk = (1, *shape) if shape and int(np.prod(shape)) > 64 else (256, *shape)
+    element.create_dataset("value", shape=(0, *shape), maxshape=(None, *shape), dtype=dtype, chunks=chunk)
+
+
+class Trajectory:
+    """An H5MD trajectory being written: create or reopen, append frames, flush each time."""
+
+    PARTICLE_ELEMENTS = {"position": ("cm", 3), "velocity": ("cm s-1", 3), "omega": ("rad s-1", 3), "stress": ("cm", None)}
+
+    def __init__(self, file: h5py.File, path: Path):
+        self.file = file
+        self.path = path
+
+    @classmethod
+    def create(cls, path, state: State, observables: dict, parameters: dict) -> "Trajectory":
+        """A new file for ``state``'s particles; ``observables`` gives each series' shape from a sample frame."""
+        path = Path(path)
+        f = h5py.File(path, "w", libver="latest")
+        h5md = f.create_group("h5md")
+        h5md.attrs["version"] = np.array([1, 1])
+        h5md.create_group("author").attrs["name"] = os.environ.get("USER", "decco-warp user")
+        creator = h5md.create_group("creator")
+        creator.attrs["name"] = "decco-warp"
+        creator.attrs["version"] = __version__
+        particles = f.create_group("particles/all")
+        box = particles.create_group("box")
+        box.attrs["dimension"] = 3
+        box.attrs["boundary"] = np.array([b"none"] * 3)
+        n = state.n
+        for name, (unit, width) in cls.PARTICLE_ELEMENTS.items():
+            _time_series(particles, name, (n, width) if width else (n,), np.float64)
+            particles[name]["value"].attrs["unit"] = unit
+        for name, values, unit in [
+            ("radius", state.radii, "cm"),
+            ("mass", state.masses, "g"),
+            ("species", state.size_class, None),
+            ("pile_id", state.pile_id, None),
+        ]:
+            dataset = particles.create_dataset(name, data=values)
+            if unit:
+                dataset.attrs["unit"] = unit
+        observables_group = f.create_group("observables")
+        for name, value in observables.items():
+            value = np.asarray(value)
+            dtype = np.int64 if np.issubdtype(value.dtype, np.integer) else np.float64
+            _time_series(observables_group, name, value.shape, dtype)
+        write_dict(f.create_group("parameters"), parameters)
+        f.swmr_mode = True
+        return cls(f, path)
+
+    @classmethod
+    def reopen(cls, path, keep_through_step: int) -> "Trajectory":
+        """Open an existing trajectory to continue it, dropping frames after ``keep_through_step``."""
+        path = Path(path)
+        clear_write_flags(path)  # left set by a writer that was killed
+        try:
+            f = h5py.File(path, "r+", libver="latest")
+        except OSError as error:
+            raise FileFormatError(f"trajectory {path} cannot be reopened ({_first_line(error)})") from None
+        trajectory = cls(f, path)
+        for element in trajectory._elements():
+            steps = element["step"][()]
+            keep = int(np.searchsorted(steps, keep_through_step, side="right"))
+            for name in ("step", "time", "value"):
+                element[name].resize(keep, axis=0)
+        f.swmr_mode = True
+        return trajectory
+
+    def _elements(self):
+        for name in self.PARTICLE_ELEMENTS:
+            yield self.file["particles/all"][name]
+        yield from self.file["observables"].values()
+
+    def append(self, step: int, time: float, particles: dict, observables: dict) -> None:
+        """One frame: particle arrays (position, velocity, omega, stress) and observable values."""
+        for name, value in particles.items():
+            self._append(self.file["particles/all"][name], step, time, value)
+        for name, value in observables.items():
+            self._append(self.file["observables"][name], step, time, value)
+        self.file.flush()
+
+    @staticmethod
+    def _append(element: h5py.Group, step: int, time: float, value) -> None:
+        k = element["step"].shape[0]
+        for name in ("step", "time", "value"):
+            element[name].resize(k + 1, axis=0)
+        element["step"][k] = step
+        element["time"][k] = time
+        element["value"][k] = value
+
+    def close(self) -> None:
+        self.file.close()
+
+
+def read_trajectory(path) -> dict:
+    """A finished or running trajectory as NumPy arrays: steps, times, particle frames, observables, parameters."""
+    with open_h5(path, "trajectory", swmr=True, locking=False) as f:
+        particles = f["particles/all"]
+        result = {
+            "step": particles["position/step"][()],
+            "time": particles["position/time"][()],
+            "particles": {name: particles[name]["value"][()] for name in Trajectory.PARTICLE_ELEMENTS},
+            "static": {name: particles[name][()] for name in ("radius", "mass", "species", "pile_id")},
+            "observables": {name: group["value"][()] for name, group in f["observables"].items()},
+            "observable_step": {name: group["step"][()] for name, group in f["observables"].items()},
+            "parameters": read_dict(f["parameters"]),
+        }
+    return result
+
+
+# --- recovering a file whose writer was killed -----------------------------------------
+
+
+def _rotate(x: int, k: int) -> int:
+    return ((x << k) | (x >> (32 - k))) & 0xFFFFFFFF
+
+
+def lookup3(data: bytes, initval: int = 0) -> int:
+    """Bob Jenkins' lookup3 hash (hashlittle), the checksum of HDF5 metadata."""
+    mask = 0xFFFFFFFF
+    length = len(data)
+    a = b = c = (0xDEADBEEF + length + initval) & mask
+    k = 0
+    while length > 12:
+        a = (a + int.from_bytes(data[k : k + 4], "little")) & mask
+        b = (b + int.from_bytes(data[k + 4 : k + 8], "little")) & mask
+        c = (c + int.from_bytes(data[k + 8 : k + 12], "little")) & mask
+        a = (a - c) & mask; a ^= _rotate(c, 4); c = (c + b) & mask  # noqa: E702
+        b = (b - a) & mask; b ^= _rotate(a, 6); a = (a + c) & mask  # noqa: E702
+        c = (c - b) & mask; c ^= _rotate(b, 8); b = (b + a) & mask  # noqa: E702
+        a = (a - c) & mask; a ^= _rotate(c, 16); c = (c + b) & mask  # noqa: E702
+        b = (b - a) & mask; b ^= _rotate(a, 19); a = (a + c) & mask  # noqa: E702
+        c = (c - b) & mask; c ^= _rotate(b, 4); b = (b + a) & mask  # noqa: E702
+        length -= 12
+        k += 12
+    if length == 0:
+        return c
+    tail = data[k:].ljust(12, b"\0")
+    a = (a + int.from_bytes(tail[0:4], "little")) & mask
+    b = (b + int.from_bytes(tail[4:8], "little")) & mask
+    c = (c + int.from_bytes(tail[8:12], "little")) & mask
+    c ^= b; c = (c - _rotate(b, 14)) & mask  # noqa: E702
+    a ^= c; a = (a - _rotate(c, 11)) & mask  # noqa: E702
+    b ^= a; b = (b - _rotate(a, 25)) & mask  # noqa: E702
+    c ^= b; c = (c - _rotate(b, 16)) & mask  # noqa: E702
+    a ^= c; a = (a - _rotate(c, 4)) & mask  # noqa: E702
+    b ^= a; b = (b - _rotate(a, 14)) & mask  # noqa: E702
+    c ^= b; c = (c - _rotate(b, 24)) & mask  # noqa: E702
+    return c
+
+
+def clear_write_flags(path: Path) -> None:
+    """What ``h5clear -s`` does: reset the superblock's "open for writing" flags.
+
+    A file written in SWMR mode stays consistent if its writer is killed, but the
+    writer's flags remain set and HDF5 then refuses to open it for writing.  Only
+    a version 2/3 superblock at offset 0 whose checksum verifies is touched.
+    """
+    with open(path, "r+b") as f:
+        head = f.read(48)
+        if len(head) < 12 or head[:8] != b"\x89HDF\r\n\x1a\n" or head[8] not in (2, 3) or head[11] == 0:
+            return
+        size = 12 + 4 * head[9]
+        if int.from_bytes(head[size : size + 4], "little") != lookup3(head[:size]):
+            return
+        patched = head[:11] + b"\0" + head[12:size]
+        f.seek(0)
+        f.write(patched + lookup3(patched).to_bytes(4, "little"))
+        f.flush()
+        os.fsync(f.fileno())
+
+
+# --- checkpoints ---------------------------------------------------------------------
+
+
+def write_checkpoint(path, snapshot: dict, static: State, extra: dict) -> None:
+    """Everything a run needs to continue bit for bit, replacing ``path`` atomically."""
+    with atomic_h5(Path(path)) as f:
+        f.attrs["format"] = CHECKPOINT_FORMAT
+        f.attrs["format_version"] = FORMAT_VERSION
+        f.attrs["creator"] = f"decco-warp {__version__}"
+        state = f.create_group("state")
+        for name in ("radii", "masses", "pile_id", "size_class"):
+            state.create_dataset(name, data=getattr(static, name))
+        write_dict(f.create_group("snapshot"), snapshot)
+        write_dict(f.create_group("run"), extra)
+
+
+def read_checkpoint(path) -> tuple[dict, State, dict]:
+    """(snapshot, static State, extra) from :func:`write_checkpoint`."""
+    with open_h5(path, "checkpoint") as f:
+        if f.attrs.get("format") != CHECKPOINT_FORMAT:
+            raise FileFormatError(f"checkpoint {path} is not a decco-warp checkpoint")
+        snapshot = read_dict(f["snapshot"])
+        static = {name: f["state"][name][()] for name in ("radii", "masses", "pile_id", "size_class")}
+        extra = read_dict(f["run"])
+    try:
+        state = State.from_arrays(
+            snapshot["positions"],
+            snapshot["velocities"],
+            snapshot["omegas"],
+            static["radii"],
+            static["masses"],
+            pile_id=static["pile_id"],
+            size_class=static["size_class"],
+        )
+    except (KeyError, ValueError) as error:
+        raise FileFormatError(f"checkpoint {path}: {error}") from None
+    return snapshot, state, extra

@@ -1,0 +1,312 @@
+"""A collision run from a specification: set-up, stepping, trajectory, checkpoints, resume.
+
+A run folder holds ``spec.toml`` (the resolved specification), ``trajectory.h5``
+(H5MD, one frame every ``output_every`` steps), ``checkpoint.h5`` (replaced
+atomically every ``checkpoint_every`` steps and at the end) and ``run.log``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time as _time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from importlib import resources
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from . import spec as specs
+from .collision import setup_collision
+from .diagnostics import energy_ledger, stress_shares
+from .io import FileFormatError, Trajectory, load_pile, read_checkpoint, write_checkpoint
+from .simulation import Simulation
+from .state import State
+
+SPEC_FILE = "spec.toml"
+TRAJECTORY_FILE = "trajectory.h5"
+CHECKPOINT_FILE = "checkpoint.h5"
+LOG_FILE = "run.log"
+BUILTIN_PREFIX = "builtin:"
+
+
+class RunError(ValueError):
+    """A run that cannot start or continue as asked (bad folder, pile, checkpoint)."""
+
+
+@dataclass
+class RunProgress:
+    """What a progress display gets during a run."""
+
+    step: int
+    total_steps: int
+    time: float
+    first_step: int
+    elapsed: float
+
+
+@dataclass
+class RunResult:
+    run_dir: Path
+    steps: int
+    time: float
+    wall_seconds: float
+    steps_this_session: int
+
+
+# --- piles and folders ---------------------------------------------------------------
+
+
+def builtin_pile(name: str) -> Path:
+    """Path of a pile shipped with the package (``target`` or ``projectile``)."""
+    path = Path(str(resources.files("decco_warp") / "data" / "piles" / f"{name}.h5"))
+    if not path.is_file():
+        raise RunError(f"there is no builtin pile {name!r}; shipped: target, projectile")
+    return path
+
+
+def pile_path(reference: str) -> Path:
+    if reference.startswith(BUILTIN_PREFIX):
+        return builtin_pile(reference[len(BUILTIN_PREFIX) :])
+    path = Path(reference).expanduser()
+    if not path.is_file():
+        raise RunError(f"pile file {reference} does not exist")
+    return path
+
+
+def run_dir_of(spec: dict) -> Path:
+    return Path(spec["run"]["out"]).expanduser() / spec["run"]["name"]
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+class RunLog:
+    """Timestamped lines appended to run.log (and flushed at once)."""
+
+    def __init__(self, path: Path):
+        self.file = open(path, "a", encoding="utf-8")
+
+    def __call__(self, message: str) -> None:
+        stamp = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        self.file.write(f"{stamp} {message}\n")
+        self.file.flush()
+
+    def close(self) -> None:
+        self.file.close()
+
+
+# --- one frame of output -------------------------------------------------------------
+
+
+def record(sim: Simulation, size_classes: int) -> tuple[dict, dict]:
+    """Particle arrays and observables of the current state, as written to the trajectory."""
+    state = sim.state
+    pairs = sim.pair_observables()
+    d = sim.diagnostics(state, pairs)
+    ledger = energy_ledger(d, sim.energy_start, sim.work())
+    particles = {
+        "position": state.positions,
+        "velocity": state.velocities,
+        "omega": state.omegas,
+        "stress": pairs["max_overlap"],
+    }
+    observables = {
+        "kinetic_translational": d["kinetic_translational"],
+        "kinetic_rotational": d["kinetic_rotational"],
+        "potential": d["potential"],
+        "elastic": d["elastic"],
+        "total_energy": d["total_energy"],
+        **ledger,
+        "momentum": d["momentum"],
+        "angular_momentum": d["angular_momentum"],
+        "number_of_contacts": np.int64(d["number_of_contacts"]),
+        "max_overlap": d["max_overlap"],
+        "stress_share": stress_shares(pairs["max_overlap"], state.size_class, size_classes),
+    }
+    return particles, observables
+
+
+# --- start, resume ----------------------------------------------------------------------
+
+
+def prepare_collision(spec: dict, device: str | None) -> tuple[State, dict]:
+    """The combined State of a spec's collision, and what to record about its inputs."""
+    piles = {}
+    for which in ("target", "projectile"):
+        path = pile_path(spec["piles"][which])
+        try:
+            piles[which] = load_pile(path)
+        except FileFormatError as error:
+            raise RunError(str(error)) from None
+        piles[f"{which}_file"] = str(path.resolve())
+        piles[f"{which}_sha256"] = _sha256(path)
+    collision = spec["collision"]
+    state = setup_collision(
+        piles.pop("target"),
+        piles.pop("projectile"),
+        eta=collision.get("eta"),
+        speed=collision.get("speed"),
+        theta_deg=collision["theta_deg"],
+        gap=collision["gap"],
+        target_spin=specs.spin_of(spec, "target"),
+        projectile_spin=specs.spin_of(spec, "projectile"),
+        G=spec["params"]["G"],
+        device=device,
+    )
+    return state, piles
+
+
+def _device(spec: dict, override: str | None) -> str | None:
+    if override is not None:
+        return override
+    return None if spec["run"]["device"] == "auto" else spec["run"]["device"]
+
+
+@dataclass
+class PreparedRun:
+    """A run checked and set up, nothing written yet: what :func:`execute` needs."""
+
+    sim: Simulation
+    spec: dict
+    run_dir: Path
+    extra: dict
+    resume: bool
+    state: State | None = None
+    pile_info: dict | None = None
+
+
+def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None) -> PreparedRun:
+    """Check a resolved ``spec`` and set up its collision, writing nothing."""
+    run_dir = run_dir_of(spec)
+    if run_dir.exists() and (not run_dir.is_dir() or any(run_dir.iterdir())) and not overwrite:
+        raise RunError(f"run folder {run_dir} already exists; use --overwrite to replace it or resume to continue it")
+    device = _device(spec, device)
+    state, pile_info = prepare_collision(spec, device)
+    sim = Simulation(
+        state,
+        specs.params_of(spec),
+        device=device,
+        precision=spec["run"]["precision"],
+        allow_unstable=spec["run"]["allow_unstable"],
+        ledger=True,
+    )
+    extra = {"size_classes": int(state.size_class.max()) + 1, "wall_seconds": 0.0}
+    return PreparedRun(sim, spec, run_dir, extra, resume=False, state=state, pile_info=pile_info)
+
+
+def prepare_resume(run_dir, steps: int | None = None, device: str | None = None) -> PreparedRun:
+    """Check a run folder and load its checkpoint; ``steps`` raises the total to run."""
+    run_dir = Path(run_dir)
+    spec_path, checkpoint_path, trajectory_path = (run_dir / n for n in (SPEC_FILE, CHECKPOINT_FILE, TRAJECTORY_FILE))
+    for path in (spec_path, checkpoint_path, trajectory_path):
+        if not path.is_file():
+            raise RunError(f"{run_dir} is not a run folder: {path.name} is missing")
+    spec = specs.resolve_spec(specs.load_spec_file(spec_path))
+    try:
+        snapshot, static, extra = read_checkpoint(checkpoint_path)
+    except FileFormatError as error:
+        raise RunError(str(error)) from None
+    if specs.resolve_spec(_parse_toml(extra["spec_toml"])) != spec:
+        raise RunError(f"{spec_path} changed since the run started; restore it to resume")
+    if steps is not None:
+        if steps < int(snapshot["step"]):
+            raise RunError(f"steps {steps} is below the {int(snapshot['step'])} already taken")
+        spec["run"]["steps"] = steps
+    sim = Simulation.from_snapshot(
+        static, specs.params_of(spec), snapshot, device=_device(spec, device), precision=spec["run"]["precision"]
+    )
+    return PreparedRun(sim, spec, run_dir, extra, resume=True)
+
+
+def execute(run: PreparedRun, progress: Callable[[RunProgress], None] | None = None) -> RunResult:
+    """Write the run folder (or continue it) and step the run to its end."""
+    sim, spec, run_dir, extra = run.sim, run.spec, run.run_dir, run.extra
+    spec_text = specs.dumps(spec, header=f"decco-warp run specification, resolved {datetime.now(timezone.utc):%Y-%m-%d %H:%M UTC}")
+    if run.resume:
+        if spec_text.split("\n", 1)[1] != extra["spec_toml"].split("\n", 1)[1]:  # the total steps changed
+            extra["spec_toml"] = spec_text
+            (run_dir / SPEC_FILE).write_text(spec_text)
+        log = RunLog(run_dir / LOG_FILE)
+        log(f"resume: from step {sim.step_count} of {spec['run']['steps']} on {sim.device}")
+        trajectory = Trajectory.reopen(run_dir / TRAJECTORY_FILE, keep_through_step=sim.step_count)
+        return _advance(sim, trajectory, spec, run_dir, log, extra, progress)
+
+    run_dir.mkdir(parents=True, exist_ok=True)
+    for name in (TRAJECTORY_FILE, CHECKPOINT_FILE, LOG_FILE):
+        (run_dir / name).unlink(missing_ok=True)
+    (run_dir / SPEC_FILE).write_text(spec_text)
+    extra["spec_toml"] = spec_text
+    log = RunLog(run_dir / LOG_FILE)
+    state = run.state
+    log(f"start: {state.n} particles on {sim.device}, precision {spec['run']['precision']}, {spec['run']['steps']} steps")
+    log(f"stability: {sim.stability.summary()}")
+    meta = state.metadata
+    log(f"collision: eta {meta['eta']:.6g}, speed {meta['speed']:.6g} cm/s, b {meta['impact_parameter']:.6g} cm")
+    particles, observables = record(sim, extra["size_classes"])
+    parameters = {"spec": spec, "collision": meta, "piles": run.pile_info, "size_classes": extra["size_classes"]}
+    trajectory = Trajectory.create(run_dir / TRAJECTORY_FILE, state, observables, parameters)
+    trajectory.append(sim.step_count, sim.time, particles, observables)
+    write_checkpoint(run_dir / CHECKPOINT_FILE, sim.snapshot(), state, extra)
+    return _advance(sim, trajectory, spec, run_dir, log, extra, progress)
+
+
+def start_run(spec: dict, overwrite: bool = False, device: str | None = None, progress=None) -> RunResult:
+    """Set up the collision of a resolved ``spec`` and run it in a new run folder."""
+    return execute(prepare_start(spec, overwrite, device), progress)
+
+
+def resume_run(run_dir, steps: int | None = None, device: str | None = None, progress=None) -> RunResult:
+    """Continue a stopped or killed run from its checkpoint."""
+    return execute(prepare_resume(run_dir, steps, device), progress)
+
+
+def _parse_toml(text: str) -> dict:
+    return specs.tomllib.loads(text)
+
+
+def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, progress) -> RunResult:
+    total = spec["run"]["steps"]
+    output_every = spec["run"]["output_every"]
+    checkpoint_every = spec["run"]["checkpoint_every"]
+    size_classes = int(extra["size_classes"])
+    first_step = sim.step_count
+    wall_before = float(extra["wall_seconds"])
+    started = _time.perf_counter()
+    # Progress is reported about 200 times per run, never between graph blocks.
+    report_every = max(50, total // 200)
+    try:
+        while sim.step_count < total:
+            step = sim.step_count
+            stops = [total, _next_multiple(step, output_every), _next_multiple(step, checkpoint_every)]
+            sim.step(min(min(stops) - step, report_every - step % report_every))
+            step = sim.step_count
+            if step % output_every == 0 or step == total:
+                particles, observables = record(sim, size_classes)
+                trajectory.append(step, sim.time, particles, observables)
+                log(
+                    f"frame: step {step}, t {sim.time:.6g} s, E {observables['total_energy']:.9g} erg, "
+                    f"contacts {int(observables['number_of_contacts'])}"
+                )
+            if step % checkpoint_every == 0 or step == total:
+                extra["wall_seconds"] = wall_before + _time.perf_counter() - started
+                write_checkpoint(run_dir / CHECKPOINT_FILE, sim.snapshot(), sim.state, extra)
+                log(f"checkpoint: step {step}")
+            if progress is not None:
+                progress(RunProgress(step, total, sim.time, first_step, _time.perf_counter() - started))
+    finally:
+        trajectory.close()
+    wall = _time.perf_counter() - started
+    log(f"done: step {sim.step_count}, t {sim.time:.6g} s, {wall:.1f} s wall this session")
+    log.close()
+    return RunResult(run_dir, sim.step_count, sim.time, wall_before + wall, sim.step_count - first_step)
+
+
+def _next_multiple(step: int, every: int) -> int:
+    return (step // every + 1) * every

@@ -1,0 +1,212 @@
+"""Run specifications: TOML in, checked and fully resolved, TOML out.
+
+A specification has four tables, every key optional (defaults below):
+
+    [run]        name, steps | duration, output_every, checkpoint_every, device, precision, out, allow_unstable
+    [piles]      target, projectile          (pile files, or builtin:target / builtin:projectile)
+    [collision]  eta | speed, theta_deg, gap, target_spin, target_spin_axis, projectile_spin, projectile_spin_axis
+    [params]     k_in, restitution, mu_k, mu_r, dt, G, rolling_friction
+
+Every problem is a :class:`SpecError` naming the table, the key and what is allowed.
+The resolved form has every default filled in, ``steps`` rather than
+``duration`` and exactly one of ``eta`` / ``speed``, so that a run folder's
+``spec.toml`` repeats the run exactly.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+from .collision import SPIN_AXES
+from .engine import PRECISIONS
+from .params import ROLLING_FRICTION_FORMS, Params
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+
+class SpecError(ValueError):
+    """A run specification that cannot be run as written."""
+
+
+@dataclass(frozen=True)
+class Key:
+    kind: type
+    default: Any
+    check: Callable[[Any], bool]
+    allowed: str
+
+
+def _positive(v):
+    return v > 0
+
+
+def _non_negative(v):
+    return v >= 0
+
+
+def _any(v):
+    return True
+
+
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
+_DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?")
+
+_PARAMS_DEFAULT = Params()
+
+SCHEMA: dict[str, dict[str, Key]] = {
+    "run": {
+        "name": Key(str, "default", lambda v: bool(_NAME.fullmatch(v)), "letters, digits, '.', '_' and '-'"),
+        "steps": Key(int, None, _positive, "an integer >= 1"),
+        "duration": Key(float, None, _positive, "> 0 (seconds of simulated time)"),
+        "output_every": Key(int, 500, _positive, "an integer >= 1 (steps)"),
+        "checkpoint_every": Key(int, 10_000, _positive, "an integer >= 1 (steps)"),
+        "device": Key(str, "auto", lambda v: bool(_DEVICE.fullmatch(v)), "auto, cpu, cuda or cuda:N"),
+        "precision": Key(str, "mixed", lambda v: v in PRECISIONS, " or ".join(PRECISIONS)),
+        "out": Key(str, "runs/out", lambda v: bool(v.strip()), "a folder path"),
+        "allow_unstable": Key(bool, False, _any, "true or false"),
+    },
+    "piles": {
+        "target": Key(str, "builtin:target", lambda v: bool(v.strip()), "a pile file or builtin:target"),
+        "projectile": Key(str, "builtin:projectile", lambda v: bool(v.strip()), "a pile file or builtin:projectile"),
+    },
+    "collision": {
+        "eta": Key(float, None, _positive, "> 0 (KE / |U|, paper eq. 18)"),
+        "speed": Key(float, None, _positive, "> 0 (relative speed, cm/s)"),
+        "theta_deg": Key(float, 22.0, lambda v: 0 <= v < 90, "in [0, 90) degrees"),
+        "gap": Key(float, 1e5, _non_negative, ">= 0 (cm)"),
+        "target_spin": Key(float, 0.0, lambda v: 0 <= v <= 1, "in [0, 1] (fraction of breakup spin)"),
+        "target_spin_axis": Key(str, "+z", lambda v: v in SPIN_AXES, ", ".join(SPIN_AXES)),
+        "projectile_spin": Key(float, 0.0, lambda v: 0 <= v <= 1, "in [0, 1] (fraction of breakup spin)"),
+        "projectile_spin_axis": Key(str, "+z", lambda v: v in SPIN_AXES, ", ".join(SPIN_AXES)),
+    },
+    "params": {
+        "k_in": Key(float, _PARAMS_DEFAULT.k_in, _positive, "> 0 (dyne/cm)"),
+        "restitution": Key(float, _PARAMS_DEFAULT.restitution, lambda v: 0 < v <= 1, "in (0, 1]"),
+        "mu_k": Key(float, _PARAMS_DEFAULT.mu_k, _non_negative, ">= 0"),
+        "mu_r": Key(float, _PARAMS_DEFAULT.mu_r, _non_negative, ">= 0"),
+        "dt": Key(float, _PARAMS_DEFAULT.dt, _positive, "> 0 (s)"),
+        "G": Key(float, _PARAMS_DEFAULT.G, _non_negative, ">= 0 (cm^3 g^-1 s^-2)"),
+        "rolling_friction": Key(str, "couple", lambda v: v in ROLLING_FRICTION_FORMS, " or ".join(ROLLING_FRICTION_FORMS)),
+    },
+}
+
+#: Default collision energy when neither eta nor speed is given.
+DEFAULT_ETA = 2.0
+
+
+def load_spec_file(path) -> dict:
+    """Parse a TOML file into a raw (unchecked) dictionary."""
+    path = Path(path)
+    if not path.is_file():
+        raise SpecError(f"specification {path} does not exist")
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except tomllib.TOMLDecodeError as error:
+        raise SpecError(f"specification {path} is not valid TOML: {error}") from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise SpecError(f"specification {path} cannot be read: {error}") from None
+
+
+def resolve_spec(raw: dict | None = None, overrides: dict | None = None) -> dict:
+    """Check ``raw`` (from TOML) plus ``overrides`` ({table: {key: value}}, e.g. from the CLI) and fill defaults."""
+    raw = raw or {}
+    if not isinstance(raw, dict):
+        raise SpecError("a specification must be a table of tables")
+    merged: dict[str, dict] = {}
+    for source in (raw, overrides or {}):
+        for table, values in source.items():
+            if table not in SCHEMA:
+                raise SpecError(f"unknown table [{table}]; allowed: {', '.join(f'[{t}]' for t in SCHEMA)}")
+            if not isinstance(values, dict):
+                raise SpecError(f"[{table}] must be a table of keys, not {values!r}")
+            for key, value in values.items():
+                if key not in SCHEMA[table]:
+                    raise SpecError(f"unknown key [{table}] {key}; allowed: {', '.join(SCHEMA[table])}")
+                if value is not None:
+                    merged.setdefault(table, {})[key] = value
+
+    spec: dict[str, dict] = {}
+    for table, keys in SCHEMA.items():
+        given = merged.get(table, {})
+        spec[table] = {}
+        for key, rule in keys.items():
+            if key in given:
+                spec[table][key] = _checked(table, key, given[key], rule)
+            elif rule.default is not None:
+                spec[table][key] = rule.default
+
+    run, collision = spec["run"], spec["collision"]
+    if "steps" in run and "duration" in run:
+        raise SpecError("[run] give steps or duration, not both")
+    if "duration" in run:
+        run["steps"] = max(1, math.ceil(run.pop("duration") / spec["params"]["dt"] - 1e-9))
+    run.setdefault("steps", 50_000)
+    if "eta" in collision and "speed" in collision:
+        raise SpecError("[collision] give eta or speed, not both")
+    if "eta" not in collision and "speed" not in collision:
+        collision["eta"] = DEFAULT_ETA
+    try:
+        Params(**spec["params"])
+    except ValueError as error:
+        raise SpecError(f"[params] {error}") from None
+    return spec
+
+
+def _checked(table: str, key: str, value, rule: Key):
+    where = f"[{table}] {key} = {value!r}"
+    if rule.kind is bool:
+        ok = isinstance(value, bool)
+    elif rule.kind is int:
+        ok = isinstance(value, int) and not isinstance(value, bool)
+    elif rule.kind is float:
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if ok:
+            value = float(value)
+            ok = math.isfinite(value)
+    else:
+        ok = isinstance(value, str)
+    if not ok:
+        raise SpecError(f"{where}: must be {rule.kind.__name__} {rule.allowed}")
+    if not rule.check(value):
+        raise SpecError(f"{where}: must be {rule.allowed}")
+    return value
+
+
+def params_of(spec: dict) -> Params:
+    return Params(**spec["params"])
+
+
+def spin_of(spec: dict, which: str):
+    fraction = spec["collision"][f"{which}_spin"]
+    return (fraction, spec["collision"][f"{which}_spin_axis"]) if fraction > 0 else None
+
+
+def dumps(spec: dict, header: str = "") -> str:
+    """TOML text of a resolved specification (tables of scalars)."""
+    lines = [f"# {line}" if line else "#" for line in header.splitlines()]
+    for table, values in spec.items():
+        lines.append("")
+        lines.append(f"[{table}]")
+        for key, value in values.items():
+            lines.append(f"{key} = {_toml_value(value)}")
+    return "\n".join(lines).lstrip("\n") + "\n"
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return repr(value)
+    text = str(value).replace("\\", "\\\\").replace('"', '\\"')
+    return f'"{text}"'

@@ -1,0 +1,128 @@
+"""Rubble-pile formation and pile files."""
+
+import h5py
+import numpy as np
+import pytest
+
+import decco_warp as dw
+from decco_warp.collision import pile_radius
+from decco_warp.io import FileFormatError, load_pile, save_pile
+from decco_warp.pile import KE_THRESHOLD, remove_net_motion, seed_cloud, size_class_counts
+
+#: Overlaps left in a settled pile: well under 1 % of the smallest radius.
+SETTLED_OVERLAP_FRACTION = 0.01
+
+
+def test_size_class_counts_give_equal_mass_per_class():
+    counts = size_class_counts(5000)
+    assert counts.tolist() == [4303, 538, 159]  # physics.md
+    radii = np.array([0.75e6, 1.5e6, 2.25e6])
+    mass = counts * radii**3
+    assert np.ptp(mass) / mass.mean() < 0.01
+    for n in (2, 7, 100, 1250):
+        assert size_class_counts(n).sum() == n
+
+
+def test_seed_cloud_has_no_overlaps_and_grows_when_crowded():
+    rng = np.random.default_rng(0)
+    radii = np.repeat([0.75e6, 1.5e6, 2.25e6], [80, 10, 3])
+    positions, seed_radius = seed_cloud(radii, rng, fill=0.45)  # too crowded: the sphere must grow
+    first = ((radii**3).sum() / 0.45) ** (1 / 3)
+    assert seed_radius > first
+    d = np.linalg.norm(positions[:, None] - positions[None], axis=2)
+    gaps = d - radii[:, None] - radii[None]
+    np.fill_diagonal(gaps, np.inf)
+    assert gaps.min() >= 0
+    assert np.all(np.linalg.norm(positions, axis=1) + radii <= seed_radius * (1 + 1e-12))
+
+
+def test_remove_net_motion_zeroes_momentum_and_spin():
+    rng = np.random.default_rng(1)
+    n = 50
+    state = dw.State.from_arrays(
+        rng.normal(size=(n, 3)) * 1e7 + 3e7,
+        rng.normal(size=(n, 3)) * 100 + 40,
+        rng.normal(size=(n, 3)) * 1e-4,
+        np.full(n, 1e6),
+        np.full(n, 1e19),
+    )
+    still = remove_net_motion(state)
+    d = dw.diagnostics(still, dw.Params())
+    p_scale = np.linalg.norm(state.masses[:, None] * state.velocities, axis=1).sum()
+    assert np.linalg.norm(d["momentum"]) < 1e-12 * p_scale
+    l_scale = np.linalg.norm(state.masses[:, None] * np.cross(still.positions, state.velocities), axis=1).sum()
+    assert np.linalg.norm(d["angular_momentum"]) < 1e-12 * l_scale
+    assert np.linalg.norm(still.centre_of_mass) < 1e-9 * 1e7
+
+
+@pytest.fixture(scope="module")
+def small_pile():
+    # A larger dt than the paper's (eq. 17 margin 22) keeps this test short.
+    return dw.form_pile(n_particles=100, seed=4, device="cpu", params=dw.Params(dt=0.1))
+
+
+def test_formed_pile_is_settled_centred_and_still(small_pile):
+    pile = small_pile
+    params = dw.Params()
+    assert pile.n == 100 and pile.size_class.tolist() == sorted(pile.size_class.tolist())
+    assert np.bincount(pile.size_class).tolist() == size_class_counts(100).tolist()
+    d = dw.diagnostics(pile, params)
+    kinetic = d["kinetic_translational"] + d["kinetic_rotational"]
+    # Removing the net spin can only lower the kinetic energy below the formation threshold.
+    assert kinetic < KE_THRESHOLD * abs(d["potential"])
+    assert small_pile.metadata["history_ke_over_u"].max() > 1e-3  # it collapsed first
+    assert d["number_of_contacts"] > pile.n  # a pile, not a cloud
+    assert d["max_overlap"] < SETTLED_OVERLAP_FRACTION * pile.radii.min()
+    assert np.linalg.norm(pile.centre_of_mass) < 1e-6 * pile_radius(pile)
+    assert np.linalg.norm(d["momentum"]) < 1e-9 * pile.total_mass * 1.0
+
+
+def test_formation_is_deterministic_for_a_seed():
+    params = dw.Params(dt=0.2)  # eq. 17 margin 11: fine for a 12-particle check
+    a = dw.form_pile(n_particles=12, seed=9, device="cpu", params=params, ke_threshold=1e-4)
+    b = dw.form_pile(n_particles=12, seed=9, device="cpu", params=params, ke_threshold=1e-4)
+    assert np.array_equal(a.positions, b.positions) and np.array_equal(a.velocities, b.velocities)
+    radii = np.repeat([0.75e6, 1.5e6, 2.25e6], [10, 1, 1])
+    seeded_9, _ = seed_cloud(radii, np.random.default_rng(9))
+    seeded_10, _ = seed_cloud(radii, np.random.default_rng(10))
+    assert not np.array_equal(seeded_9, seeded_10)
+
+
+def test_pile_file_round_trip(small_pile, tmp_path):
+    path = tmp_path / "p.h5"
+    save_pile(small_pile, path)
+    back = load_pile(path)
+    for name in ("positions", "velocities", "omegas", "radii", "masses", "size_class"):
+        assert np.array_equal(getattr(back, name), getattr(small_pile, name)), name
+    assert back.metadata["seed"] == 4
+    np.testing.assert_array_equal(back.metadata["history_ke_over_u"], small_pile.metadata["history_ke_over_u"])
+    with h5py.File(path) as f:
+        assert f["pile/summary"].attrs["mass"] == pytest.approx(small_pile.total_mass)
+    assert list(tmp_path.iterdir()) == [path]  # no temporary file left behind
+
+
+def test_bad_pile_files_are_refused_with_a_reason(small_pile, tmp_path):
+    with pytest.raises(FileFormatError, match="does not exist"):
+        load_pile(tmp_path / "missing.h5")
+    junk = tmp_path / "junk.h5"
+    junk.write_bytes(b"not hdf5 at all")
+    with pytest.raises(FileFormatError, match="not a readable HDF5 file"):
+        load_pile(junk)
+    good = tmp_path / "good.h5"
+    save_pile(small_pile, good)
+    truncated = tmp_path / "truncated.h5"
+    truncated.write_bytes(good.read_bytes()[: good.stat().st_size // 3])
+    with pytest.raises(FileFormatError):
+        load_pile(truncated)
+    negative = tmp_path / "negative.h5"
+    save_pile(small_pile, negative)
+    with h5py.File(negative, "r+") as f:
+        f["pile/radii"][3] = -1.0
+    with pytest.raises(FileFormatError, match="radii must be > 0; particle 3"):
+        load_pile(negative)
+    gutted = tmp_path / "gutted.h5"
+    save_pile(small_pile, gutted)
+    with h5py.File(gutted, "r+") as f:
+        del f["pile/masses"]
+    with pytest.raises(FileFormatError, match="lacks masses"):
+        load_pile(gutted)

@@ -1,0 +1,221 @@
+"""Runs: the CLI, run folders, the H5MD trajectory, checkpoints and resume."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+import decco_warp as dw
+from decco_warp import spec as specs
+from decco_warp.io import read_checkpoint, save_pile
+from decco_warp.run import resume_run, start_run
+
+#: A short run of the shipped default collision.
+SHORT = {"steps": 600, "output_every": 100, "checkpoint_every": 200}
+
+
+def _cli(*args, cwd=None):
+    return subprocess.run(
+        [sys.executable, "-c", "from decco_warp.cli import app; app()", *args], capture_output=True, text=True, cwd=cwd
+    )
+
+
+def _spec(tmp_path, name="r", **run):
+    return specs.resolve_spec({"run": {"name": name, "out": str(tmp_path), "device": "cpu", **SHORT, **run}})
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    """The default collision, shortened, run through the CLI."""
+    out = tmp_path_factory.mktemp("runs")
+    result = _cli(
+        "simulate", "--steps", "600", "--output-every", "100", "--checkpoint-every", "200", "--out", str(out), "--device", "cpu"
+    )
+    assert result.returncode == 0, result.stderr
+    return out / "default", result
+
+
+def test_default_simulate_writes_a_complete_run_folder(finished):
+    run_dir, result = finished
+    assert {p.name for p in run_dir.iterdir()} == {"spec.toml", "trajectory.h5", "checkpoint.h5", "run.log"}
+    assert str(run_dir) in result.stdout and "trajectory.h5" in result.stdout
+    spec = specs.resolve_spec(specs.load_spec_file(run_dir / "spec.toml"))
+    assert spec["run"]["steps"] == 600 and spec["piles"]["target"] == "builtin:target"
+    assert "done: step 600" in (run_dir / "run.log").read_text()
+
+
+def test_trajectory_follows_h5md_and_round_trips(finished):
+    run_dir, _ = finished
+    spec = specs.resolve_spec(specs.load_spec_file(run_dir / "spec.toml"))
+    with h5py.File(run_dir / "trajectory.h5", "r", swmr=True) as f:
+        assert list(f["h5md"].attrs["version"]) == [1, 1]
+        assert f["h5md/creator"].attrs["name"] == "decco-warp"
+        particles = f["particles/all"]
+        n = particles["radius"].shape[0]
+        for element in ("position", "velocity", "omega"):
+            assert particles[element]["value"].shape == (7, n, 3)
+            assert particles[element]["step"][()].tolist() == list(range(0, 601, 100))
+            assert particles[element]["value"].maxshape[0] is None and particles[element]["value"].chunks
+        assert particles["stress/value"].shape == (7, n)
+        np.testing.assert_allclose(particles["position/time"][()], np.arange(7) * 100 * spec["params"]["dt"])
+        assert set(np.unique(particles["pile_id"][()])) == {0, 1}
+        expected = {
+            "kinetic_translational", "kinetic_rotational", "potential", "elastic", "total_energy",
+            "dissipated_sliding", "dissipated_rolling", "dissipated_hysteresis", "integration_error",
+            "momentum", "angular_momentum", "number_of_contacts", "max_overlap", "stress_share",
+        }
+        assert set(f["observables"]) == expected
+        assert f["observables/stress_share/value"].shape == (7, 3)
+        assert f["parameters/spec/collision"].attrs["eta"] == spec["collision"]["eta"]
+        assert f["parameters/collision"].attrs["cross_potential"] < 0
+    data = dw.read_trajectory(run_dir / "trajectory.h5")
+    assert data["particles"]["position"].shape == (7, n, 3)
+    assert data["parameters"]["spec"]["params"]["k_in"] == spec["params"]["k_in"]
+
+
+def test_observables_match_the_recorded_particles(finished):
+    run_dir, _ = finished
+    data = dw.read_trajectory(run_dir / "trajectory.h5")
+    masses = data["static"]["mass"]
+    radii = data["static"]["radius"]
+    obs = data["observables"]
+    for k in (0, 3, 6):
+        v = data["particles"]["velocity"][k]
+        w = data["particles"]["omega"][k]
+        assert obs["kinetic_translational"][k] == pytest.approx(0.5 * np.sum(masses * (v * v).sum(axis=1)), rel=1e-12)
+        assert obs["kinetic_rotational"][k] == pytest.approx(0.5 * np.sum(0.4 * masses * radii**2 * (w * w).sum(axis=1)), rel=1e-12)
+        np.testing.assert_allclose(obs["momentum"][k], (masses[:, None] * v).sum(axis=0), rtol=1e-12, atol=1e-9 * np.abs(masses[:, None] * v).sum())
+    # The books balance at every frame, and momentum stays put.
+    books = obs["total_energy"] + obs["dissipated_sliding"] + obs["dissipated_rolling"] + obs["dissipated_hysteresis"] + obs["integration_error"]
+    np.testing.assert_allclose(books, obs["total_energy"][0], rtol=1e-10)
+    p_scale = np.abs(masses[:, None] * data["particles"]["velocity"][0]).sum()
+    assert np.abs(obs["momentum"] - obs["momentum"][0]).max() < 1e-6 * p_scale
+
+
+def _frames(run_dir):
+    data = dw.read_trajectory(run_dir / "trajectory.h5")
+    return data
+
+
+def _assert_same_run(a, b):
+    assert a["step"].tolist() == b["step"].tolist()
+    for name in a["particles"]:
+        assert np.array_equal(a["particles"][name], b["particles"][name]), name
+    for name in a["observables"]:
+        assert np.array_equal(a["observables"][name], b["observables"][name], equal_nan=True), name
+        assert a["observable_step"][name].tolist() == a["step"].tolist(), name
+
+
+def test_stopped_run_resumes_bit_identically(tmp_path):
+    straight = start_run(_spec(tmp_path, "straight"))
+    start_run(_spec(tmp_path, "parts", steps=300))
+    resumed = resume_run(tmp_path / "parts", steps=600)
+    assert resumed.steps == 600 and resumed.steps_this_session == 300
+    _assert_same_run(_frames(straight.run_dir), _frames(tmp_path / "parts"))
+    snap_a, _, _ = read_checkpoint(tmp_path / "straight" / "checkpoint.h5")
+    snap_b, _, _ = read_checkpoint(tmp_path / "parts" / "checkpoint.h5")
+    for key in ("positions", "velocities", "omegas", "force", "torque", "work"):
+        assert np.array_equal(snap_a[key], snap_b[key]), key
+
+
+def test_killed_run_resumes_without_lost_or_duplicated_frames(tmp_path):
+    straight = start_run(_spec(tmp_path, "straight", steps=2400, checkpoint_every=600))
+    args = ["--steps", "2400", "--output-every", "100", "--checkpoint-every", "600", "--out", str(tmp_path)]
+    process = subprocess.Popen(
+        [sys.executable, "-c", "from decco_warp.cli import app; app()", "simulate", "--name", "killed", *args, "--device", "cpu"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    log = tmp_path / "killed" / "run.log"
+    deadline = time.time() + 120
+    while time.time() < deadline:
+        if log.exists() and "checkpoint: step 1200" in log.read_text():
+            break
+        time.sleep(0.02)
+    os.kill(process.pid, signal.SIGKILL)
+    process.wait()
+    text = log.read_text()
+    assert "checkpoint: step 1200" in text and "done" not in text, "the run was not killed mid-way"
+    result = _cli("resume", str(tmp_path / "killed"), "--device", "cpu")
+    assert result.returncode == 0, result.stderr
+    _assert_same_run(_frames(straight.run_dir), _frames(tmp_path / "killed"))
+
+
+def test_existing_run_folder_is_not_overwritten(finished, tmp_path):
+    run_dir, _ = finished
+    before = (run_dir / "trajectory.h5").stat().st_mtime_ns
+    result = _cli("simulate", "--steps", "10", "--out", str(run_dir.parent), "--device", "cpu")
+    assert result.returncode == 2 and "already exists" in result.stderr
+    assert (run_dir / "trajectory.h5").stat().st_mtime_ns == before
+
+
+@pytest.fixture(scope="module")
+def bad_piles(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("piles")
+    pile = dw.load_pile(dw.run.builtin_pile("projectile"))
+    negative = pile.copy()
+    negative.radii = negative.radii.copy()
+    save_pile(negative, folder / "negative.h5")
+    with h5py.File(folder / "negative.h5", "r+") as f:
+        f["pile/radii"][0] = -5.0
+    (folder / "corrupt.h5").write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 100)
+    return folder
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--eta", "0"], "[collision] eta = 0.0: must be > 0"),
+        (["--theta", "95"], "[collision] theta_deg = 95.0: must be in [0, 90) degrees"),
+        (["--projectile", "no/such/pile.h5"], "pile file no/such/pile.h5 does not exist"),
+        (["--projectile", "{piles}/negative.h5"], "radii must be > 0; particle 0"),
+        (["--projectile", "{piles}/corrupt.h5"], "not a readable HDF5 file"),
+        (["--spin-target", "fast"], "--spin-target must be FRACTION[,AXIS]"),
+        (["--steps", "10", "--duration", "5"], "not both"),
+        (["--device", "gpu"], "must be auto, cpu, cuda or cuda:N"),
+        (["--dt", "5"], "dt = 5 s is too long"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_code_2(args, message, bad_piles, tmp_path):
+    args = [a.replace("{piles}", str(bad_piles)) for a in args]
+    result = _cli("simulate", *args, "--out", str(tmp_path))
+    assert result.returncode == 2, result.stderr
+    assert message in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.stderr
+    assert not any(tmp_path.iterdir()), "nothing may be written"
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("[collision]\netaa = 2.0\n", "unknown key [collision] etaa"),
+        ("[runs]\nsteps = 2\n", "unknown table [runs]"),
+        ("[run]\nsteps = 'many'\n", "[run] steps = 'many': must be int"),
+        ("[params]\nrestitution = 1.5\n", "[params] restitution = 1.5: must be in (0, 1]"),
+        ("[run\nsteps = 1\n", "is not valid TOML"),
+    ],
+)
+def test_bad_spec_files_are_refused_before_any_work(text, message, tmp_path):
+    config = tmp_path / "spec.toml"
+    config.write_text(text)
+    out = tmp_path / "out"
+    result = _cli("simulate", str(config), "--out", str(out))
+    assert result.returncode == 2 and message in result.stderr, result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_spec_file_and_options_combine_and_resolve(tmp_path):
+    config = tmp_path / "c.toml"
+    config.write_text('[run]\nname = "mine"\nduration = 8.0\n[collision]\nspeed = 2e4\ntheta_deg = 10\n[params]\ndt = 0.05\n')
+    result = _cli("simulate", str(config), "--theta", "30", "--output-every", "40", "--out", str(tmp_path), "--device", "cpu")
+    assert result.returncode == 0, result.stderr
+    spec = specs.load_spec_file(tmp_path / "mine" / "spec.toml")
+    assert spec["run"]["steps"] == 160 and "duration" not in spec["run"]
+    assert spec["collision"]["theta_deg"] == 30.0 and spec["collision"]["speed"] == 2e4 and "eta" not in spec["collision"]
+    assert spec == specs.resolve_spec(spec)  # the written spec is complete and re-runs exactly
