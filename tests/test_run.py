@@ -219,3 +219,11 @@ def test_spec_file_and_options_combine_and_resolve(tmp_path):
     assert spec["run"]["steps"] == 160 and "duration" not in spec["run"]
     assert spec["collision"]["theta_deg"] == 30.0 and spec["collision"]["speed"] == 2e4 and "eta" not in spec["collision"]
     assert spec == specs.resolve_spec(spec)  # the written spec is complete and re-runs exactly
+
+
+def test_shipped_default_spec_file_is_the_default():
+    """runs/default.toml documents what `decco-warp simulate` with no arguments runs."""
+    from pathlib import Path
+
+    shipped = Path(__file__).parent.parent / "runs" / "default.toml"
+    assert specs.resolve_spec(specs.load_spec_file(shipped)) == specs.resolve_spec({})
