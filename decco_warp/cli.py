@@ -300,3 +300,70 @@ def resume(
 
     result = _run_with_progress(prepare_resume, run_dir, steps=steps, device=device)
     _report(result)
+
+
+# --- bench -------------------------------------------------------------------------------
+
+
+@app.command()
+def bench(
+    n: str = typer.Option("", "--n", help="Comma-separated particle counts (default: 2048,10240,65536,131072 on CUDA; 256,1024 on CPU)."),
+    steps: int = typer.Option(100, "--steps", help="Steps per timed call of the full step (one CUDA graph replay per 50)."),
+    budget: float = typer.Option(1.0, "--seconds", help="Seconds of timing per measurement."),
+    precision: str = typer.Option("mixed", "--precision", help="mixed or float64."),
+    layouts: str = typer.Option("", "--layouts", help="Also time these layouts, TILE:PER_BLOCK,... (e.g. 128:1,128:4,256:4)."),
+    json_out: Optional[Path] = typer.Option(None, "--json", help="Write the table as JSON here."),
+    device: Optional[str] = DeviceOption,
+) -> None:
+    """Pairs/s of the force kernel and of the full step, beside a one-thread-per-particle baseline."""
+    import json
+
+    import warp as wp
+
+    from . import bench as benchmarks
+    from .device import DeviceError, resolve_device
+    from .engine import PRECISIONS, Layout
+
+    try:
+        chosen = resolve_device(device)
+    except DeviceError as error:
+        fail(str(error))
+    if precision not in PRECISIONS:
+        fail(f"--precision must be one of {', '.join(PRECISIONS)}; got {precision!r}")
+    default_sizes = "2048,10240,65536,131072" if chosen.startswith("cuda") else "256,1024"
+    sizes = [int(v) for v in _floats(n or default_sizes, "--n")]
+    if any(v < 2 for v in sizes) or steps < 1 or budget <= 0:
+        fail("--n values must be >= 2, --steps >= 1 and --seconds > 0")
+    extra_layouts = []
+    for item in filter(None, (part.strip() for part in layouts.split(","))):
+        try:
+            tile, per_block = (int(v) for v in item.split(":"))
+            extra_layouts.append(Layout(tile, per_block, tile if chosen.startswith("cuda") else 1))
+        except ValueError:
+            fail(f"--layouts entries must be TILE:PER_BLOCK with positive integers; got {item!r}")
+    limit, how = benchmarks.device_limit_pairs_per_s(chosen)
+    d = wp.get_device(chosen)
+    typer.echo(f"device: {chosen} ({d.name}), warp-lang {wp.config.version}, precision {precision}")
+    typer.echo(f"limit: {how}" + (f" -> {limit:.3g} pairs/s" if limit else ""))
+    header = f"{'N':>8} {'force pairs/s':>14} {'step pairs/s':>13} {'step ms':>9} {'of limit':>9} {'baseline pairs/s':>17} {'speed-up':>9}  layout"
+    typer.echo(header)
+    rows = []
+    for size in sizes:
+        for layout in [None, *extra_layouts]:
+            row = benchmarks.bench_size(size, chosen, precision, layout, budget, steps, baseline=layout is None)
+            rows.append(row)
+            fraction = f"{100 * row.fraction_of_limit:8.1f}%" if row.fraction_of_limit is not None else f"{'n/a':>9}"
+            baseline_text = f"{row.baseline_pairs_per_s:17.3g} {row.speedup:8.1f}x" if layout is None else f"{'':>17} {'':>9}"
+            typer.echo(
+                f"{size:>8} {row.force_pairs_per_s:14.3g} {row.step_pairs_per_s:13.3g} {1e3 * row.step_seconds:9.3f} "
+                f"{fraction} {baseline_text}  {row.layout}"
+            )
+    if json_out is not None:
+        json_out.write_text(
+            json.dumps(
+                {"device": chosen, "device_name": d.name, "warp": wp.config.version, "precision": precision,
+                 "limit_pairs_per_s": limit, "limit": how, "rows": [benchmarks.as_dict(r) for r in rows]},
+                indent=2,
+            )
+        )
+        typer.echo(f"wrote {json_out}")

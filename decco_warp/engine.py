@@ -119,7 +119,14 @@ class Engine:
         self.channels = wp.zeros((ledger_rows, channel_count), dtype=wp.vec3d, device=self.device)
         self.work = wp.zeros(ledger_rows, dtype=wp.vec4d, device=self.device)
 
-        if force_kernel == "tiled":
+        # The mixed-precision sweep reads packed float32 bodies, refreshed before each sweep.
+        self._packed = force_kernel == "tiled" and precision == "mixed"
+        self.body = wp.zeros(self.count if self._packed else 0, dtype=force_kernels.Body, device=self.device)
+        if self._packed:
+            self._force_kernel = force_kernels.pair_forces_tiled_mixed(
+                self.layout.tile, self.layout.particles_per_block, params.rolling_friction, ledger
+            )
+        elif force_kernel == "tiled":
             self._force_kernel = force_kernels.pair_forces_tiled(
                 self.layout.tile, self.layout.particles_per_block, precision, params.rolling_friction, ledger
             )
@@ -134,6 +141,15 @@ class Engine:
         outputs = [self.force, self.torque, self.channels]
         if self.ledger:
             self.channels.zero_()
+        if self._packed:
+            wp.launch(
+                force_kernels.pack_bodies,
+                dim=self.count,
+                inputs=[wp.float64(self.params.G), self.radius, self.mass, self.position],
+                outputs=[self.body],
+                device=self.device,
+            )
+            inputs.append(self.body)
         if self.force_kernel == "tiled":
             per_block = self.layout.particles_per_block
             wp.launch_tiled(

@@ -17,9 +17,11 @@ form and layout, each in its own Warp module so that a variant compiles once and
 never forces another to recompile.
 
 Precision:
-    ``"mixed"`` (default): positions, velocities and every contact quantity in
-    float64; gravity in float32 arithmetic on the float64 separation; sums in
-    float32.
+    ``"mixed"`` (default): the sweep runs on packed float32 "bodies" (each
+    position split into a float32 pair hi + lo, so that separations keep float32
+    *relative* precision however far from the origin; radius; G m).  Gravity is
+    float32; a pair that may touch is re-examined from the float64 arrays, and
+    every contact quantity is float64.  Sums are float32.
     ``"float64"``: everything in double.
 """
 
@@ -29,7 +31,36 @@ import warp as wp
 
 from .pair import CONTACT_FUNCTIONS, ContactModel, gravity, in_contact
 
+wp.set_module_options({"enable_backward": False})
+
 PRECISIONS = ("mixed", "float64")
+
+#: A packed particle for the mixed-precision sweep: position as float32 hi + lo, radius, G m.
+Body = wp.types.vector(length=8, dtype=wp.float32)
+
+#: A float32 separation is good to ~1e-7 relative; pairs this close (in d^2) are
+#: candidates, confirmed or rejected in float64.
+CONTACT_CANDIDATE = 1.0 + 1e-5
+
+
+@wp.kernel
+def pack_bodies(
+    # Model:
+    G: wp.float64,
+    radius_in: wp.array(dtype=wp.float64),
+    mass_in: wp.array(dtype=wp.float64),
+    # State in:
+    position_in: wp.array(dtype=wp.vec3d),
+    # Out:
+    body_out: wp.array(dtype=Body),
+):
+    """Split each float64 position into float32 hi + lo; (hi_i - hi_j) + (lo_i - lo_j) is then
+    accurate to float32 relative precision of the separation itself."""
+    i = wp.tid()
+    x = position_in[i]
+    hi = wp.vec3f(x)
+    lo = wp.vec3f(x - wp.vec3d(hi))
+    body_out[i] = Body(hi[0], hi[1], hi[2], lo[0], lo[1], lo[2], wp.float32(radius_in[i]), wp.float32(G * mass_in[i]))
 
 _REAL = {"mixed": (wp.float32, wp.vec3f), "float64": (wp.float64, wp.vec3d)}
 
@@ -196,6 +227,114 @@ def pair_forces_tiled(
                     torque_out[i] = wp.vec3d(wp.float64(row[3]), wp.float64(row[4]), wp.float64(row[5]))
 
     return pair_forces_tiled_kernel
+
+
+@functools.cache
+def pair_forces_tiled_mixed(tile: int, particles_per_block: int, rolling: str = "couple", ledger: bool = False):
+    """The tiled kernel of the default precision: the sweep touches only packed float32 bodies.
+
+    Same launch as :func:`pair_forces_tiled`, with ``body_in`` from :data:`pack_bodies`.
+    """
+    contact = CONTACT_FUNCTIONS[rolling]
+    P = particles_per_block
+    Rows3 = wp.types.matrix(shape=(P, 3), dtype=wp.float32)
+    Rows = wp.types.vector(length=P, dtype=wp.float32)
+    # Per particle: the gravitational field sum G m_j r_ij / d^3 (force is -m_i times it),
+    # then contact force and torque.
+    Sums = wp.types.matrix(shape=(P, 9), dtype=wp.float32)
+    Sum = wp.types.vector(length=9, dtype=wp.float32)
+    candidate = wp.float32(CONTACT_CANDIDATE)
+
+    @wp.kernel(module="unique", enable_backward=False, module_options={"fast_math": True})
+    def pair_forces_tiled_mixed_kernel(
+        # Model:
+        model: ContactModel,
+        count: int,
+        radius_in: wp.array(dtype=wp.float64),
+        mass_in: wp.array(dtype=wp.float64),
+        # State in:
+        position_in: wp.array(dtype=wp.vec3d),
+        velocity_in: wp.array(dtype=wp.vec3d),
+        omega_in: wp.array(dtype=wp.vec3d),
+        body_in: wp.array(dtype=Body),
+        # Out:
+        force_out: wp.array(dtype=wp.vec3d),
+        torque_out: wp.array(dtype=wp.vec3d),
+        channels_out: wp.array2d(dtype=wp.vec3d),
+    ):
+        block, lane = wp.tid()
+        first = block * wp.static(P)
+
+        hi_i = Rows3()
+        lo_i = Rows3()
+        radius_i = Rows()
+        for p in range(wp.static(P)):
+            b = body_in[wp.min(first + p, count - 1)]
+            hi_i[p] = wp.vec3f(b[0], b[1], b[2])
+            lo_i[p] = wp.vec3f(b[3], b[4], b[5])
+            radius_i[p] = b[6]
+
+        sums = Sums()
+        for start in range(0, count, wp.static(tile)):
+            body_t = wp.tile_load(body_in, shape=wp.static(tile), offset=start, storage="shared")
+            for k in range(lane, wp.static(tile), wp.block_dim()):
+                j = start + k
+                if j < count:
+                    b = body_t[k]
+                    hi_j = wp.vec3f(b[0], b[1], b[2])
+                    lo_j = wp.vec3f(b[3], b[4], b[5])
+                    radius_j = b[6]
+                    g_mass_j = b[7]
+                    for p in range(wp.static(P)):
+                        i = first + p
+                        r = (hi_i[p] - hi_j) + (lo_i[p] - lo_j)
+                        d2 = wp.dot(r, r)
+                        # d2 == 0: the particle itself (or a coincident one, which has no direction).
+                        if i < count and d2 > wp.float32(0.0):
+                            inv_d = wp.float32(1.0) / wp.sqrt(d2)
+                            field = (g_mass_j * inv_d * inv_d * inv_d) * r
+                            force = wp.vec3f()
+                            torque = wp.vec3f()
+                            reach = radius_i[p] + radius_j
+                            if d2 < reach * reach * candidate:
+                                r64 = position_in[i] - position_in[j]
+                                d2_64 = wp.dot(r64, r64)
+                                if in_contact(d2_64, radius_in[i], radius_in[j]):
+                                    spring, sliding, sliding_torque, rolling, rolling_torque = wp.static(contact)(
+                                        model,
+                                        r64,
+                                        d2_64,
+                                        radius_in[i],
+                                        velocity_in[i],
+                                        omega_in[i],
+                                        radius_in[j],
+                                        velocity_in[j],
+                                        omega_in[j],
+                                        i < j,
+                                    )
+                                    force = wp.vec3f(spring + sliding + rolling)
+                                    torque = wp.vec3f(sliding_torque + rolling_torque)
+                                    if wp.static(ledger):
+                                        wp.atomic_add(channels_out, i, 0, spring)
+                                        wp.atomic_add(channels_out, i, 1, sliding)
+                                        wp.atomic_add(channels_out, i, 2, sliding_torque)
+                                        wp.atomic_add(channels_out, i, 3, rolling)
+                            sums[p] = sums[p] + Sum(
+                                field[0], field[1], field[2], force[0], force[1], force[2], torque[0], torque[1], torque[2]
+                            )
+
+        total = wp.tile_sum(wp.tile(sums, preserve_type=True))[0]
+        if lane == 0:
+            for p in range(wp.static(P)):
+                i = first + p
+                if i < count:
+                    row = total[p]
+                    field_sum = wp.vec3d(wp.float64(row[0]), wp.float64(row[1]), wp.float64(row[2]))
+                    contact_force = wp.vec3d(wp.float64(row[3]), wp.float64(row[4]), wp.float64(row[5]))
+                    force_out[i] = contact_force - mass_in[i] * field_sum
+                    torque_out[i] = wp.vec3d(wp.float64(row[6]), wp.float64(row[7]), wp.float64(row[8]))
+
+    return pair_forces_tiled_mixed_kernel
 
 
 @functools.cache

@@ -1,0 +1,146 @@
+"""Throughput of the force kernel and of the full step, beside a plain baseline in the same process.
+
+The test system is a jittered cubic lattice of the paper's smallest spheres,
+spaced so that each touches its six neighbours with overlaps of ~1e2 cm: the
+contact density of a settled pile, at any N.  Throughput is N^2 / time (pairs
+per second, every ordered pair evaluated once per force evaluation).
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import warp as wp
+
+from .engine import Engine, Layout, choose_layout
+from .params import Params
+from .simulation import Simulation
+from .state import State
+
+#: Arithmetic per pair used for the device limit (gravity ~20 flops), as in the issue tracker.
+FLOPS_PER_PAIR = 20
+#: FP32 lanes per SM by compute capability (major, minor).
+_FP32_LANES = {(7, 0): 64, (8, 0): 64, (8, 6): 128, (8, 7): 128, (8, 9): 128, (9, 0): 128, (10, 0): 128, (12, 0): 128}
+
+RADIUS = 0.75e6
+DENSITY = 2.7
+
+
+@dataclass
+class BenchRow:
+    n: int
+    device: str
+    layout: str
+    force_seconds: float
+    force_pairs_per_s: float
+    step_seconds: float
+    step_pairs_per_s: float
+    baseline_seconds: float
+    baseline_pairs_per_s: float
+    speedup: float
+    fraction_of_limit: float | None
+
+
+def lattice_pile(n: int, seed: int = 0) -> State:
+    """``n`` spheres on a jittered cubic lattice, each overlapping its neighbours by ~1e2 cm."""
+    rng = np.random.default_rng(seed)
+    side = math.ceil(n ** (1.0 / 3.0))
+    spacing = 2.0 * RADIUS - 300.0
+    grid = np.stack(np.meshgrid(*[np.arange(side)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)[:n]
+    positions = (grid - (side - 1) / 2.0) * spacing + rng.uniform(-100.0, 100.0, size=(n, 3))
+    velocities = rng.normal(size=(n, 3)) * 10.0
+    omegas = rng.normal(size=(n, 3)) * 1e-5
+    radii = np.full(n, RADIUS)
+    masses = np.full(n, 4.0 / 3.0 * math.pi * DENSITY * RADIUS**3)
+    return State.from_arrays(positions, velocities, omegas, radii, masses)
+
+
+def device_limit_pairs_per_s(device: str) -> tuple[float | None, str]:
+    """The device's float32 arithmetic limit in pairs/s, and how it was worked out."""
+    if not device.startswith("cuda"):
+        return None, "no limit is computed for the CPU"
+    d = wp.get_device(device)
+    lanes = _FP32_LANES.get((d.arch // 10, d.arch % 10))
+    clock_ghz = _max_sm_clock_ghz(d.ordinal)
+    if lanes is None or clock_ghz is None:
+        return None, f"unknown FP32 lanes or clock for sm_{d.arch}"
+    flops = d.sm_count * lanes * 2 * clock_ghz * 1e9  # an FMA is 2 flops
+    return flops / FLOPS_PER_PAIR, (
+        f"{d.sm_count} SMs x {lanes} FP32 lanes x 2 x {clock_ghz:.2f} GHz = {flops / 1e12:.1f} TFLOP/s, "
+        f"/ {FLOPS_PER_PAIR} flops per pair"
+    )
+
+
+def _max_sm_clock_ghz(ordinal: int) -> float | None:
+    try:
+        out = subprocess.run(
+            ["nvidia-smi", f"--id={ordinal}", "--query-gpu=clocks.max.sm", "--format=csv,noheader,nounits"],
+            capture_output=True,
+            text=True,
+            timeout=20,
+        )
+        return float(out.stdout.strip().splitlines()[0]) / 1e3
+    except (OSError, ValueError, IndexError, subprocess.SubprocessError):
+        return None
+
+
+def _seconds_per_call(fn, device: str, budget: float) -> float:
+    """Mean wall time of fn() over enough calls to fill ``budget`` seconds (after a warm-up)."""
+    fn()
+    wp.synchronize_device(device)
+    start = time.perf_counter()
+    fn()
+    wp.synchronize_device(device)
+    once = max(time.perf_counter() - start, 1e-7)
+    calls = max(1, min(10_000, int(budget / once)))
+    start = time.perf_counter()
+    for _ in range(calls):
+        fn()
+    wp.synchronize_device(device)
+    return (time.perf_counter() - start) / calls
+
+
+def bench_size(
+    n: int,
+    device: str,
+    precision: str = "mixed",
+    layout: Layout | None = None,
+    budget: float = 1.0,
+    steps: int = 100,
+    baseline: bool = True,
+) -> BenchRow:
+    state = lattice_pile(n)
+    params = Params()
+    layout = layout or choose_layout(n, device)
+    tiled = Engine(state, params, device, precision, "tiled", layout)
+    force_seconds = _seconds_per_call(tiled.eval_forces, device, budget)
+    sim = Simulation(state, params, device=device, precision=precision, layout=layout, allow_unstable=True)
+    step_seconds = _seconds_per_call(lambda: sim.step(steps), device, budget) / steps
+    if baseline:
+        reference = Engine(state, params, device, precision, "reference")
+        baseline_seconds = _seconds_per_call(reference.eval_forces, device, budget)
+    else:
+        baseline_seconds = math.nan
+    limit, _ = device_limit_pairs_per_s(device)
+    pairs = float(n) * n
+    return BenchRow(
+        n=n,
+        device=device,
+        layout=f"tile {layout.tile} x {layout.particles_per_block} per block, {layout.block_dim} threads",
+        force_seconds=force_seconds,
+        force_pairs_per_s=pairs / force_seconds,
+        step_seconds=step_seconds,
+        step_pairs_per_s=pairs / step_seconds,
+        baseline_seconds=baseline_seconds,
+        baseline_pairs_per_s=pairs / baseline_seconds,
+        speedup=baseline_seconds / force_seconds,
+        fraction_of_limit=None if limit is None else (pairs / step_seconds) / limit,
+    )
+
+
+def as_dict(row: BenchRow) -> dict:
+    return asdict(row)
