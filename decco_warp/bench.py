@@ -130,7 +130,7 @@ def bench_size(
     return BenchRow(
         n=n,
         device=device,
-        layout=f"tile {layout.tile} x {layout.particles_per_block} per block, {layout.block_dim} threads",
+        layout=f"{layout.block_dim} threads x {layout.particles_per_block} per block, {layout.contact_slots} slots",
         force_seconds=force_seconds,
         force_pairs_per_s=pairs / force_seconds,
         step_seconds=step_seconds,

@@ -64,8 +64,8 @@ def info(device: Optional[str] = DeviceOption) -> None:
     layout = choose_layout(10_240, chosen)
     typer.echo(f"would use: {chosen}")
     typer.echo(
-        f"force kernel layout at N = 10 240: tile {layout.tile}, {layout.particles_per_block} particle(s) "
-        f"per block, {layout.block_dim} thread(s) per block"
+        f"force kernel layout at N = 10 240: {layout.block_dim} thread(s) per block, "
+        f"{layout.particles_per_block} particle(s) per block, {layout.contact_slots} contact slots"
     )
 
 
@@ -311,7 +311,9 @@ def bench(
     steps: int = typer.Option(100, "--steps", help="Steps per timed call of the full step (one CUDA graph replay per 50)."),
     budget: float = typer.Option(1.0, "--seconds", help="Seconds of timing per measurement."),
     precision: str = typer.Option("mixed", "--precision", help="mixed or float64."),
-    layouts: str = typer.Option("", "--layouts", help="Also time these layouts, TILE:PER_BLOCK,... (e.g. 128:1,128:4,256:4)."),
+    layouts: str = typer.Option(
+        "", "--layouts", help="Also time these layouts, BLOCK_DIM:PER_BLOCK[:SLOTS],... (e.g. 128:1,128:4,256:4:2)."
+    ),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the table as JSON here."),
     device: Optional[str] = DeviceOption,
 ) -> None:
@@ -337,10 +339,12 @@ def bench(
     extra_layouts = []
     for item in filter(None, (part.strip() for part in layouts.split(","))):
         try:
-            tile, per_block = (int(v) for v in item.split(":"))
-            extra_layouts.append(Layout(tile, per_block, tile if chosen.startswith("cuda") else 1))
+            values = [int(v) for v in item.split(":")]
+            if len(values) not in (2, 3) or (not chosen.startswith("cuda") and values[0] != 1):
+                raise ValueError
+            extra_layouts.append(Layout(*values))
         except ValueError:
-            fail(f"--layouts entries must be TILE:PER_BLOCK with positive integers; got {item!r}")
+            fail(f"--layouts entries must be BLOCK_DIM:PER_BLOCK[:SLOTS], positive, BLOCK_DIM 1 on CPU; got {item!r}")
     limit, how = benchmarks.device_limit_pairs_per_s(chosen)
     d = wp.get_device(chosen)
     typer.echo(f"device: {chosen} ({d.name}), warp-lang {wp.config.version}, precision {precision}")

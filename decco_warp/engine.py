@@ -28,36 +28,36 @@ FORCE_KERNELS = ("tiled", "reference")
 class Layout:
     """How the tiled force kernel maps pairs onto threads.
 
-    ``tile`` particles j are loaded per shared-memory tile; a block owns
-    ``particles_per_block`` particles i (each j load serves all of them);
-    ``block_dim`` threads per block (Warp runs one per block on CPU).
+    A block of ``block_dim`` threads (1 on CPU, where Warp runs one thread per
+    block) owns ``particles_per_block`` particles i and sweeps the j in tiles of
+    ``block_dim``; each j load serves all particles of the block.  Each thread
+    notes up to ``contact_slots`` contact candidates per particle before falling
+    back to a second look.
     """
 
-    tile: int
-    particles_per_block: int
     block_dim: int
+    particles_per_block: int
+    contact_slots: int = 4
 
     def __post_init__(self):
-        for name in ("tile", "particles_per_block", "block_dim"):
+        for name in ("block_dim", "particles_per_block", "contact_slots"):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ValueError(f"Layout.{name} must be a positive integer; got {value!r}")
 
 
 def choose_layout(n: int, device: str) -> Layout:
-    """The force-kernel layout for ``n`` particles on ``device``.
+    """The force-kernel layout for ``n`` particles on ``device`` (measured with ``decco-warp bench --layouts``).
 
-    CUDA: 128 threads stride the j of a 128-wide tile, each thread serving 4
-    particles i (measured on an H100: sharing each j load over 4 particles beats
-    one particle per block by ~40 % at N = 10 240).  Small systems use one
-    particle per block so that there are still enough blocks to fill the GPU.
-    CPU: one thread per block walks the tile; 4 particles per block reuse each
-    j load from cache.
+    CUDA: 128 threads per block, 4 particles per block sharing each j load
+    (1 below 4096 particles, so that there are enough blocks to fill the GPU);
+    a thread meets a given particle's few contacts rarely, so 4 slots suffice.
+    CPU: the one thread of a block sees every contact of its particles, up to
+    ~15 in a pile.
     """
     if device.startswith("cuda"):
-        per_block = 4 if n >= 4096 else 1
-        return Layout(tile=128, particles_per_block=per_block, block_dim=128)
-    return Layout(tile=64, particles_per_block=4, block_dim=1)
+        return Layout(block_dim=128, particles_per_block=4 if n >= 4096 else 1, contact_slots=4)
+    return Layout(block_dim=1, particles_per_block=4, contact_slots=16)
 
 
 def contact_model(params: Params) -> ContactModel:
@@ -119,16 +119,19 @@ class Engine:
         self.channels = wp.zeros((ledger_rows, channel_count), dtype=wp.vec3d, device=self.device)
         self.work = wp.zeros(ledger_rows, dtype=wp.vec4d, device=self.device)
 
-        # The mixed-precision sweep reads packed float32 bodies, refreshed before each sweep.
-        self._packed = force_kernel == "tiled" and precision == "mixed"
-        self.body = wp.zeros(self.count if self._packed else 0, dtype=force_kernels.Body, device=self.device)
-        if self._packed:
-            self._force_kernel = force_kernels.pair_forces_tiled_mixed(
-                self.layout.tile, self.layout.particles_per_block, params.rolling_friction, ledger
-            )
-        elif force_kernel == "tiled":
+        # The tiled sweep reads packed bodies (force_kernels.BODY_TYPES), refreshed before each sweep.
+        tiled = force_kernel == "tiled"
+        self.body = wp.zeros(self.count if tiled else 0, dtype=force_kernels.BODY_TYPES[precision], device=self.device)
+        if tiled:
+            if not self.device.startswith("cuda") and self.layout.block_dim != 1:
+                raise ValueError("on the CPU a layout's block_dim must be 1 (Warp runs one thread per block)")
             self._force_kernel = force_kernels.pair_forces_tiled(
-                self.layout.tile, self.layout.particles_per_block, precision, params.rolling_friction, ledger
+                self.layout.block_dim,
+                self.layout.particles_per_block,
+                self.layout.contact_slots,
+                precision,
+                params.rolling_friction,
+                ledger,
             )
         else:
             self._force_kernel = force_kernels.pair_forces_reference(precision, params.rolling_friction, ledger)
@@ -141,9 +144,9 @@ class Engine:
         outputs = [self.force, self.torque, self.channels]
         if self.ledger:
             self.channels.zero_()
-        if self._packed:
+        if self.force_kernel == "tiled":
             wp.launch(
-                force_kernels.pack_bodies,
+                force_kernels.PACK_KERNELS[self.precision],
                 dim=self.count,
                 inputs=[wp.float64(self.params.G), self.radius, self.mass, self.position],
                 outputs=[self.body],

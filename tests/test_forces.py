@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from conftest import DEVICES
 from oracle import pair_loop_forces
 from scenes import contact_cluster, oracle_args, overlapping_cloud
 
@@ -53,18 +54,33 @@ def test_default_precision_forces_match_oracle(scene, device):
     assert torque_error.max() <= MIXED_TOLERANCE
 
 
-# Odd layouts make the remainder of the last tile and of the last block of particles non-trivial.
-LAYOUTS = [dw.Layout(tile=4, particles_per_block=3, block_dim=1), dw.Layout(tile=64, particles_per_block=4, block_dim=1)]
+# Odd layouts make the remainder of the last tile and of the last block of particles non-trivial;
+# one slot per particle forces the second look for contacts.  CPU layouts have one thread per block.
+LAYOUTS = [
+    ("cpu", dw.Layout(block_dim=1, particles_per_block=3, contact_slots=1)),
+    ("cpu", dw.Layout(block_dim=1, particles_per_block=4, contact_slots=16)),
+] + [
+    (device, layout)
+    for device in DEVICES
+    if device.startswith("cuda")
+    for layout in (dw.Layout(128, 4, 4), dw.Layout(32, 3, 1), dw.Layout(64, 1, 2))
+]
 
 
-@pytest.mark.parametrize("layout", LAYOUTS, ids=lambda lay: f"tile{lay.tile}x{lay.particles_per_block}")
+def _layout_id(case):
+    device, layout = case
+    return f"{device}-{layout.block_dim}x{layout.particles_per_block}-{layout.contact_slots}slots"
+
+
+@pytest.mark.parametrize("case", LAYOUTS, ids=_layout_id)
 @pytest.mark.parametrize("n", [1, 2, 7, 129, 1000])
-def test_tiled_kernel_equals_reference_kernel_on_cpu(n, layout):
+def test_tiled_kernel_equals_reference_kernel(n, case):
     """No particle skipped in a remainder tile: the tiled kernel sums every pair the plain loop sums."""
+    device, layout = case
     state = overlapping_cloud(n, seed=n) if n > 1 else contact_cluster(1, seed=0)
     params = dw.Params()
-    tiled = dw.compute_forces(state, params, device="cpu", precision="float64", layout=layout)
-    reference = dw.compute_forces(state, params, device="cpu", precision="float64", force_kernel="reference")
+    tiled = dw.compute_forces(state, params, device=device, precision="float64", layout=layout)
+    reference = dw.compute_forces(state, params, device=device, precision="float64", force_kernel="reference")
     for got, want in zip(tiled, reference):
         scale = np.abs(want).max() or 1.0
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * scale)
@@ -75,12 +91,13 @@ def test_tiled_kernel_equals_reference_kernel_on_cpu(n, layout):
         np.testing.assert_allclose(tiled[0], ref_force, rtol=1e-9, atol=1e-12 * np.abs(ref_force).max())
 
 
-@pytest.mark.parametrize("layout", LAYOUTS, ids=lambda lay: f"tile{lay.tile}x{lay.particles_per_block}")
+@pytest.mark.parametrize("case", LAYOUTS, ids=_layout_id)
 @pytest.mark.parametrize("n", [1, 2, 7, 129])
-def test_default_precision_kernel_sums_every_pair_in_remainder_tiles(n, layout):
+def test_default_precision_kernel_sums_every_pair_in_remainder_tiles(n, case):
+    device, layout = case
     state = overlapping_cloud(n, seed=n) if n > 1 else contact_cluster(1, seed=0)
     params = dw.Params()
-    force, torque = dw.compute_forces(state, params, device="cpu", layout=layout)
+    force, torque = dw.compute_forces(state, params, device=device, layout=layout)
     ref_force, ref_torque, force_scale, torque_scale = pair_loop_forces(*oracle_args(state, params))
     if n == 1:
         assert np.all(force == 0.0) and np.all(torque == 0.0)
