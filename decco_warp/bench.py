@@ -118,7 +118,8 @@ def bench_size(
     layout = layout or choose_layout(n, device)
     tiled = Engine(state, params, device, precision, "tiled", layout)
     force_seconds = _seconds_per_call(tiled.eval_forces, device, budget)
-    sim = Simulation(state, params, device=device, precision=precision, layout=layout, allow_unstable=True)
+    # The full step as runs take it: with the energy ledger.
+    sim = Simulation(state, params, device=device, precision=precision, layout=layout, allow_unstable=True, ledger=True)
     step_seconds = _seconds_per_call(lambda: sim.step(steps), device, budget) / steps
     if baseline:
         reference = Engine(state, params, device, precision, "reference")

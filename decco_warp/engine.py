@@ -49,14 +49,14 @@ class Layout:
 def choose_layout(n: int, device: str) -> Layout:
     """The force-kernel layout for ``n`` particles on ``device`` (measured with ``decco-warp bench --layouts``).
 
-    CUDA: 128 threads per block, 4 particles per block sharing each j load
-    (1 below 4096 particles, so that there are enough blocks to fill the GPU);
-    a thread meets a given particle's few contacts rarely, so 4 slots suffice.
+    CUDA (H100, docs/benchmarks.md): 128 threads per block, 4 particles per
+    block sharing each j load; 64 threads below 4096 particles, for more blocks.
+    A thread meets a given particle's few contacts rarely, so 4 slots suffice.
     CPU: the one thread of a block sees every contact of its particles, up to
     ~15 in a pile.
     """
     if device.startswith("cuda"):
-        return Layout(block_dim=128, particles_per_block=4 if n >= 4096 else 1, contact_slots=4)
+        return Layout(block_dim=128, particles_per_block=4, contact_slots=4) if n >= 4096 else Layout(64, 4, 4)
     return Layout(block_dim=1, particles_per_block=4, contact_slots=16)
 
 
@@ -142,8 +142,6 @@ class Engine:
         """Force and torque on every particle at the current positions and velocities."""
         inputs = [self.model, self.count, self.radius, self.mass, self.position, self.velocity, self.omega]
         outputs = [self.force, self.torque, self.channels]
-        if self.ledger:
-            self.channels.zero_()
         if self.force_kernel == "tiled":
             wp.launch(
                 force_kernels.PACK_KERNELS[self.precision],

@@ -113,17 +113,16 @@ def _real_types(precision: str):
 
 
 @functools.cache
-def contact_of_pair(rolling: str, ledger: bool):
-    """The Warp function giving (force, torque) on i from j if they touch, in float64 from the state arrays.
+def contact_function(rolling: str):
+    """The Warp function giving the contact channels on i from j if they touch, in float64 from the state arrays.
 
-    With ``ledger``, it also adds the contact's channels (LEDGER_CHANNELS) to row
-    i of ``channels_out`` with atomics: contacts are few, and these sums feed only
-    the energy ledger, never the motion.
+    Returns (spring force, sliding force, sliding torque, rolling force, rolling
+    torque), all zero for a pair that does not touch.
     """
     contact = CONTACT_FUNCTIONS[rolling]
 
     @wp.func
-    def contact_force(
+    def contact_channels(
         model: ContactModel,
         i: int,
         j: int,
@@ -131,16 +130,13 @@ def contact_of_pair(rolling: str, ledger: bool):
         position_in: wp.array(dtype=wp.vec3d),
         velocity_in: wp.array(dtype=wp.vec3d),
         omega_in: wp.array(dtype=wp.vec3d),
-        channels_out: wp.array2d(dtype=wp.vec3d),
     ):
         # The separation is taken in float64: positions are ~1e7 cm, overlaps ~1e2 cm.
         r_ij = position_in[i] - position_in[j]
         d2 = wp.dot(r_ij, r_ij)
-        force = wp.vec3d()
-        torque = wp.vec3d()
         # d2 == 0: the particle itself, or a coincident one, which has no direction.
         if d2 > wp.float64(0.0) and in_contact(d2, radius_in[i], radius_in[j]):
-            spring, sliding, sliding_torque, rolling, rolling_torque = wp.static(contact)(
+            return wp.static(contact)(
                 model,
                 r_ij,
                 d2,
@@ -152,16 +148,9 @@ def contact_of_pair(rolling: str, ledger: bool):
                 omega_in[j],
                 i < j,
             )
-            force = spring + sliding + rolling
-            torque = sliding_torque + rolling_torque
-            if wp.static(ledger):
-                wp.atomic_add(channels_out, i, 0, spring)
-                wp.atomic_add(channels_out, i, 1, sliding)
-                wp.atomic_add(channels_out, i, 2, sliding_torque)
-                wp.atomic_add(channels_out, i, 3, rolling)
-        return force, torque
+        return wp.vec3d(), wp.vec3d(), wp.vec3d(), wp.vec3d(), wp.vec3d()
 
-    return contact_force
+    return contact_channels
 
 
 @functools.cache
@@ -183,7 +172,7 @@ def pair_forces_tiled(
     """
     real, vec_real = _real_types(precision)
     Body = BODY_TYPES[precision]
-    contact_force = contact_of_pair(rolling, ledger)
+    contact_channels = contact_function(rolling)
     T, P, K = block_dim, particles_per_block, contact_slots
     radius_at, g_mass_at = (6, 7) if precision == "mixed" else (3, 4)
     candidate = real(CONTACT_CANDIDATE if precision == "mixed" else 1.0)
@@ -191,9 +180,10 @@ def pair_forces_tiled(
     Fields = wp.types.matrix(shape=(P, 3), dtype=real)
     Slots = wp.types.matrix(shape=(P, K), dtype=wp.int32)
     Counts = wp.types.vector(length=P, dtype=wp.int32)
-    # Per particle: the field sum G m_j r_ij / d^3 (gravity is -m_i times it), contact force, torque.
-    Sums = wp.types.matrix(shape=(P, 9), dtype=real)
-    Sum = wp.types.vector(length=9, dtype=real)
+    # Per particle: the field sum G m_j r_ij / d^3 (gravity is -m_i times it), contact force,
+    # torque, and with the ledger the contact channels (LEDGER_CHANNELS).
+    width = 9 + (3 * len(LEDGER_CHANNELS) if ledger else 0)
+    Sums = wp.types.matrix(shape=(P, width), dtype=real)
 
     @wp.kernel(module="unique", enable_backward=False, module_options={"fast_math": precision == "mixed"})
     def pair_forces_tiled_kernel(
@@ -210,7 +200,7 @@ def pair_forces_tiled(
         # Out:
         force_out: wp.array(dtype=wp.vec3d),
         torque_out: wp.array(dtype=wp.vec3d),
-        channels_out: wp.array2d(dtype=wp.vec3d),  # (N, 4) with the ledger, else empty; zeroed by the caller
+        channels_out: wp.array2d(dtype=wp.vec3d),  # (N, 4) with the ledger, else empty
     ):
         block, lane = wp.tid()
         first = block * wp.static(P)
@@ -242,34 +232,53 @@ def pair_forces_tiled(
                                 slots[p, noted] = j
                             candidates[p] = noted + 1
 
+        # Contacts, in float64: the noted candidates, or after an overflow of the slots,
+        # this thread's share of j looked at again.  Either way in increasing j.
         sums = Sums()
         for p in range(wp.static(P)):
             i = first + p
             if i < count:
-                force = wp.vec3d()
-                torque = wp.vec3d()
                 noted = candidates[p]
-                if noted <= wp.static(K):
-                    for s in range(noted):
-                        f, t = contact_force(model, i, slots[p, s], radius_in, position_in, velocity_in, omega_in, channels_out)
-                        force += f
-                        torque += t
-                else:
-                    # More candidates than slots: find them again in this thread's share of j.
-                    for j in range(lane, count, wp.static(T)):
+                overflow = noted > wp.static(K)
+                walk = noted
+                if overflow:
+                    walk = (count - lane + wp.static(T) - 1) // wp.static(T)
+                spring = wp.vec3d()
+                sliding = wp.vec3d()
+                sliding_torque = wp.vec3d()
+                rolling = wp.vec3d()
+                rolling_torque = wp.vec3d()
+                for s in range(walk):
+                    j = 0
+                    if overflow:
+                        j = lane + s * wp.static(T)
                         body_j = body_in[j]
                         r = separation(bodies_i[p], body_j)
                         reach = bodies_i[p][radius_at] + body_j[radius_at]
-                        if wp.dot(r, r) < reach * reach * candidate:
-                            f, t = contact_force(model, i, j, radius_in, position_in, velocity_in, omega_in, channels_out)
-                            force += f
-                            torque += t
+                        if wp.dot(r, r) >= reach * reach * candidate:
+                            continue
+                    else:
+                        j = slots[p, s]
+                    c0, c1, c2, c3, c4 = contact_channels(model, i, j, radius_in, position_in, velocity_in, omega_in)
+                    spring += c0
+                    sliding += c1
+                    sliding_torque += c2
+                    rolling += c3
+                    rolling_torque += c4
                 field = fields[p]
-                sums[p] = Sum(
-                    field[0], field[1], field[2],
-                    real(force[0]), real(force[1]), real(force[2]),
-                    real(torque[0]), real(torque[1]), real(torque[2]),
-                )  # fmt: skip
+                force = spring + sliding + rolling
+                torque = sliding_torque + rolling_torque
+                row = sums[p]
+                for k in range(3):
+                    row[k] = field[k]
+                    row[3 + k] = real(force[k])
+                    row[6 + k] = real(torque[k])
+                    if wp.static(ledger):
+                        row[9 + k] = real(spring[k])
+                        row[12 + k] = real(sliding[k])
+                        row[15 + k] = real(sliding_torque[k])
+                        row[18 + k] = real(rolling[k])
+                sums[p] = row
 
         total = wp.tile_sum(wp.tile(sums, preserve_type=True))[0]
         if lane == 0:
@@ -281,6 +290,11 @@ def pair_forces_tiled(
                     contact_sum = wp.vec3d(wp.float64(row[3]), wp.float64(row[4]), wp.float64(row[5]))
                     force_out[i] = contact_sum - mass_in[i] * field_sum
                     torque_out[i] = wp.vec3d(wp.float64(row[6]), wp.float64(row[7]), wp.float64(row[8]))
+                    if wp.static(ledger):
+                        for c in range(4):
+                            channels_out[i, c] = wp.vec3d(
+                                wp.float64(row[9 + 3 * c]), wp.float64(row[10 + 3 * c]), wp.float64(row[11 + 3 * c])
+                            )
 
     return pair_forces_tiled_kernel
 
@@ -293,7 +307,7 @@ def pair_forces_reference(precision: str = "mixed", rolling: str = "couple", led
     contacts with the same function as the tiled kernel.
     """
     real, vec_real = _real_types(precision)
-    contact_force = contact_of_pair(rolling, ledger)
+    contact_channels = contact_function(rolling)
 
     @wp.kernel(module="unique", enable_backward=False)
     def pair_forces_reference_kernel(
@@ -315,18 +329,29 @@ def pair_forces_reference(precision: str = "mixed", rolling: str = "couple", led
         position_i = position_in[i]
         g_mass_i = model.G * mass_in[i]
         gravity_sum = vec_real()
-        force = wp.vec3d()
-        torque = wp.vec3d()
+        spring = wp.vec3d()
+        sliding = wp.vec3d()
+        sliding_torque = wp.vec3d()
+        rolling = wp.vec3d()
+        rolling_torque = wp.vec3d()
         for j in range(count):
             r_ij = position_i - position_in[j]
             d2 = wp.dot(r_ij, r_ij)
             if d2 > wp.float64(0.0):
                 gravity_sum += gravity(vec_real(r_ij), real(g_mass_i * mass_in[j]))
                 if in_contact(d2, radius_in[i], radius_in[j]):
-                    f, t = contact_force(model, i, j, radius_in, position_in, velocity_in, omega_in, channels_out)
-                    force += f
-                    torque += t
-        force_out[i] = wp.vec3d(gravity_sum) + force
-        torque_out[i] = torque
+                    c0, c1, c2, c3, c4 = contact_channels(model, i, j, radius_in, position_in, velocity_in, omega_in)
+                    spring += c0
+                    sliding += c1
+                    sliding_torque += c2
+                    rolling += c3
+                    rolling_torque += c4
+        force_out[i] = wp.vec3d(gravity_sum) + spring + sliding + rolling
+        torque_out[i] = sliding_torque + rolling_torque
+        if wp.static(ledger):
+            channels_out[i, 0] = spring
+            channels_out[i, 1] = sliding
+            channels_out[i, 2] = sliding_torque
+            channels_out[i, 3] = rolling
 
     return pair_forces_reference_kernel
