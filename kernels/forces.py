@@ -184,6 +184,8 @@ def pair_forces_tiled(
     # torque, and with the ledger the contact channels (LEDGER_CHANNELS).
     width = 9 + (3 * len(LEDGER_CHANNELS) if ledger else 0)
     Sums = wp.types.matrix(shape=(P, width), dtype=real)
+    Sum = wp.types.vector(length=width, dtype=real)
+    Contacts = wp.types.matrix(shape=(P, width - 3), dtype=real)
 
     @wp.kernel(module="unique", enable_backward=False, module_options={"fast_math": precision == "mixed"})
     def pair_forces_tiled_kernel(
@@ -233,52 +235,52 @@ def pair_forces_tiled(
                             candidates[p] = noted + 1
 
         # Contacts, in float64: the noted candidates, or after an overflow of the slots,
-        # this thread's share of j looked at again.  Either way in increasing j.
-        sums = Sums()
-        for p in range(wp.static(P)):
+        # this thread's share of j looked at again; either way in increasing j.  The
+        # loop over the block's particles is deliberately not unrolled: one copy of the
+        # contact code keeps the kernel's register count (and so the sweep's occupancy) low.
+        contacts = Contacts()
+        for p in range(wp.min(wp.static(P), count - first)):  # a run-time bound: not unrolled
             i = first + p
-            if i < count:
-                noted = candidates[p]
-                overflow = noted > wp.static(K)
-                walk = noted
+            noted = candidates[p]
+            overflow = noted > wp.static(K)
+            walk = noted
+            body_i = body_in[i]
+            if overflow:
+                walk = (count - lane + wp.static(T) - 1) // wp.static(T)
+            for s in range(walk):
+                j = 0
                 if overflow:
-                    walk = (count - lane + wp.static(T) - 1) // wp.static(T)
-                spring = wp.vec3d()
-                sliding = wp.vec3d()
-                sliding_torque = wp.vec3d()
-                rolling = wp.vec3d()
-                rolling_torque = wp.vec3d()
-                for s in range(walk):
-                    j = 0
-                    if overflow:
-                        j = lane + s * wp.static(T)
-                        body_j = body_in[j]
-                        r = separation(bodies_i[p], body_j)
-                        reach = bodies_i[p][radius_at] + body_j[radius_at]
-                        if wp.dot(r, r) >= reach * reach * candidate:
-                            continue
-                    else:
-                        j = slots[p, s]
-                    c0, c1, c2, c3, c4 = contact_channels(model, i, j, radius_in, position_in, velocity_in, omega_in)
-                    spring += c0
-                    sliding += c1
-                    sliding_torque += c2
-                    rolling += c3
-                    rolling_torque += c4
-                field = fields[p]
+                    j = lane + s * wp.static(T)
+                    body_j = body_in[j]
+                    r = separation(body_i, body_j)
+                    reach = body_i[radius_at] + body_j[radius_at]
+                    if wp.dot(r, r) >= reach * reach * candidate:
+                        continue
+                else:
+                    j = slots[p, s]
+                spring, sliding, sliding_torque, rolling, rolling_torque = contact_channels(
+                    model, i, j, radius_in, position_in, velocity_in, omega_in
+                )
                 force = spring + sliding + rolling
                 torque = sliding_torque + rolling_torque
-                row = sums[p]
                 for k in range(3):
-                    row[k] = field[k]
-                    row[3 + k] = real(force[k])
-                    row[6 + k] = real(torque[k])
+                    contacts[p, k] += real(force[k])
+                    contacts[p, 3 + k] += real(torque[k])
                     if wp.static(ledger):
-                        row[9 + k] = real(spring[k])
-                        row[12 + k] = real(sliding[k])
-                        row[15 + k] = real(sliding_torque[k])
-                        row[18 + k] = real(rolling[k])
-                sums[p] = row
+                        contacts[p, 6 + k] += real(spring[k])
+                        contacts[p, 9 + k] += real(sliding[k])
+                        contacts[p, 12 + k] += real(sliding_torque[k])
+                        contacts[p, 15 + k] += real(rolling[k])
+
+        sums = Sums()
+        for p in range(wp.static(P)):
+            field = fields[p]
+            row = Sum()
+            for k in range(3):
+                row[k] = field[k]
+            for k in range(wp.static(width - 3)):
+                row[3 + k] = contacts[p, k]
+            sums[p] = row
 
         total = wp.tile_sum(wp.tile(sums, preserve_type=True))[0]
         if lane == 0:
