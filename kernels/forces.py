@@ -8,8 +8,9 @@
   cheap test that notes contact candidates in a few slots; the contacts, which
   are few, are evaluated in float64 after the sweep, so that the hot loop stays
   small.  Per-thread sums are reduced with ``wp.tile_sum`` and lane 0 writes
-  each particle's force and torque: no atomics, and the result does not depend
-  on scheduling.
+  each particle's force and torque: no atomics, and the motion does not depend
+  on scheduling.  (The energy ledger's contact channels are added with atomics;
+  on a GPU their last bits may vary from run to run, the motion's never.)
 * ``pair_forces_reference`` -- one thread per particle, a plain loop over j.  It
   is the yardstick for tests and the baseline of ``decco-warp bench``.
 
@@ -161,6 +162,7 @@ def pair_forces_tiled(
     precision: str = "mixed",
     rolling: str = "couple",
     ledger: bool = False,
+    max_registers: int = 0,
 ):
     """Build the tiled all-pairs kernel for a layout; launch with ``wp.launch_tiled``.
 
@@ -168,7 +170,9 @@ def pair_forces_tiled(
     (``block_dim`` must be 1 on CPU, where Warp runs one thread per block), with
     ``body_in`` packed by ``PACK_KERNELS[precision]``.  Each thread notes up to
     ``contact_slots`` contact candidates per particle; past that it finds them
-    again after the sweep, so any number of contacts is handled.
+    again after the sweep, so any number of contacts is handled.  ``max_registers``
+    (CUDA, 0 = the compiler's choice) caps registers per thread: the float64
+    contact code, which runs rarely, then spills instead of the sweep losing occupancy.
     """
     real, vec_real = _real_types(precision)
     Body = BODY_TYPES[precision]
@@ -180,14 +184,17 @@ def pair_forces_tiled(
     Fields = wp.types.matrix(shape=(P, 3), dtype=real)
     Slots = wp.types.matrix(shape=(P, K), dtype=wp.int32)
     Counts = wp.types.vector(length=P, dtype=wp.int32)
-    # Per particle: the field sum G m_j r_ij / d^3 (gravity is -m_i times it), contact force,
-    # torque, and with the ledger the contact channels (LEDGER_CHANNELS).
-    width = 9 + (3 * len(LEDGER_CHANNELS) if ledger else 0)
-    Sums = wp.types.matrix(shape=(P, width), dtype=real)
-    Sum = wp.types.vector(length=width, dtype=real)
-    Contacts = wp.types.matrix(shape=(P, width - 3), dtype=real)
+    # Per particle: the field sum G m_j r_ij / d^3 (gravity is -m_i times it), contact force, torque.
+    Sums = wp.types.matrix(shape=(P, 9), dtype=real)
+    Sum = wp.types.vector(length=9, dtype=real)
+    Contacts = wp.types.matrix(shape=(P, 6), dtype=real)
 
-    @wp.kernel(module="unique", enable_backward=False, module_options={"fast_math": precision == "mixed"})
+    @wp.kernel(
+        module="unique",
+        enable_backward=False,
+        module_options={"fast_math": precision == "mixed"},
+        cuda_max_registers=max_registers or None,
+    )
     def pair_forces_tiled_kernel(
         # Model:
         model: ContactModel,
@@ -202,7 +209,7 @@ def pair_forces_tiled(
         # Out:
         force_out: wp.array(dtype=wp.vec3d),
         torque_out: wp.array(dtype=wp.vec3d),
-        channels_out: wp.array2d(dtype=wp.vec3d),  # (N, 4) with the ledger, else empty
+        channels_out: wp.array2d(dtype=wp.vec3d),  # (N, 4) with the ledger, else empty; zeroed by the caller
     ):
         block, lane = wp.tid()
         first = block * wp.static(P)
@@ -266,11 +273,13 @@ def pair_forces_tiled(
                 for k in range(3):
                     contacts[p, k] += real(force[k])
                     contacts[p, 3 + k] += real(torque[k])
-                    if wp.static(ledger):
-                        contacts[p, 6 + k] += real(spring[k])
-                        contacts[p, 9 + k] += real(sliding[k])
-                        contacts[p, 12 + k] += real(sliding_torque[k])
-                        contacts[p, 15 + k] += real(rolling[k])
+                if wp.static(ledger):
+                    # Atomics: the channel sums feed only the energy ledger, never the motion,
+                    # and keeping them out of the reduction keeps the kernel lean.
+                    wp.atomic_add(channels_out, i, 0, spring)
+                    wp.atomic_add(channels_out, i, 1, sliding)
+                    wp.atomic_add(channels_out, i, 2, sliding_torque)
+                    wp.atomic_add(channels_out, i, 3, rolling)
 
         sums = Sums()
         for p in range(wp.static(P)):
@@ -278,7 +287,7 @@ def pair_forces_tiled(
             row = Sum()
             for k in range(3):
                 row[k] = field[k]
-            for k in range(wp.static(width - 3)):
+            for k in range(6):
                 row[3 + k] = contacts[p, k]
             sums[p] = row
 
@@ -292,11 +301,6 @@ def pair_forces_tiled(
                     contact_sum = wp.vec3d(wp.float64(row[3]), wp.float64(row[4]), wp.float64(row[5]))
                     force_out[i] = contact_sum - mass_in[i] * field_sum
                     torque_out[i] = wp.vec3d(wp.float64(row[6]), wp.float64(row[7]), wp.float64(row[8]))
-                    if wp.static(ledger):
-                        for c in range(4):
-                            channels_out[i, c] = wp.vec3d(
-                                wp.float64(row[9 + 3 * c]), wp.float64(row[10 + 3 * c]), wp.float64(row[11 + 3 * c])
-                            )
 
     return pair_forces_tiled_kernel
 

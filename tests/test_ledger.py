@@ -94,8 +94,14 @@ def test_snapshot_restart_is_bit_identical(device):
     assert second.step_count == 57
     second.step(73)
     a, b = straight.snapshot(), second.snapshot()
-    for key in ("positions", "velocities", "omegas", "force", "torque", "channels", "work"):
+    for key in ("positions", "velocities", "omegas", "force", "torque"):
         assert np.array_equal(a[key], b[key]), key
+    # The ledger's contact channels are summed with atomics: bit for bit on the CPU, to round-off on a GPU.
+    for key in ("channels", "work"):
+        if device == "cpu":
+            assert np.array_equal(a[key], b[key]), key
+        else:
+            np.testing.assert_allclose(a[key], b[key], rtol=1e-12, atol=1e-12 * np.abs(a[key]).max())
     assert straight.time == second.time and second.step_count == 130
     for key in ("potential", "elastic", "total_energy"):
         assert straight.energy_start[key] == second.energy_start[key]
