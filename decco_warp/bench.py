@@ -145,4 +145,5 @@ def bench_size(
 
 
 def as_dict(row: BenchRow) -> dict:
-    return asdict(row)
+    """The row for JSON: a quantity not measured (NaN) becomes null."""
+    return {key: None if isinstance(value, float) and math.isnan(value) else value for key, value in asdict(row).items()}

@@ -1,0 +1,48 @@
+"""decco-warp bench: a smoke test on the CPU at tiny N (speed is measured by the benchmark, never by tests)."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+
+import decco_warp as dw
+from decco_warp.bench import lattice_pile
+
+
+def test_lattice_pile_touches_its_neighbours_lightly():
+    state = lattice_pile(64)
+    d = dw.diagnostics(state, dw.Params())
+    # 4 x 4 x 4 lattice: 3 * 4 * 4 * 3 = 144 neighbour contacts, overlaps of 300 +- 200 cm.
+    assert d["number_of_contacts"] == 144
+    assert 0 < d["max_overlap"] < 700
+
+
+def test_bench_cli_writes_a_table_with_its_baseline(tmp_path):
+    out = tmp_path / "bench.json"
+    result = subprocess.run(
+        [sys.executable, "-c", "from decco_warp.cli import app; app()", "bench", "--device", "cpu", "--n", "64,100",
+         "--seconds", "0.05", "--steps", "5", "--layouts", "1:2:8", "--json", str(out)],
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode == 0, result.stderr
+    assert "baseline pairs/s" in result.stdout
+    table = json.loads(out.read_text())
+    assert table["device"] == "cpu" and table["limit_pairs_per_s"] is None
+    rows = table["rows"]
+    assert [r["n"] for r in rows] == [64, 64, 100, 100]
+    for row in rows:
+        assert row["force_pairs_per_s"] > 0 and row["step_pairs_per_s"] > 0
+        assert np.isclose(row["force_pairs_per_s"], row["n"] ** 2 / row["force_seconds"])
+    assert np.isclose(rows[0]["speedup"], rows[0]["baseline_seconds"] / rows[0]["force_seconds"])
+    assert "2 per block" in rows[1]["layout"]
+
+
+def test_bench_cli_rejects_bad_layouts():
+    result = subprocess.run(
+        [sys.executable, "-c", "from decco_warp.cli import app; app()", "bench", "--device", "cpu", "--layouts", "128:4"],
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode == 2 and "BLOCK_DIM 1 on CPU" in result.stderr
