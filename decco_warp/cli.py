@@ -117,7 +117,6 @@ def pile(
 ) -> None:
     """Build a rubble pile: seed spheres without overlaps, collapse under gravity until settled."""
     from .device import DeviceError, resolve_device
-    from .diagnostics import diagnostics
     from .io import save_pile
     from .params import Params
     from .pile import FormationError, form_pile
@@ -163,7 +162,6 @@ def pile(
             fail(str(error))
         except FormationError as error:
             fail(str(error), code=1)
-    formed.metadata["potential"] = diagnostics(formed, params, chosen)["potential"]
     save_pile(formed, out)
     from .collision import pile_radius
 

@@ -184,6 +184,7 @@ def form_pile(
             break
     pile = remove_net_motion(state)
     pile.time, pile.step = 0.0, 0
+    settled = sim.diagnostics(pile)
     pile.metadata = {
         "seed": int(seed),
         "n_particles": int(n_particles),
@@ -200,6 +201,7 @@ def form_pile(
         "precision": precision,
         "history_time": np.array(history_time),
         "history_ke_over_u": np.array(history_ratio),
+        "potential": settled["potential"],
         "params": params.to_dict(),
     }
     return pile

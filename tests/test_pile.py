@@ -98,6 +98,8 @@ def test_pile_file_round_trip(small_pile, tmp_path):
     np.testing.assert_array_equal(back.metadata["history_ke_over_u"], small_pile.metadata["history_ke_over_u"])
     with h5py.File(path) as f:
         assert f["pile/summary"].attrs["mass"] == pytest.approx(small_pile.total_mass)
+        assert f["pile/summary"].attrs["radius"] == pytest.approx(pile_radius(small_pile))
+        assert f["pile/summary"].attrs["potential"] == pytest.approx(dw.diagnostics(small_pile, dw.Params())["potential"], rel=1e-12)
     assert list(tmp_path.iterdir()) == [path]  # no temporary file left behind
 
 
