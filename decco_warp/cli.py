@@ -22,7 +22,13 @@ DeviceOption = typer.Option(
 )
 
 
-def fail(message: str, code: int = 2) -> None:
+#: Exit codes (README, "When things go wrong").
+EXIT_INPUT = 2  # bad input: nothing was run or written
+EXIT_STOPPED = 3  # SIGINT/SIGTERM: checkpoint written, resumable
+EXIT_BLOW_UP = 4  # non-finite values or runaway overlaps: the last good checkpoint is kept
+
+
+def fail(message: str, code: int = EXIT_INPUT) -> None:
     """Print a one-line error and exit: bad input is exit code 2, never a traceback."""
     typer.echo(f"decco-warp: error: {message}", err=True)
     raise typer.Exit(code)
@@ -194,7 +200,7 @@ def _run_with_progress(prepare, *args, **kwargs):
     """Prepare a run (every input problem exits with code 2, nothing written), then run it with a progress bar."""
     from .device import DeviceError
     from .io import FileFormatError
-    from .run import RunError, execute
+    from .run import BlowUp, RunError, RunStopped, execute
     from .spec import SpecError
     from .stability import StabilityError
 
@@ -221,6 +227,10 @@ def _run_with_progress(prepare, *args, **kwargs):
             return execute(prepared, progress=show)
         except (RunError, FileFormatError) as error:
             fail(str(error))
+        except RunStopped as stopped:
+            fail(str(stopped), code=EXIT_STOPPED)
+        except BlowUp as error:
+            fail(f"the run blew up: {error}; the last checkpoint is kept", code=EXIT_BLOW_UP)
 
 
 def _report(result) -> None:

@@ -8,6 +8,8 @@ atomically every ``checkpoint_every`` steps and at the end) and ``run.log``.
 from __future__ import annotations
 
 import hashlib
+import signal
+import threading
 import time as _time
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -281,31 +283,121 @@ def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, pro
     started = _time.perf_counter()
     # Progress is reported about 200 times per run, never between graph blocks.
     report_every = max(50, total // 200)
+    radii = sim.state.radii
+    start_energy = sim.energy_start["total_energy"]
+    # Dissipation only lowers the total energy; this much gain means the integration broke down.
+    energy_scale = abs(sim.energy_start["potential"]) + abs(start_energy - sim.energy_start["potential"])
+    stop = _StopRequests()
+
+    def checkpoint(step: int) -> None:
+        extra["wall_seconds"] = wall_before + _time.perf_counter() - started
+        write_checkpoint(run_dir / CHECKPOINT_FILE, sim.snapshot(), sim.state, extra)
+        log(f"checkpoint: step {step}")
+
     try:
-        while sim.step_count < total:
-            step = sim.step_count
-            stops = [total, _next_multiple(step, output_every), _next_multiple(step, checkpoint_every)]
-            sim.step(min(min(stops) - step, report_every - step % report_every))
-            step = sim.step_count
-            if step % output_every == 0 or step == total:
-                particles, observables = record(sim, size_classes)
-                trajectory.append(step, sim.time, particles, observables)
-                log(
-                    f"frame: step {step}, t {sim.time:.6g} s, E {observables['total_energy']:.9g} erg, "
-                    f"contacts {int(observables['number_of_contacts'])}"
-                )
-            if step % checkpoint_every == 0 or step == total:
-                extra["wall_seconds"] = wall_before + _time.perf_counter() - started
-                write_checkpoint(run_dir / CHECKPOINT_FILE, sim.snapshot(), sim.state, extra)
-                log(f"checkpoint: step {step}")
-            if progress is not None:
-                progress(RunProgress(step, total, sim.time, first_step, _time.perf_counter() - started))
+        with stop:
+            while sim.step_count < total:
+                step = sim.step_count
+                stops = [total, _next_multiple(step, output_every), _next_multiple(step, checkpoint_every)]
+                sim.step(min(min(stops) - step, report_every - step % report_every))
+                step = sim.step_count
+                if step % output_every == 0 or step == total:
+                    particles, observables = record(sim, size_classes)
+                    check_sanity(step, particles, radii)
+                    check_energy(step, observables["total_energy"], start_energy, energy_scale)
+                    trajectory.append(step, sim.time, particles, observables)
+                    log(
+                        f"frame: step {step}, t {sim.time:.6g} s, E {observables['total_energy']:.9g} erg, "
+                        f"contacts {int(observables['number_of_contacts'])}"
+                    )
+                if step % checkpoint_every == 0 or step == total:
+                    checkpoint(step)
+                if progress is not None:
+                    progress(RunProgress(step, total, sim.time, first_step, _time.perf_counter() - started))
+                if stop.signal is not None and step < total:
+                    checkpoint(step)
+                    log(f"stopped by {stop.signal} at step {step}; decco-warp resume {run_dir} continues")
+                    raise RunStopped(stop.signal, step, run_dir)
+    except BlowUp as error:
+        log(f"blow-up: {error}; the last checkpoint is kept")
+        raise
     finally:
         trajectory.close()
-    wall = _time.perf_counter() - started
-    log(f"done: step {sim.step_count}, t {sim.time:.6g} s, {wall:.1f} s wall this session")
-    log.close()
+        wall = _time.perf_counter() - started
+        if sim.step_count >= total:
+            log(f"done: step {sim.step_count}, t {sim.time:.6g} s, {wall:.1f} s wall this session")
+        log.close()
     return RunResult(run_dir, sim.step_count, sim.time, wall_before + wall, sim.step_count - first_step)
+
+
+#: A frame stops the run if any particle's largest overlap exceeds this fraction of its radius.
+BLOW_UP_OVERLAP = 0.5
+
+
+class BlowUp(RuntimeError):
+    """The run went numerically wrong (non-finite values or spheres passing through each other)."""
+
+
+class RunStopped(RuntimeError):
+    """SIGINT or SIGTERM arrived; the run wrote a checkpoint and can be resumed."""
+
+    def __init__(self, signal_name: str, step: int, run_dir: Path):
+        self.signal_name, self.step, self.run_dir = signal_name, step, run_dir
+        super().__init__(f"stopped by {signal_name} at step {step}; continue with: decco-warp resume {run_dir}")
+
+
+def check_sanity(step: int, particles: dict, radii: np.ndarray) -> None:
+    """Raise BlowUp naming the step, the particle and the quantity that went wrong."""
+    for name in ("position", "velocity", "omega"):
+        bad = np.flatnonzero(~np.isfinite(particles[name]).all(axis=1))
+        if bad.size:
+            raise BlowUp(
+                f"step {step}: particle {bad[0]} has a non-finite {name}; the time step is probably "
+                "too long for k_in (see the eq. 17 margin in run.log)"
+            )
+    depth = particles["stress"] / radii
+    worst = int(np.argmax(depth))
+    if depth[worst] > BLOW_UP_OVERLAP:
+        raise BlowUp(
+            f"step {step}: particle {worst} overlaps a neighbour by {depth[worst]:.2f} of its radius "
+            f"(limit {BLOW_UP_OVERLAP}); k_in is probably too soft for the impact speed, or dt too long "
+            "(see the eq. 15 and 17 margins in run.log)"
+        )
+
+
+#: A frame stops the run if the total energy has grown by this fraction of |U| + KE at the start.
+BLOW_UP_ENERGY_GAIN = 0.1
+
+
+def check_energy(step: int, total_energy: float, start_energy: float, scale: float) -> None:
+    gain = total_energy - start_energy
+    if not np.isfinite(total_energy) or gain > BLOW_UP_ENERGY_GAIN * scale:
+        raise BlowUp(
+            f"step {step}: the total energy grew by {gain:.3g} erg ({gain / scale:.2g} of |U| + KE at the start), "
+            "which friction and restitution cannot do; the time step is probably too long for k_in "
+            "(see the eq. 17 margin in run.log)"
+        )
+
+
+class _StopRequests:
+    """While active, SIGINT and SIGTERM are noted instead of killing the process."""
+
+    def __init__(self):
+        self.signal: str | None = None
+        self._previous: dict = {}
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            for number in (signal.SIGINT, signal.SIGTERM):
+                self._previous[number] = signal.signal(number, self._note)
+        return self
+
+    def _note(self, number, frame) -> None:
+        self.signal = signal.Signals(number).name
+
+    def __exit__(self, *exc) -> None:
+        for number, handler in self._previous.items():
+            signal.signal(number, handler)
 
 
 def _next_multiple(step: int, every: int) -> int:

@@ -1,6 +1,7 @@
 """Runs: the CLI, run folders, the H5MD trajectory, checkpoints and resume."""
 
 import os
+
 import signal
 import subprocess
 import sys
@@ -227,3 +228,40 @@ def test_shipped_default_spec_file_is_the_default():
 
     shipped = Path(__file__).parent.parent / "runs" / "default.toml"
     assert specs.resolve_spec(specs.load_spec_file(shipped)) == specs.resolve_spec({})
+
+
+def test_blow_up_stops_with_its_exit_code_and_keeps_the_checkpoint(tmp_path):
+    config = tmp_path / "unstable.toml"
+    config.write_text("[run]\nallow_unstable = true\nsteps = 3000\noutput_every = 50\ncheckpoint_every = 500\n[params]\ndt = 5.0\n")
+    result = _cli("simulate", str(config), "--out", str(tmp_path), "--name", "boom", "--device", "cpu")
+    assert result.returncode == 4, result.stderr
+    assert "blew up: step 50" in result.stderr and "time step is probably too long" in result.stderr
+    assert "Traceback" not in result.stderr
+    snapshot, _, _ = read_checkpoint(tmp_path / "boom" / "checkpoint.h5")
+    assert snapshot["step"] == 0 and np.isfinite(snapshot["positions"]).all()
+    assert dw.read_trajectory(tmp_path / "boom" / "trajectory.h5")["step"].tolist() == [0]
+
+
+@pytest.mark.parametrize("signal_number", [signal.SIGTERM, signal.SIGINT])
+def test_signal_stops_cleanly_and_resume_equals_an_uninterrupted_run(signal_number, tmp_path):
+    straight = start_run(_spec(tmp_path, "straight", steps=2400, checkpoint_every=1200))
+    args = ["--steps", "2400", "--output-every", "100", "--checkpoint-every", "1200", "--out", str(tmp_path)]
+    process = subprocess.Popen(
+        [sys.executable, "-c", "from decco_warp.cli import app; app()", "simulate", "--name", "stopped", *args, "--device", "cpu"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    log = tmp_path / "stopped" / "run.log"
+    deadline = time.time() + 120
+    while time.time() < deadline and not (log.exists() and "frame: step 300" in log.read_text()):
+        time.sleep(0.02)
+    process.send_signal(signal_number)
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 3, stderr
+    assert f"stopped by {signal.Signals(signal_number).name}" in stderr and "decco-warp resume" in stderr
+    stopped_at = read_checkpoint(tmp_path / "stopped" / "checkpoint.h5")[0]["step"]
+    assert 300 <= stopped_at < 2400
+    result = _cli("resume", str(tmp_path / "stopped"), "--device", "cpu")
+    assert result.returncode == 0, result.stderr
+    _assert_same_run(_frames(straight.run_dir), _frames(tmp_path / "stopped"))
