@@ -14,6 +14,7 @@ import warp as _wp
 _wp.config.log_level = _wp.LOG_WARNING
 
 from ._version import __version__  # noqa: E402
+from .analysis import Cluster, find_clusters  # noqa: E402
 from .collision import setup_collision  # noqa: E402
 from .device import DeviceError, resolve_device  # noqa: E402
 from .diagnostics import diagnostics  # noqa: E402
@@ -27,6 +28,8 @@ from .state import State  # noqa: E402
 
 __all__ = [
     "__version__",
+    "Cluster",
+    "find_clusters",
     "DeviceError",
     "G_CGS",
     "Layout",

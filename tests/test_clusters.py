@@ -1,0 +1,128 @@
+"""The cluster finder (paper sect. 2.7, physics.md) on snapshots with known answers."""
+
+import math
+
+import numpy as np
+import pytest
+
+import decco_warp as dw
+from decco_warp.collision import pile_radius
+from decco_warp.run import builtin_pile
+
+
+@pytest.fixture(scope="module")
+def piles():
+    return dw.load_pile(builtin_pile("target")), dw.load_pile(builtin_pile("projectile"))
+
+
+def _escape_speed(pile, distance):
+    return math.sqrt(2 * dw.G_CGS * pile.total_mass / distance)
+
+
+def _combine(*parts):
+    """Concatenate States (positions, velocities already placed)."""
+    return dw.State.from_arrays(
+        np.concatenate([p.positions for p in parts]),
+        np.concatenate([p.velocities for p in parts]),
+        np.concatenate([p.omegas for p in parts]),
+        np.concatenate([p.radii for p in parts]),
+        np.concatenate([p.masses for p in parts]),
+    )
+
+
+def _moved(pile, offset, velocity):
+    moved = pile.copy()
+    moved.positions += np.asarray(offset, dtype=float)
+    moved.velocities += np.asarray(velocity, dtype=float)
+    return moved
+
+
+def test_two_separating_piles_are_two_clusters_largest_first(piles):
+    target, projectile = piles
+    distance = 10 * (pile_radius(target) + pile_radius(projectile))
+    fast = 5 * _escape_speed(target, distance)  # moving apart well above escape speed
+    state = _combine(_moved(projectile, (0, 0, 0), (0, 0, 0)), _moved(target, (distance, 0, 0), (fast, 0, 0)))
+    clusters = dw.find_clusters(state, min_members=50)
+    assert len(clusters) == 2
+    big, small = clusters
+    assert big.members.tolist() == list(range(projectile.n, projectile.n + target.n))
+    assert small.members.tolist() == list(range(projectile.n))
+    assert big.mass == pytest.approx(target.total_mass, rel=1e-12)
+    np.testing.assert_allclose(big.com, target.centre_of_mass + [distance, 0, 0], rtol=1e-9, atol=1e-3)
+    np.testing.assert_allclose(big.velocity, [fast, 0, 0], atol=1e-6 * fast)
+
+
+def test_same_piles_at_rest_bind_into_one(piles):
+    target, projectile = piles
+    distance = 10 * (pile_radius(target) + pile_radius(projectile))
+    state = _combine(target, _moved(projectile, (distance, 0, 0), (0, 0, 0)))
+    clusters = dw.find_clusters(state, min_members=50)
+    assert len(clusters) == 1 and clusters[0].members.size == state.n
+
+
+def _escapers(pile, count, speed_factor, seed=0):
+    """``count`` small particles outside the pile, flying radially away at speed_factor x escape speed."""
+    rng = np.random.default_rng(seed)
+    direction = rng.normal(size=(count, 3))
+    direction /= np.linalg.norm(direction, axis=1)[:, None]
+    distance = 3 * pile_radius(pile) * (1 + rng.uniform(size=(count, 1)))
+    positions = pile.centre_of_mass + direction * distance
+    speed = speed_factor * np.sqrt(2 * dw.G_CGS * pile.total_mass / distance)
+    radii = np.full(count, 0.75e6)
+    return dw.State.from_arrays(positions, direction * speed, np.zeros((count, 3)), radii, 4 / 3 * np.pi * 2.7 * radii**3)
+
+
+def test_unbound_escaping_particles_are_left_out(piles):
+    target, _ = piles
+    state = _combine(target, _escapers(target, 30, speed_factor=3.0))
+    clusters = dw.find_clusters(state, min_members=20)
+    assert len(clusters) == 1
+    assert clusters[0].members.tolist() == list(range(target.n))
+    # Slow enough and they are bound: they join.
+    slow = _combine(target, _escapers(target, 30, speed_factor=0.5))
+    assert dw.find_clusters(slow, min_members=20)[0].members.size == target.n + 30
+
+
+def test_a_fast_particle_touching_a_member_joins_by_contact(piles):
+    target, _ = piles
+    outermost = int(np.argmax(np.linalg.norm(target.positions - target.centre_of_mass, axis=1) + target.radii))
+    direction = target.positions[outermost] - target.centre_of_mass
+    direction /= np.linalg.norm(direction)
+    radius = 0.75e6
+    touching_at = target.positions[outermost] + direction * (target.radii[outermost] + radius - 10.0)
+    speed = 10 * _escape_speed(target, pile_radius(target))
+    stray = dw.State.from_arrays(
+        touching_at[None], (direction * speed)[None], np.zeros((1, 3)), [radius], [4 / 3 * np.pi * 2.7 * radius**3]
+    )
+    clusters = dw.find_clusters(_combine(target, stray), min_members=50)
+    assert clusters[0].members.size == target.n + 1
+    # Moved just out of contact, the same particle is unbound.
+    stray.positions += direction * 100.0
+    assert dw.find_clusters(_combine(target, stray), min_members=50)[0].members.size == target.n
+
+
+def test_minimum_member_count_cuts_off_small_clumps(piles):
+    target, _ = piles
+    clump = target.subset(np.argsort(np.linalg.norm(target.positions, axis=1))[:40])  # 40 touching particles
+    distance = 20 * pile_radius(target)
+    fast = 5 * _escape_speed(target, distance)
+    state = _combine(target, _moved(clump, (distance, 0, 0), (fast, 0, 0)))
+    assert [c.members.size for c in dw.find_clusters(state, min_members=50)] == [target.n]
+    assert [c.members.size for c in dw.find_clusters(state, min_members=30)] == [target.n, 40]
+    with pytest.raises(ValueError, match="min_members"):
+        dw.find_clusters(state, min_members=0)
+
+
+def test_result_does_not_depend_on_particle_order(piles):
+    target, projectile = piles
+    distance = 3 * (pile_radius(target) + pile_radius(projectile))
+    fast = 3 * _escape_speed(target, distance)
+    state = _combine(target, _moved(projectile, (distance, 0, 0), (fast, 0, 0)), _escapers(target, 25, 2.0, seed=4))
+    order = np.random.default_rng(7).permutation(state.n)
+    shuffled = state.subset(order)
+    a = dw.find_clusters(state, min_members=50)
+    b = dw.find_clusters(shuffled, min_members=50)
+    assert len(a) == len(b) == 2
+    for ca, cb in zip(a, b):
+        assert sorted(order[cb.members].tolist()) == ca.members.tolist()
+        assert ca.mass == pytest.approx(cb.mass, rel=1e-12)
