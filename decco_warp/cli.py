@@ -379,3 +379,65 @@ def bench(
             )
         )
         typer.echo(f"wrote {json_out}")
+
+
+# --- analyze -------------------------------------------------------------------------------
+
+
+@app.command()
+def analyze(
+    path: Path = typer.Argument(..., help="A run folder, or a folder of run folders (a sweep)."),
+    min_members: int = typer.Option(50, "--min-members", help="Smallest cluster counted (paper Fig. 2: 50)."),
+    every: int = typer.Option(1, "--every", help="Analyse every Nth frame (the last one always)."),
+) -> None:
+    """Fragments, the paper's metrics, conservation and energy of runs: analysis.h5, summary.json, figures."""
+    import csv
+    import json
+
+    from .analysis.figures import CROSS_RUN_FIGURES, RUN_FIGURES, plot_runs, save
+    from .analysis.runs import analyse_run
+    from .io import FileFormatError
+
+    if min_members < 1 or every < 1:
+        fail("--min-members and --every must be >= 1")
+    if (path / "trajectory.h5").is_file():
+        runs = [path]
+    elif path.is_dir():
+        runs = sorted(p.parent for p in path.glob("*/trajectory.h5"))
+        if not runs:
+            fail(f"{path} holds no trajectory.h5 and no run folders with one")
+    else:
+        fail(f"{path} is not a run folder")
+    summaries = []
+    bar = _progress_bar("analysing", "frames")
+    with bar:
+        for run_dir in runs:
+            task = bar.add_task(run_dir.name, total=None, frames="")
+            try:
+                analysis = analyse_run(
+                    run_dir,
+                    min_members=min_members,
+                    every=every,
+                    progress=lambda done, total, task=task: bar.update(task, total=total, completed=done, frames=f"{done}/{total} frames"),
+                )
+            except FileFormatError as error:
+                fail(str(error))
+            for name, plot in RUN_FIGURES.items():
+                save(plot(analysis), run_dir / "figures", name)
+            summaries.append(analysis["summary"])
+    for run_dir, summary in zip(runs, summaries):
+        typer.echo(
+            f"{run_dir}: m_lf/m_t {summary['largest_mass_ratio']:.4g}, particle size change "
+            f"{summary['particle_size_change']:.3g} %, {summary['clusters']} cluster(s); "
+            f"analysis.h5, summary.json and figures/ written"
+        )
+    if len(runs) > 1:
+        with open(path / "summary.csv", "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=list(summaries[0]))
+            writer.writeheader()
+            writer.writerows(summaries)
+        usable = [s for s in summaries if s.get("eta") is not None and s.get("mass_ratio") is not None]
+        for name, (metric, label) in CROSS_RUN_FIGURES.items():
+            save(plot_runs(usable, metric, label), path / "figures", name)
+        (path / "summaries.json").write_text(json.dumps(summaries, indent=2) + "\n")
+        typer.echo(f"{path}: summary.csv and cross-run figures in {path / 'figures'}")

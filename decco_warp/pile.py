@@ -114,16 +114,10 @@ def remove_net_motion(state: State) -> State:
     angular momentum about the centre is zero to round-off.
     """
     state = state.copy()
+    spin = state.spin()
     state.positions -= state.centre_of_mass
     state.velocities -= state.bulk_velocity
-    m, x = state.masses, state.positions
-    angular_momentum = (m[:, None] * np.cross(x, state.velocities)).sum(axis=0) + (
-        state.inertia[:, None] * state.omegas
-    ).sum(axis=0)
-    r2 = (x * x).sum(axis=1)
-    inertia_tensor = (m * r2).sum() * np.eye(3) - np.einsum("i,ij,ik->jk", m, x, x) + state.inertia.sum() * np.eye(3)
-    spin = np.linalg.solve(inertia_tensor, angular_momentum)
-    state.velocities -= np.cross(spin, x)
+    state.velocities -= np.cross(spin, state.positions)
     state.omegas -= spin
     return state
 

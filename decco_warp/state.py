@@ -99,6 +99,21 @@ class State:
         """Velocity of the centre of mass [cm/s], (3,)."""
         return (self.masses[:, None] * self.velocities).sum(axis=0) / self.total_mass
 
+    def spin(self) -> np.ndarray:
+        """Rigid-body angular velocity about the centre of mass [rad/s], (3,): I^-1 L.
+
+        L and I both include the particles' own spins and moments of inertia.
+        """
+        x = self.positions - self.centre_of_mass
+        v = self.velocities - self.bulk_velocity
+        m = self.masses
+        angular_momentum = (m[:, None] * np.cross(x, v)).sum(axis=0) + (self.inertia[:, None] * self.omegas).sum(axis=0)
+        r2 = (x * x).sum(axis=1)
+        tensor = ((m * r2).sum() + self.inertia.sum()) * np.eye(3) - np.einsum("i,ij,ik->jk", m, x, x)
+        if self.n == 1:
+            return self.omegas[0].copy()
+        return np.linalg.solve(tensor, angular_momentum)
+
     def copy(self) -> "State":
         arrays = ("positions", "velocities", "omegas", "radii", "masses", "pile_id", "size_class")
         return replace(self, **{name: getattr(self, name).copy() for name in arrays}, metadata=copy.deepcopy(self.metadata))

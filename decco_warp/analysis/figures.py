@@ -1,0 +1,156 @@
+"""Figures of a run's analysis and of a set of runs (matplotlib, PNG and PDF)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only: no display needed
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+HOUR = 3600.0
+SIZE_LABELS = ("7.5 km", "15 km", "22.5 km")
+
+
+def _size_label(k: int) -> str:
+    return SIZE_LABELS[k] if k < len(SIZE_LABELS) else f"class {k}"
+
+
+def save(fig, folder: Path, name: str) -> list[Path]:
+    """Write ``name``.png and ``name``.pdf into ``folder``; returns the paths."""
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = [folder / f"{name}.png", folder / f"{name}.pdf"]
+    for path in paths:
+        fig.savefig(path, dpi=150, bbox_inches="tight")
+    plt.close(fig)
+    return paths
+
+
+def plot_clusters(analysis: dict):
+    """Fig. 2 style: the final snapshot projected on x-y, spheres at true size, coloured by cluster."""
+    from matplotlib.collections import EllipseCollection
+    from matplotlib.lines import Line2D
+
+    final = analysis["final"]
+    x = final["positions"] / 1e5
+    diameter = 2.0 * final["radius"] / 1e5
+    label = final["label"]
+    order = np.argsort(x[:, 2])  # draw from -z to +z, so the near side is on top
+    colours = plt.get_cmap("tab10")
+    face = np.array([colours(k % 10) if k >= 0 else (0.75, 0.75, 0.75, 1.0) for k in label[order]])
+    fig, ax = plt.subplots(figsize=(6.4, 6.0))
+    ax.add_collection(
+        EllipseCollection(
+            diameter[order], diameter[order], np.zeros(label.size), units="xy", offsets=x[order, :2],
+            offset_transform=ax.transData, facecolors=face, edgecolors="0.2", linewidths=0.2,
+        )
+    )  # fmt: skip
+    ax.autoscale_view()
+    handles = [Line2D([], [], marker="o", linestyle="", color="0.75", label="unbound")]
+    for k in range(int(label.max()) + 1):
+        share = final["mass"][k] / analysis["summary"]["target_mass"]
+        handles.append(Line2D([], [], marker="o", linestyle="", color=colours(k % 10), label=f"{k + 1}: {share:.3g} m_t"))
+    ax.set_aspect("equal")
+    margin = diameter.max()
+    ax.set_xlim(x[:, 0].min() - margin, x[:, 0].max() + margin)
+    ax.set_ylim(x[:, 1].min() - margin, x[:, 1].max() + margin)
+    ax.set_xlabel("x [km]")
+    ax.set_ylabel("y [km]")
+    ax.set_title(f"clusters at t = {final['time'] / HOUR:.3g} h")
+    ax.legend(handles=handles, loc="best", fontsize=8)
+    return fig
+
+
+def plot_conservation(analysis: dict):
+    """Fig. 4 style: relative drift of total momentum and angular momentum."""
+    c = analysis["conservation"]
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    t = c["time"] / HOUR
+    ax.plot(t, c["momentum_drift"], label="|p - p(0)| / sum m|v|")
+    ax.plot(t, c["angular_momentum_drift"], label="|L - L(0)| / sum (|m x cross v| + |I w|)")
+    ax.set_yscale("symlog", linthresh=1e-12)
+    ax.set_xlabel("time [h]")
+    ax.set_ylabel("relative drift")
+    ax.set_title("conservation of momentum and angular momentum")
+    ax.legend(fontsize=8)
+    return fig
+
+
+def plot_stress_shares(analysis: dict):
+    """Fig. 8 style: 100 N_c,top / N_c for each size class vs time; dashed, the value at t = 0."""
+    s = analysis["stress_share"]
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    t = s["time"] / HOUR
+    colours = plt.get_cmap("tab10")
+    for k in range(s["value"].shape[1]):
+        ax.plot(t, s["value"][:, k], color=colours(k), label=_size_label(k))
+        ax.axhline(s["value"][0, k], color=colours(k), linestyle="--", linewidth=0.8)
+    ax.axhline(1.0, color="0.5", linewidth=0.6)
+    ax.set_xlabel("time [h]")
+    ax.set_ylabel("100 N_top / N  (top 1 % by stress)")
+    ax.set_title("share of the most stressed particles by size")
+    ax.legend(fontsize=8)
+    return fig
+
+
+ENERGY_LINES = (
+    ("kinetic", lambda e: e["kinetic_translational"] + e["kinetic_rotational"]),
+    ("potential", lambda e: e["potential"]),
+    ("elastic", lambda e: e["elastic"]),
+    ("dissipated: sliding", lambda e: e["dissipated_sliding"]),
+    ("dissipated: rolling", lambda e: e["dissipated_rolling"]),
+    ("dissipated: hysteresis", lambda e: e["dissipated_hysteresis"]),
+    ("total + dissipated", lambda e: e["total_energy"] + e["dissipated_sliding"] + e["dissipated_rolling"]
+     + e["dissipated_hysteresis"] + e["integration_error"]),
+)
+
+
+def plot_energy(analysis: dict):
+    """The energy ledger: where the collision's energy went."""
+    e = analysis["energy"]
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    t = e["time"] / HOUR
+    for name, value in ENERGY_LINES:
+        ax.plot(t, value(e), label=name, linestyle="--" if name.startswith("total") else "-")
+    ax.set_xlabel("time [h]")
+    ax.set_ylabel("energy [erg]")
+    ax.set_title("energy ledger")
+    ax.legend(fontsize=8)
+    return fig
+
+
+RUN_FIGURES = {
+    "clusters": plot_clusters,
+    "conservation": plot_conservation,
+    "stress_shares": plot_stress_shares,
+    "energy": plot_energy,
+}
+
+
+def plot_runs(summaries: list[dict], metric: str, ylabel: str):
+    """Cross-run figure (Fig. 3 / Fig. 6 style): ``metric`` vs eta, one panel per mass ratio, a line per angle."""
+    ratios = sorted({round(s["mass_ratio"], 3) for s in summaries})
+    fig, axes = plt.subplots(1, len(ratios), figsize=(4.0 * len(ratios), 3.6), squeeze=False, sharey=True)
+    for ax, ratio in zip(axes[0], ratios):
+        mine = [s for s in summaries if round(s["mass_ratio"], 3) == ratio]
+        for angle in sorted({s["theta_deg"] for s in mine}):
+            runs = sorted((s for s in mine if s["theta_deg"] == angle), key=lambda s: s["eta"])
+            ax.plot([s["eta"] for s in runs], [s[metric] for s in runs], marker="o", label=f"{angle:g} deg")
+        ax.set_title(f"m_p / m_t = {ratio:g}")
+        ax.set_xlabel("eta = KE / |U|")
+        ax.legend(fontsize=8)
+    axes[0][0].set_ylabel(ylabel)
+    return fig
+
+
+CROSS_RUN_FIGURES = {
+    "largest_fragment": ("largest_mass_ratio", "m_lf / m_t"),
+    "particle_size_change": ("particle_size_change", "mean particle mass change [%]"),
+}
+
+
+def line_data(fig) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(x, y) of every line drawn in a figure, for checking a figure against its data."""
+    return [(np.asarray(line.get_xdata()), np.asarray(line.get_ydata())) for ax in fig.axes for line in ax.lines]

@@ -1,0 +1,181 @@
+"""Analysis of a run's trajectory: fragments, the paper's metrics, conservation and the energy ledger.
+
+Reads ``trajectory.h5`` (never the simulation) and writes ``analysis.h5`` and
+``summary.json`` in the run folder.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from ..io import read_trajectory
+from ..state import State
+from .clusters import find_clusters
+
+ENERGY_SERIES = (
+    "kinetic_translational",
+    "kinetic_rotational",
+    "potential",
+    "elastic",
+    "total_energy",
+    "dissipated_sliding",
+    "dissipated_rolling",
+    "dissipated_hysteresis",
+    "integration_error",
+)
+
+
+def particle_size_change(cluster_mass: float, cluster_members: int, parents_mass: float, parents_count: int) -> float:
+    """Paper Fig. 6: mean particle mass of a fragment over that of both piles before the collision, minus 1, in %."""
+    return 100.0 * ((cluster_mass / cluster_members) / (parents_mass / parents_count) - 1.0)
+
+
+def snapshot_state(data: dict, frame: int) -> State:
+    static = data["static"]
+    return State.from_arrays(
+        data["particles"]["position"][frame],
+        data["particles"]["velocity"][frame],
+        data["particles"]["omega"][frame],
+        static["radius"],
+        static["mass"],
+        pile_id=static["pile_id"].astype(np.int32),
+        size_class=static["species"].astype(np.int32),
+    )
+
+
+def analyse_snapshot(state: State, target_mass: float, min_members: int = 50, G: float | None = None) -> dict:
+    """Clusters of one snapshot with their properties, and the headline numbers."""
+    kwargs = {} if G is None else {"G": G}
+    clusters = find_clusters(state, min_members=min_members, **kwargs)
+    classes = int(state.size_class.max()) + 1
+    label = np.full(state.n, -1, dtype=np.int32)
+    rows = []
+    for k, cluster in enumerate(clusters):
+        label[cluster.members] = k
+        part = state.subset(cluster.members)
+        rows.append(
+            {
+                "mass": cluster.mass,
+                "members": cluster.members.size,
+                "com": cluster.com,
+                "velocity": cluster.velocity,
+                "spin": part.spin(),
+                "composition": np.bincount(part.size_class, minlength=classes)[:classes],
+            }
+        )
+    largest = rows[0] if rows else None
+    return {
+        "clusters": rows,
+        "label": label,
+        "largest_mass_ratio": largest["mass"] / target_mass if largest else 0.0,
+        "particle_size_change": (
+            particle_size_change(largest["mass"], largest["members"], state.total_mass, state.n) if largest else np.nan
+        ),
+    }
+
+
+def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None) -> dict:
+    """Analyse every ``every``-th frame of a run (and always the last); write analysis.h5 and summary.json."""
+    run_dir = Path(run_dir)
+    data = read_trajectory(run_dir / "trajectory.h5")
+    static = data["static"]
+    spec = data["parameters"].get("spec", {})
+    G = spec.get("params", {}).get("G")
+    target = static["pile_id"] == 0
+    target_mass = float(static["mass"][target].sum())
+    frames = list(range(0, len(data["step"]), max(1, every)))
+    if frames[-1] != len(data["step"]) - 1:
+        frames.append(len(data["step"]) - 1)
+
+    ratio, size_change, n_clusters = [], [], []
+    for done, frame in enumerate(frames):
+        result = analyse_snapshot(snapshot_state(data, frame), target_mass, min_members, G)
+        ratio.append(result["largest_mass_ratio"])
+        size_change.append(result["particle_size_change"])
+        n_clusters.append(len(result["clusters"]))
+        if progress is not None:
+            progress(done + 1, len(frames))
+    final = result
+
+    obs = data["observables"]
+    first = snapshot_state(data, 0)
+    p_scale = float(np.linalg.norm(first.masses[:, None] * first.velocities, axis=1).sum())
+    orbital = first.masses[:, None] * np.cross(first.positions, first.velocities)
+    l_scale = float(np.linalg.norm(orbital, axis=1).sum() + np.linalg.norm(first.inertia[:, None] * first.omegas, axis=1).sum())
+    analysis = {
+        "frames": {
+            "step": data["step"][frames],
+            "time": data["time"][frames],
+            "largest_mass_ratio": np.array(ratio),
+            "particle_size_change": np.array(size_change),
+            "clusters": np.array(n_clusters),
+        },
+        "conservation": {
+            "time": data["time"],
+            "momentum_drift": np.linalg.norm(obs["momentum"] - obs["momentum"][0], axis=1) / p_scale,
+            "angular_momentum_drift": np.linalg.norm(obs["angular_momentum"] - obs["angular_momentum"][0], axis=1) / l_scale,
+        },
+        "stress_share": {"time": data["time"], "value": obs["stress_share"]},
+        "energy": {"time": data["time"], **{name: obs[name] for name in ENERGY_SERIES}},
+        "final": {
+            "step": int(data["step"][-1]),
+            "time": float(data["time"][-1]),
+            "label": final["label"],
+            "positions": data["particles"]["position"][-1],
+            "radius": static["radius"],
+            "mass": np.array([c["mass"] for c in final["clusters"]]),
+            "members": np.array([c["members"] for c in final["clusters"]], dtype=np.int64),
+            "com": np.array([c["com"] for c in final["clusters"]]).reshape(-1, 3),
+            "velocity": np.array([c["velocity"] for c in final["clusters"]]).reshape(-1, 3),
+            "spin": np.array([c["spin"] for c in final["clusters"]]).reshape(-1, 3),
+            "composition": np.array([c["composition"] for c in final["clusters"]], dtype=np.int64).reshape(
+                len(final["clusters"]), int(static["species"].max()) + 1
+            ),
+        },
+    }
+    collision = data["parameters"].get("collision", {})
+    summary = {
+        "run": run_dir.name,
+        "eta": collision.get("eta"),
+        "theta_deg": collision.get("theta_deg"),
+        "mass_ratio": (collision.get("projectile_mass", np.nan) / collision.get("target_mass", np.nan)) if collision else None,
+        "target_mass": target_mass,
+        "final_time": float(data["time"][-1]),
+        "largest_mass_ratio": float(ratio[-1]),
+        "particle_size_change": float(size_change[-1]),
+        "clusters": int(n_clusters[-1]),
+        "momentum_drift": float(analysis["conservation"]["momentum_drift"].max()),
+        "angular_momentum_drift": float(analysis["conservation"]["angular_momentum_drift"].max()),
+        "min_members": int(min_members),
+    }
+    summary = {k: (float(v) if isinstance(v, np.floating) else v) for k, v in summary.items()}
+    analysis["summary"] = summary
+    write_analysis(run_dir / "analysis.h5", analysis)
+    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return analysis
+
+
+def write_analysis(path: Path, analysis: dict) -> None:
+    from ..io import atomic_h5
+
+    with atomic_h5(path) as f:
+        for group, values in analysis.items():
+            if group == "summary":
+                for key, value in values.items():
+                    if value is not None:
+                        f.attrs[key] = value
+                continue
+            g = f.create_group(group)
+            for key, value in values.items():
+                g.create_dataset(key, data=np.asarray(value))
+
+
+def read_analysis(path) -> dict:
+    with h5py.File(path, "r") as f:
+        result = {name: {key: f[name][key][()] for key in f[name]} for name in f}
+        result["summary"] = {key: (v.item() if isinstance(v, np.generic) else v) for key, v in f.attrs.items()}
+    return result
