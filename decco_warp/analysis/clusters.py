@@ -45,21 +45,29 @@ class Cluster:
     """Velocity of the centre of mass [cm/s], (3,)."""
 
 
-def smoothed_density(positions: np.ndarray, masses: np.ndarray, sigmas: np.ndarray) -> np.ndarray:
-    """sum_j m_j N(x_i - x_j; sigma_j) at every particle i [g/cm^3] (the particle's own mass included)."""
+def smoothed_density(
+    positions: np.ndarray, masses: np.ndarray, sigmas: np.ndarray, at: np.ndarray | None = None
+) -> np.ndarray:
+    """sum_j m_j N(y - x_j; sigma_j) at the points ``at`` (default: the particles themselves) [g/cm^3].
+
+    The sum runs over the particles given (a particle's own mass included at its position).
+    """
+    at = positions if at is None else at
     norm = masses / ((2.0 * math.pi) ** 1.5 * sigmas**3)
     inv_two_var = 0.5 / sigmas**2
     # |a - b|^2 = |a|^2 + |b|^2 - 2 a.b through BLAS; centring first keeps the cancellation
     # error (~1e-16 of |x|^2) far below sigma^2 ~ (10 R)^2.
-    centred = positions - positions.mean(axis=0)
-    square = (centred * centred).sum(axis=1)
-    density = np.empty(positions.shape[0])
-    for start in range(0, positions.shape[0], _CHUNK):
-        rows = centred[start : start + _CHUNK]
-        exponent = rows @ centred.T
+    centre = positions.mean(axis=0)
+    sources = positions - centre
+    targets = at - centre
+    source_square = (sources * sources).sum(axis=1)
+    target_square = (targets * targets).sum(axis=1)
+    density = np.empty(targets.shape[0])
+    for start in range(0, targets.shape[0], _CHUNK):
+        exponent = targets[start : start + _CHUNK] @ sources.T
         exponent *= -2.0
-        exponent += square[start : start + _CHUNK, None]
-        exponent += square[None, :]
+        exponent += target_square[start : start + _CHUNK, None]
+        exponent += source_square[None, :]
         np.maximum(exponent, 0.0, out=exponent)
         exponent *= -inv_two_var[None, :]
         np.exp(exponent, out=exponent)
@@ -93,13 +101,14 @@ def find_clusters(state: State, min_members: int = 50, G: float = G_CGS) -> list
     n = state.n
     contacts = contact_graph(x, radii)
     sigmas = SMOOTHING_RADII * radii
+    # The density of the particles left: computed once, then each cluster's share is taken off.
+    density = smoothed_density(x, m, sigmas)
     left = np.ones(n, dtype=bool)
     clusters: list[Cluster] = []
     while left.sum() >= min_members:
         remaining = np.flatnonzero(left)
-        density = smoothed_density(x[remaining], m[remaining], sigmas[remaining])
         member = np.zeros(n, dtype=bool)
-        member[remaining[int(np.argmax(density))]] = True
+        member[remaining[int(np.argmax(density[remaining]))]] = True
         while True:
             _grow_by_contact(member, left, contacts)
             if not _bind_by_escape_speed(member, left, x, v, m, G):
@@ -117,6 +126,9 @@ def find_clusters(state: State, min_members: int = 50, G: float = G_CGS) -> list
             )
         )
         left &= ~member
+        rest = np.flatnonzero(left)
+        if rest.size:
+            density[rest] -= smoothed_density(x[indices], m[indices], sigmas[indices], at=x[rest])
     clusters.sort(key=lambda c: (-c.mass, c.members[0]))
     return clusters
 
