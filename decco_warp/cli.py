@@ -196,7 +196,41 @@ def _spin_option(text: Optional[str], which: str) -> dict:
     return values
 
 
-def _run_with_progress(prepare, *args, **kwargs):
+RerunOption = typer.Option(
+    None, "--rerun", help="Stream to rerun: spawn (local viewer), save (recording.rrd), connect[=ADDR], serve (web viewer)."
+)
+RerunEveryOption = typer.Option(None, "--rerun-every", help="Steps between rerun frames (default: --output-every).")
+
+
+def _rerun_observer(prepared, mode_text: str | None, every: int | None):
+    """A RerunLogger watching the run, or None; exits with code 2 on a bad mode or a missing rerun."""
+    if mode_text is None:
+        return None, []
+    from .io import read_frame
+    from .run import TRAJECTORY_FILE
+    from .viz import RerunLogger, RerunUnavailable, parse_mode
+
+    try:
+        mode, address = parse_mode(mode_text)
+        every = every or prepared.spec["run"]["output_every"]
+        if every < 1:
+            raise ValueError("--rerun-every must be >= 1")
+        if prepared.resume:
+            first_particles, first_observables, static = read_frame(prepared.run_dir / TRAJECTORY_FILE, 0)
+        else:
+            state = prepared.state
+            static = {"radius": state.radii, "mass": state.masses, "species": state.size_class, "pile_id": state.pile_id}
+        logger = RerunLogger(mode, address, prepared.run_dir, static, name=prepared.run_dir.name)
+        if prepared.resume:  # drifts are measured from the run's first frame, not from the restart
+            logger._log_drift(first_observables, first_particles)
+    except (ValueError, RerunUnavailable) as error:
+        fail(str(error))
+    if logger.url:
+        typer.echo(f"rerun: serving {logger.url}; open the printed web viewer address, or: rerun --connect {logger.url}")
+    return logger, [(every, logger.log_frame)]
+
+
+def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: int | None = None, **kwargs):
     """Prepare a run (every input problem exits with code 2, nothing written), then run it with a progress bar."""
     from .device import DeviceError
     from .io import FileFormatError
@@ -210,27 +244,34 @@ def _run_with_progress(prepare, *args, **kwargs):
         fail(f"{error}; set allow_unstable = true in [run] to run it anyway")
     except (SpecError, RunError, FileFormatError, DeviceError, ValueError) as error:
         fail(str(error))
+    logger, observers = _rerun_observer(prepared, rerun, rerun_every)
     bar = _progress_bar("simulating", "step", "time")
-    with bar:
-        task = bar.add_task("run", total=None, step="", time="")
+    try:
+        with bar:
+            task = bar.add_task("run", total=None, step="", time="")
 
-        def show(p):
-            bar.update(
-                task,
-                total=p.total_steps - p.first_step,
-                completed=p.step - p.first_step,
-                step=f"step {p.step}/{p.total_steps}",
-                time=f"t {p.time:.0f} s",
-            )
+            def show(p):
+                bar.update(
+                    task,
+                    total=p.total_steps - p.first_step,
+                    completed=p.step - p.first_step,
+                    step=f"step {p.step}/{p.total_steps}",
+                    time=f"t {p.time:.0f} s",
+                )
 
-        try:
-            return execute(prepared, progress=show)
-        except (RunError, FileFormatError) as error:
-            fail(str(error))
-        except RunStopped as stopped:
-            fail(str(stopped), code=EXIT_STOPPED)
-        except BlowUp as error:
-            fail(f"the run blew up: {error}; the last checkpoint is kept", code=EXIT_BLOW_UP)
+            try:
+                return execute(prepared, progress=show, observers=observers)
+            except (RunError, FileFormatError) as error:
+                fail(str(error))
+            except RunStopped as stopped:
+                fail(str(stopped), code=EXIT_STOPPED)
+            except BlowUp as error:
+                fail(f"the run blew up: {error}; the last checkpoint is kept", code=EXIT_BLOW_UP)
+    finally:
+        if logger is not None:
+            logger.close()
+            if getattr(logger, "path", None):
+                typer.echo(f"rerun recording: {logger.path} (view it with: rerun {logger.path})")
 
 
 def _report(result) -> None:
@@ -263,6 +304,8 @@ def simulate(
     precision: Optional[str] = typer.Option(None, "--precision", help="mixed or float64."),
     out: Optional[str] = typer.Option(None, "--out", help="Parent folder of run folders (default runs/out)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing run folder."),
+    rerun: Optional[str] = RerunOption,
+    rerun_every: Optional[int] = RerunEveryOption,
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Run a collision: the shipped demo, a TOML specification, and/or options (options win)."""
@@ -293,7 +336,7 @@ def simulate(
         spec = specs.resolve_spec(raw, overrides)
     except specs.SpecError as error:
         fail(str(error))
-    result = _run_with_progress(prepare_start, spec, overwrite=overwrite)
+    result = _run_with_progress(prepare_start, spec, overwrite=overwrite, rerun=rerun, rerun_every=rerun_every)
     _report(result)
 
 
@@ -301,12 +344,14 @@ def simulate(
 def resume(
     run_dir: Path = typer.Argument(..., help="Run folder to continue."),
     steps: Optional[int] = typer.Option(None, "--steps", help="New total number of steps (to extend a run)."),
+    rerun: Optional[str] = RerunOption,
+    rerun_every: Optional[int] = RerunEveryOption,
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Continue a stopped or killed run from its last checkpoint."""
     from .run import prepare_resume
 
-    result = _run_with_progress(prepare_resume, run_dir, steps=steps, device=device)
+    result = _run_with_progress(prepare_resume, run_dir, steps=steps, device=device, rerun=rerun, rerun_every=rerun_every)
     _report(result)
 
 
@@ -441,3 +486,38 @@ def analyze(
             save(plot_runs(usable, metric, label), path / "figures", name)
         (path / "summaries.json").write_text(json.dumps(summaries, indent=2) + "\n")
         typer.echo(f"{path}: summary.csv and cross-run figures in {path / 'figures'}")
+
+
+# --- view --------------------------------------------------------------------------------
+
+
+@app.command()
+def view(
+    path: Path = typer.Argument(..., help="A run folder or its trajectory.h5 (finished or still running)."),
+    save_to: Optional[Path] = typer.Option(None, "--save", help="Write a .rrd recording here instead of opening a viewer."),
+    mode: str = typer.Option("spawn", "--mode", help="Without --save: spawn, connect[=ADDR] or serve."),
+) -> None:
+    """Replay a run into rerun: a local viewer, a recording (.rrd), or a viewer elsewhere."""
+    from .io import FileFormatError
+    from .viz import RerunUnavailable, parse_mode, replay
+
+    trajectory = path / "trajectory.h5" if path.is_dir() else path
+    if not trajectory.is_file():
+        fail(f"{path} is neither a run folder nor a trajectory file")
+    try:
+        chosen, address = ("save", None) if save_to is not None else parse_mode(mode)
+        if chosen == "save" and save_to is None:
+            save_to = trajectory.parent / "recording.rrd"
+        bar = _progress_bar("replaying", "frames")
+        with bar:
+            task = bar.add_task(trajectory.parent.name, total=None, frames="")
+            logger = replay(
+                trajectory, chosen, address, save_to=save_to,
+                progress=lambda done, total: bar.update(task, total=total, completed=done, frames=f"{done}/{total}"),
+            )  # fmt: skip
+    except (ValueError, RerunUnavailable, FileFormatError) as error:
+        fail(str(error))
+    if save_to is not None:
+        typer.echo(f"wrote {save_to} (view it with: rerun {save_to})")
+    elif logger.url:
+        typer.echo(f"rerun: serving {logger.url}")

@@ -294,6 +294,16 @@ def read_trajectory(path) -> dict:
     return result
 
 
+def read_frame(path, index: int = 0) -> tuple[dict, dict, dict]:
+    """(particles, observables, static) of one frame of a trajectory, without reading the rest."""
+    with open_h5(path, "trajectory", swmr=True, locking=False) as f:
+        particles = f["particles/all"]
+        frame = {name: particles[name]["value"][index] for name in Trajectory.PARTICLE_ELEMENTS}
+        observables = {name: group["value"][index] for name, group in f["observables"].items()}
+        static = {name: particles[name][()] for name in ("radius", "mass", "species", "pile_id")}
+    return frame, observables, static
+
+
 # --- recovering a file whose writer was killed -----------------------------------------
 
 

@@ -227,8 +227,15 @@ def prepare_resume(run_dir, steps: int | None = None, device: str | None = None)
     return PreparedRun(sim, spec, run_dir, extra, resume=True)
 
 
-def execute(run: PreparedRun, progress: Callable[[RunProgress], None] | None = None) -> RunResult:
+#: Something that watches frames as a run makes them: (every how many steps, callback(step, time, particles, observables)).
+Observer = tuple[int, Callable[[int, float, dict, dict], None]]
+
+
+def execute(
+    run: PreparedRun, progress: Callable[[RunProgress], None] | None = None, observers: list[Observer] | None = None
+) -> RunResult:
     """Write the run folder (or continue it) and step the run to its end."""
+    observers = observers or []
     sim, spec, run_dir, extra = run.sim, run.spec, run.run_dir, run.extra
     spec_text = specs.dumps(spec, header=f"decco-warp run specification, resolved {datetime.now(timezone.utc):%Y-%m-%d %H:%M UTC}")
     if run.resume:
@@ -238,7 +245,7 @@ def execute(run: PreparedRun, progress: Callable[[RunProgress], None] | None = N
         log = RunLog(run_dir / LOG_FILE)
         log(f"resume: from step {sim.step_count} of {spec['run']['steps']} on {sim.device}")
         trajectory = Trajectory.reopen(run_dir / TRAJECTORY_FILE, keep_through_step=sim.step_count)
-        return _advance(sim, trajectory, spec, run_dir, log, extra, progress)
+        return _advance(sim, trajectory, spec, run_dir, log, extra, progress, observers)
 
     run_dir.mkdir(parents=True, exist_ok=True)
     for name in (TRAJECTORY_FILE, CHECKPOINT_FILE, LOG_FILE):
@@ -255,8 +262,10 @@ def execute(run: PreparedRun, progress: Callable[[RunProgress], None] | None = N
     parameters = {"spec": spec, "collision": meta, "piles": run.pile_info, "size_classes": extra["size_classes"]}
     trajectory = Trajectory.create(run_dir / TRAJECTORY_FILE, state, observables, parameters)
     trajectory.append(sim.step_count, sim.time, particles, observables)
+    for _, observe in observers:
+        observe(sim.step_count, sim.time, particles, observables)
     write_checkpoint(run_dir / CHECKPOINT_FILE, sim.snapshot(), state, extra)
-    return _advance(sim, trajectory, spec, run_dir, log, extra, progress)
+    return _advance(sim, trajectory, spec, run_dir, log, extra, progress, observers)
 
 
 def start_run(spec: dict, overwrite: bool = False, device: str | None = None, progress=None) -> RunResult:
@@ -273,7 +282,7 @@ def _parse_toml(text: str) -> dict:
     return specs.tomllib.loads(text)
 
 
-def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, progress) -> RunResult:
+def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, progress, observers=()) -> RunResult:
     total = spec["run"]["steps"]
     output_every = spec["run"]["output_every"]
     checkpoint_every = spec["run"]["checkpoint_every"]
@@ -299,10 +308,12 @@ def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, pro
             while sim.step_count < total:
                 step = sim.step_count
                 stops = [total, _next_multiple(step, output_every), _next_multiple(step, checkpoint_every)]
+                stops += [_next_multiple(step, every) for every, _ in observers]
                 sim.step(min(min(stops) - step, report_every - step % report_every))
                 step = sim.step_count
+                frame = None
                 if step % output_every == 0 or step == total:
-                    particles, observables = record(sim, size_classes)
+                    frame = particles, observables = record(sim, size_classes)
                     check_sanity(step, particles, radii)
                     check_energy(step, observables["total_energy"], start_energy, energy_scale)
                     trajectory.append(step, sim.time, particles, observables)
@@ -310,6 +321,10 @@ def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, pro
                         f"frame: step {step}, t {sim.time:.6g} s, E {observables['total_energy']:.9g} erg, "
                         f"contacts {int(observables['number_of_contacts'])}"
                     )
+                for every, observe in observers:
+                    if step % every == 0 or step == total:
+                        frame = frame or record(sim, size_classes)  # copied to the host only when due
+                        observe(step, sim.time, *frame)
                 if step % checkpoint_every == 0 or step == total:
                     checkpoint(step)
                 if progress is not None:

@@ -1,0 +1,116 @@
+"""rerun: live recordings and replays carry the particles and exactly the HDF5 observables."""
+
+import subprocess
+import sys
+from collections import defaultdict
+
+import numpy as np
+import pytest
+
+import decco_warp as dw
+
+rerun = pytest.importorskip("rerun")
+from rerun.chunk import RrdReader  # noqa: E402
+
+STEPS = ["--steps", "300", "--output-every", "100"]
+
+
+def _cli(*args, env=None):
+    return subprocess.run(
+        [sys.executable, "-c", "from decco_warp.cli import app; app()", *args], capture_output=True, text=True, env=env
+    )
+
+
+def read_recording(path):
+    """{entity: {column: [values by row]}} of the temporal chunks, and the static entities' columns."""
+    temporal = defaultdict(lambda: defaultdict(list))
+    static = defaultdict(dict)
+    for chunk in RrdReader(path).stream():
+        batch = chunk.to_record_batch()
+        names = [n for n in batch.schema.names if n not in ("rerun.controls.RowId", "log_time", "sim_time")]
+        for name in names:
+            values = batch.column(name).to_pylist()
+            if chunk.is_static:
+                static[str(chunk.entity_path)][name] = values
+            else:
+                temporal[str(chunk.entity_path)][name].extend(values)
+    return temporal, static
+
+
+def _series(temporal, entity):
+    rows = temporal[entity]
+    order = np.argsort(rows["step"])
+    return np.array(rows["step"])[order], np.array([v[0] for v in rows["Scalars:scalars"]])[order]
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    out = tmp_path_factory.mktemp("rr")
+    result = _cli("simulate", *STEPS, "--rerun", "save", "--out", str(out), "--device", "cpu")
+    assert result.returncode == 0, result.stderr
+    run_dir = out / "default"
+    assert "recording.rrd" in result.stdout
+    view = _cli("view", str(run_dir), "--save", str(out / "replay.rrd"))
+    assert view.returncode == 0, view.stderr
+    return run_dir, out / "replay.rrd"
+
+
+def test_live_recording_has_the_particles_and_the_hdf5_observables(recorded):
+    run_dir, _ = recorded
+    data = dw.read_trajectory(run_dir / "trajectory.h5")
+    temporal, static = read_recording(run_dir / "recording.rrd")
+    radii = data["static"]["radius"]
+    points = temporal["/particles/by_size"]
+    assert sorted(points["step"]) == [0, 100, 200, 300]
+    for positions, point_radii, classes in zip(points["Points3D:positions"], points["Points3D:radii"], points["Points3D:class_ids"]):
+        assert len(positions) == len(radii)
+        np.testing.assert_allclose(point_radii, radii / 1e5, rtol=1e-6)
+        assert classes == data["static"]["species"].tolist()
+    k = points["step"].index(300)
+    np.testing.assert_allclose(points["Points3D:positions"][k], data["particles"]["position"][3] / 1e5, rtol=1e-6)
+    assert len(temporal["/particles/by_stress"]["Points3D:colors"][0]) == len(radii)
+    for name in ("kinetic_translational", "potential", "dissipated_sliding", "number_of_contacts", "max_overlap"):
+        steps, values = _series(temporal, f"/observables/{name}")
+        assert steps.tolist() == data["step"].tolist()
+        np.testing.assert_array_equal(values, data["observables"][name].astype(float))
+    steps, share = _series(temporal, "/stress_share/class_2")
+    np.testing.assert_array_equal(share, data["observables"]["stress_share"][:, 2])
+    assert "AnnotationContext:context" in static["/particles/by_size"]
+    assert static["/observables/potential"]["SeriesLines:names"] == [["potential"]]
+    assert set(temporal) >= {"/piles/target", "/piles/projectile/velocity", "/conservation/momentum_drift"}
+
+
+def test_replay_is_equivalent_to_the_live_recording(recorded):
+    run_dir, replay = recorded
+    live, live_static = read_recording(run_dir / "recording.rrd")
+    again, again_static = read_recording(replay)
+    assert set(live) == set(again) and set(live_static) == set(again_static)
+    for entity in live:
+        for column in live[entity]:
+            a, b = live[entity][column], again[entity][column]
+            order_a, order_b = np.argsort(live[entity]["step"]), np.argsort(again[entity]["step"])
+            assert [a[i] for i in order_a] == [b[i] for i in order_b], (entity, column)
+
+
+def test_rerun_is_not_imported_unless_asked(tmp_path):
+    code = (
+        "import sys\nfrom decco_warp.cli import app\n"
+        f"try:\n    app(['simulate', '--steps', '20', '--output-every', '10', '--out', r'{tmp_path}', '--device', 'cpu'])\n"
+        "except SystemExit:\n    pass\nprint('rerun imported:', 'rerun' in sys.modules)\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert "rerun imported: False" in result.stdout, result.stderr
+
+
+def test_missing_rerun_is_one_line_telling_how_to_install(tmp_path):
+    fake = tmp_path / "fake"
+    (fake / "rerun").mkdir(parents=True)
+    (fake / "rerun" / "__init__.py").write_text("raise ImportError('no module named rerun')\n")
+    import os
+
+    env = dict(os.environ, PYTHONPATH=str(fake))
+    result = _cli("simulate", *STEPS, "--rerun", "save", "--out", str(tmp_path / "out"), "--device", "cpu", env=env)
+    assert result.returncode == 2
+    assert "pip install" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+    bad = _cli("simulate", *STEPS, "--rerun", "tv", "--out", str(tmp_path / "out2"), "--device", "cpu")
+    assert bad.returncode == 2 and "spawn, save, connect[=ADDR], serve" in bad.stderr
