@@ -124,20 +124,25 @@ def test_stopped_run_resumes_bit_identically(tmp_path):
         assert np.array_equal(snap_a[key], snap_b[key]), key
 
 
+def _simulate_in_background(tmp_path, name, checkpoint_every, until):
+    """The demo collision, 2400 steps, in another process; returns once ``until`` is in its log."""
+    args = ["--steps", "2400", "--output-every", "100", "--checkpoint-every", str(checkpoint_every), "--out", str(tmp_path)]
+    process = subprocess.Popen(
+        [sys.executable, "-c", "from decco_warp.cli import app; app()", "simulate", "--name", name, *args, "--device", "cpu"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    log = tmp_path / name / "run.log"
+    deadline = time.time() + 120
+    while time.time() < deadline and not (log.exists() and until in log.read_text()):
+        time.sleep(0.02)
+    return process, log
+
+
 def test_killed_run_resumes_without_lost_or_duplicated_frames(tmp_path):
     straight = start_run(_spec(tmp_path, "straight", steps=2400, checkpoint_every=600))
-    args = ["--steps", "2400", "--output-every", "100", "--checkpoint-every", "600", "--out", str(tmp_path)]
-    process = subprocess.Popen(
-        [sys.executable, "-c", "from decco_warp.cli import app; app()", "simulate", "--name", "killed", *args, "--device", "cpu"],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    log = tmp_path / "killed" / "run.log"
-    deadline = time.time() + 120
-    while time.time() < deadline:
-        if log.exists() and "checkpoint: step 1200" in log.read_text():
-            break
-        time.sleep(0.02)
+    process, log = _simulate_in_background(tmp_path, "killed", checkpoint_every=600, until="checkpoint: step 1200")
     os.kill(process.pid, signal.SIGKILL)
     process.wait()
     text = log.read_text()
@@ -245,17 +250,7 @@ def test_blow_up_stops_with_its_exit_code_and_keeps_the_checkpoint(tmp_path):
 @pytest.mark.parametrize("signal_number", [signal.SIGTERM, signal.SIGINT])
 def test_signal_stops_cleanly_and_resume_equals_an_uninterrupted_run(signal_number, tmp_path):
     straight = start_run(_spec(tmp_path, "straight", steps=2400, checkpoint_every=1200))
-    args = ["--steps", "2400", "--output-every", "100", "--checkpoint-every", "1200", "--out", str(tmp_path)]
-    process = subprocess.Popen(
-        [sys.executable, "-c", "from decco_warp.cli import app; app()", "simulate", "--name", "stopped", *args, "--device", "cpu"],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    log = tmp_path / "stopped" / "run.log"
-    deadline = time.time() + 120
-    while time.time() < deadline and not (log.exists() and "frame: step 300" in log.read_text()):
-        time.sleep(0.02)
+    process, _ = _simulate_in_background(tmp_path, "stopped", checkpoint_every=1200, until="frame: step 300")
     process.send_signal(signal_number)
     _, stderr = process.communicate(timeout=120)
     assert process.returncode == 3, stderr
