@@ -26,6 +26,7 @@ DeviceOption = typer.Option(
 EXIT_INPUT = 2  # bad input: nothing was run or written
 EXIT_STOPPED = 3  # SIGINT/SIGTERM: checkpoint written, resumable
 EXIT_BLOW_UP = 4  # non-finite values or runaway overlaps: the last good checkpoint is kept
+EXIT_OUTPUT = 5  # writing the run folder failed (disk full): the last checkpoint is intact
 
 
 def fail(message: str, code: int = EXIT_INPUT) -> None:
@@ -234,7 +235,7 @@ def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: in
     """Prepare a run (every input problem exits with code 2, nothing written), then run it with a progress bar."""
     from .device import DeviceError
     from .io import FileFormatError
-    from .run import BlowUp, RunError, RunStopped, execute
+    from .run import BlowUp, OutputError, RunError, RunStopped, execute
     from .spec import SpecError
     from .stability import StabilityError
 
@@ -267,6 +268,8 @@ def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: in
                 fail(str(stopped), code=EXIT_STOPPED)
             except BlowUp as error:
                 fail(f"the run blew up: {error}; the last checkpoint is kept", code=EXIT_BLOW_UP)
+            except OutputError as error:
+                fail(str(error), code=EXIT_OUTPUT)
     finally:
         if logger is not None:
             logger.close()

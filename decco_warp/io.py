@@ -16,6 +16,7 @@ Nothing here imports Warp: these functions read and write NumPy snapshots.
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import tempfile
 from pathlib import Path
@@ -245,8 +246,7 @@ class Trajectory:
             raise FileFormatError(f"trajectory {path} cannot be reopened ({_first_line(error)})") from None
         trajectory = cls(f, path)
         for element in trajectory._elements():
-            steps = element["step"][()]
-            keep = int(np.searchsorted(steps, keep_through_step, side="right"))
+            keep = _complete_frames(element, keep_through_step)
             for name in ("step", "time", "value"):
                 element[name].resize(keep, axis=0)
         f.swmr_mode = True
@@ -267,15 +267,53 @@ class Trajectory:
 
     @staticmethod
     def _append(element: h5py.Group, step: int, time: float, value) -> None:
+        # The step is written last: a frame whose step is missing was cut short (see _complete_frames).
         k = element["step"].shape[0]
         for name in ("step", "time", "value"):
             element[name].resize(k + 1, axis=0)
-        element["step"][k] = step
-        element["time"][k] = time
         element["value"][k] = value
+        element["time"][k] = time
+        pause_point("trajectory-write", step)
+        element["step"][k] = step
 
     def close(self) -> None:
         self.file.close()
+
+
+def _complete_frames(element: h5py.Group, keep_through_step: int) -> int:
+    """How many leading frames of an element are whole and at or before ``keep_through_step``.
+
+    A frame cut short by a kill has its step still at the fill value 0 (or lacks
+    its value), so only the strictly increasing prefix of steps counts.
+    """
+    steps = element["step"][()]
+    n = min(len(steps), element["time"].shape[0], element["value"].shape[0])
+    keep = 0
+    while keep < n and steps[keep] <= keep_through_step and (keep == 0 or steps[keep] > steps[keep - 1]):
+        keep += 1
+    return keep
+
+
+def pause_point(phase: str, step: int) -> None:
+    """Test hooks at the risky moments of a run (phases: step, trajectory-write, checkpoint-write).
+
+    With DECCO_TEST_PAUSE="phase@step" the run stops here (forever) so that a test can
+    kill it, after creating the file named by DECCO_TEST_PAUSE_MARK; with
+    DECCO_TEST_FAIL="phase@step" the write fails here as on a full disk.
+    """
+    here = f"{phase}@{step}"
+    if os.environ.get("DECCO_TEST_FAIL") == here:
+        raise OSError(errno.ENOSPC, "No space left on device (DECCO_TEST_FAIL)")
+    wanted = os.environ.get("DECCO_TEST_PAUSE")
+    if not wanted or wanted != here:
+        return
+    mark = os.environ.get("DECCO_TEST_PAUSE_MARK")
+    if mark:
+        Path(mark).write_text(wanted)
+    import time
+
+    while True:
+        time.sleep(1.0)
 
 
 def read_trajectory(path) -> dict:
@@ -379,6 +417,8 @@ def write_checkpoint(path, snapshot: dict, static: State, extra: dict) -> None:
         for name in ("radii", "masses", "pile_id", "size_class"):
             state.create_dataset(name, data=getattr(static, name))
         write_dict(f.create_group("snapshot"), snapshot)
+        f.flush()
+        pause_point("checkpoint-write", int(snapshot["step"]))
         write_dict(f.create_group("run"), extra)
 
 

@@ -7,7 +7,9 @@ atomically every ``checkpoint_every`` steps and at the end) and ``run.log``.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import os
 import signal
 import threading
 import time as _time
@@ -22,7 +24,7 @@ import numpy as np
 from . import spec as specs
 from .collision import setup_collision
 from .diagnostics import energy_ledger, stress_shares
-from .io import FileFormatError, Trajectory, load_pile, read_checkpoint, write_checkpoint
+from .io import FileFormatError, Trajectory, load_pile, pause_point, read_checkpoint, write_checkpoint
 from .simulation import Simulation
 from .state import State
 
@@ -75,6 +77,15 @@ def pile_path(reference: str) -> Path:
     if not path.is_file():
         raise RunError(f"pile file {reference} does not exist")
     return path
+
+
+def check_writable(run_dir: Path) -> None:
+    """Refuse early an output folder that cannot be created or written (nothing is left behind)."""
+    existing = run_dir
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
+        raise RunError(f"cannot write the run folder {run_dir}: {existing} is not a writable folder")
 
 
 def run_dir_of(spec: dict) -> Path:
@@ -189,6 +200,7 @@ def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None
     run_dir = run_dir_of(spec)
     if run_dir.exists() and (not run_dir.is_dir() or any(run_dir.iterdir())) and not overwrite:
         raise RunError(f"run folder {run_dir} already exists; use --overwrite to replace it or resume to continue it")
+    check_writable(run_dir)
     device = _device(spec, device)
     state, pile_info = prepare_collision(spec, device)
     sim = Simulation(
@@ -243,6 +255,9 @@ def execute(
             extra["spec_toml"] = spec_text
             (run_dir / SPEC_FILE).write_text(spec_text)
         log = RunLog(run_dir / LOG_FILE)
+        for stale in run_dir.glob(".*.tmp"):  # a checkpoint being written when the run was killed
+            stale.unlink()
+            log(f"resume: removed the unfinished {stale.name}")
         log(f"resume: from step {sim.step_count} of {spec['run']['steps']} on {sim.device}")
         trajectory = Trajectory.reopen(run_dir / TRAJECTORY_FILE, keep_through_step=sim.step_count)
         return _advance(sim, trajectory, spec, run_dir, log, extra, progress, observers)
@@ -311,6 +326,7 @@ def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, pro
                 stops += [_next_multiple(step, every) for every, _ in observers]
                 sim.step(min(min(stops) - step, report_every - step % report_every))
                 step = sim.step_count
+                pause_point("step", step)
                 frame = None
                 if step % output_every == 0 or step == total:
                     frame = particles, observables = record(sim, size_classes)
@@ -336,8 +352,18 @@ def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, pro
     except BlowUp as error:
         log(f"blow-up: {error}; the last checkpoint is kept")
         raise
+    except OSError as error:
+        kept = read_checkpoint(run_dir / CHECKPOINT_FILE)[0]["step"]
+        message = (
+            f"writing the run folder failed at step {sim.step_count} ({error.strerror or error}); "
+            f"the checkpoint of step {kept} is intact: free space or fix the folder, then decco-warp resume {run_dir}"
+        )
+        with contextlib.suppress(OSError):
+            log(f"output error: {message}")
+        raise OutputError(message) from None
     finally:
-        trajectory.close()
+        with contextlib.suppress(OSError):  # frames were flushed as written; a failed close loses nothing
+            trajectory.close()
         wall = _time.perf_counter() - started
         if sim.step_count >= total:
             log(f"done: step {sim.step_count}, t {sim.time:.6g} s, {wall:.1f} s wall this session")
@@ -351,6 +377,10 @@ BLOW_UP_OVERLAP = 0.5
 
 class BlowUp(RuntimeError):
     """The run went numerically wrong (non-finite values or spheres passing through each other)."""
+
+
+class OutputError(RuntimeError):
+    """Writing the run folder failed (a full disk, a vanished folder); the last checkpoint is intact."""
 
 
 class RunStopped(RuntimeError):

@@ -126,12 +126,12 @@ def resolve_spec(raw: dict | None = None, overrides: dict | None = None) -> dict
     for source in (raw, overrides or {}):
         for table, values in source.items():
             if table not in SCHEMA:
-                raise SpecError(f"unknown table [{table}]; allowed: {', '.join(f'[{t}]' for t in SCHEMA)}")
+                raise SpecError(f"unknown table [{_shown(table)}]; allowed: {', '.join(f'[{t}]' for t in SCHEMA)}")
             if not isinstance(values, dict):
                 raise SpecError(f"[{table}] must be a table of keys, not {values!r}")
             for key, value in values.items():
                 if key not in SCHEMA[table]:
-                    raise SpecError(f"unknown key [{table}] {key}; allowed: {', '.join(SCHEMA[table])}")
+                    raise SpecError(f"unknown key [{table}] {_shown(key)}; allowed: {', '.join(SCHEMA[table])}")
                 if value is not None:
                     merged.setdefault(table, {})[key] = value
 
@@ -160,6 +160,12 @@ def resolve_spec(raw: dict | None = None, overrides: dict | None = None) -> dict
     except ValueError as error:
         raise SpecError(f"[params] {error}") from None
     return spec
+
+
+def _shown(name) -> str:
+    """A name from the user's file as it can be shown on one line."""
+    text = str(name)
+    return text if text.isprintable() and text.strip() == text and text else repr(text)
 
 
 def _checked(table: str, key: str, value, rule: Key):

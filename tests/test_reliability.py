@@ -1,0 +1,197 @@
+"""Faults: kills at the risky moments, full disks, unwritable folders, malformed input of every kind."""
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import decco_warp as dw
+from decco_warp import spec as specs
+from decco_warp.io import FileFormatError, load_pile, read_checkpoint, save_pile
+from decco_warp.run import RunError, builtin_pile, prepare_start, start_run
+
+RUN = ["--steps", "2400", "--output-every", "100", "--checkpoint-every", "600", "--device", "cpu"]
+
+
+def _cli(*args, env=None):
+    return subprocess.run(
+        [sys.executable, "-c", "from decco_warp.cli import app; app()", *args], capture_output=True, text=True, env=env
+    )
+
+
+@pytest.fixture(scope="module")
+def straight(tmp_path_factory):
+    out = tmp_path_factory.mktemp("straight")
+    spec = specs.resolve_spec(
+        {"run": {"name": "straight", "out": str(out), "device": "cpu", "steps": 2400, "output_every": 100, "checkpoint_every": 600}}
+    )
+    return dw.read_trajectory(start_run(spec).run_dir / "trajectory.h5")
+
+
+def _same(a, b):
+    assert a["step"].tolist() == b["step"].tolist()
+    for name in a["particles"]:
+        assert np.array_equal(a["particles"][name], b["particles"][name]), name
+    for name in a["observables"]:
+        assert np.array_equal(a["observables"][name], b["observables"][name], equal_nan=True), name
+        assert b["observable_step"][name].tolist() == b["step"].tolist(), name
+
+
+@pytest.mark.parametrize("phase", ["step@1250", "trajectory-write@1300", "checkpoint-write@1200"])
+def test_sigkill_at_a_risky_moment_then_resume_equals_an_uninterrupted_run(phase, straight, tmp_path):
+    mark = tmp_path / "paused"
+    env = dict(os.environ, DECCO_TEST_PAUSE=phase, DECCO_TEST_PAUSE_MARK=str(mark))
+    process = subprocess.Popen(
+        [sys.executable, "-c", "from decco_warp.cli import app; app()", "simulate", "--name", "k", "--out", str(tmp_path), *RUN],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=env,
+    )
+    deadline = time.time() + 120
+    while not mark.exists() and time.time() < deadline and process.poll() is None:
+        time.sleep(0.02)
+    assert mark.exists(), "the run never reached the pause"
+    os.kill(process.pid, signal.SIGKILL)
+    process.wait()
+    run_dir = tmp_path / "k"
+    # Right after the kill: the trajectory reads, and the checkpoint is a whole one.
+    frames = dw.read_trajectory(run_dir / "trajectory.h5")
+    assert frames["step"][0] == 0
+    assert read_checkpoint(run_dir / "checkpoint.h5")[0]["step"] in (600, 1200)
+    result = _cli("resume", str(run_dir), "--device", "cpu")
+    assert result.returncode == 0, result.stderr
+    _same(straight, dw.read_trajectory(run_dir / "trajectory.h5"))
+    assert not list(run_dir.glob(".*.tmp"))
+
+
+def test_full_disk_stops_cleanly_and_the_checkpoint_survives(straight, tmp_path):
+    env = dict(os.environ, DECCO_TEST_FAIL="trajectory-write@1300")
+    result = _cli("simulate", "--name", "full", "--out", str(tmp_path), *RUN, env=env)
+    assert result.returncode == 5, result.stderr
+    assert "No space left on device" in result.stderr and "checkpoint of step 1200 is intact" in result.stderr
+    assert "Traceback" not in result.stderr
+    assert read_checkpoint(tmp_path / "full" / "checkpoint.h5")[0]["step"] == 1200
+    assert _cli("resume", str(tmp_path / "full"), "--device", "cpu").returncode == 0
+    _same(straight, dw.read_trajectory(tmp_path / "full" / "trajectory.h5"))
+
+
+def test_failed_checkpoint_write_keeps_the_previous_checkpoint(tmp_path):
+    env = dict(os.environ, DECCO_TEST_FAIL="checkpoint-write@1200")
+    result = _cli("simulate", "--name", "ck", "--out", str(tmp_path), *RUN, env=env)
+    assert result.returncode == 5 and "checkpoint of step 600 is intact" in result.stderr
+    assert not list((tmp_path / "ck").glob(".*.tmp"))
+
+
+def test_unwritable_output_folder_is_refused_before_any_work(tmp_path):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        if os.access(locked, os.W_OK):
+            pytest.skip("running as a user who can write anywhere")
+        spec = specs.resolve_spec({"run": {"out": str(locked / "runs"), "device": "cpu"}})
+        with pytest.raises(RunError, match="cannot write the run folder"):
+            prepare_start(spec)
+    finally:
+        locked.chmod(0o700)
+
+
+def test_output_path_through_a_file_is_refused(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    result = _cli("simulate", "--out", str(blocker / "runs"), "--steps", "10", "--device", "cpu")
+    assert result.returncode == 2 and "not a writable folder" in result.stderr
+    assert blocker.read_text() == "not a folder"
+
+
+# --- malformed input of every kind (hypothesis) ------------------------------------------------------
+
+_values = st.one_of(
+    st.none(), st.booleans(), st.integers(-10**6, 10**12), st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=12), st.lists(st.integers(), max_size=3), st.dictionaries(st.text(max_size=5), st.integers(), max_size=2),
+)  # fmt: skip
+_known_keys = st.sampled_from(sorted({key for table in specs.SCHEMA.values() for key in table}) + ["bogus", ""])
+_tables = st.dictionaries(
+    st.one_of(st.sampled_from(sorted(specs.SCHEMA)), st.text(max_size=6)),
+    st.one_of(st.dictionaries(_known_keys, _values, max_size=5), _values),
+    max_size=4,
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(_tables)
+def test_any_spec_either_resolves_or_is_refused_with_a_spec_error(raw):
+    try:
+        spec = specs.resolve_spec(raw)
+    except specs.SpecError as error:
+        assert str(error) and "\n" not in str(error)
+        return
+    # Whatever resolves is complete, valid and stable.
+    assert specs.resolve_spec(spec) == spec
+    assert spec["run"]["steps"] >= 1 and math.isfinite(spec["params"]["dt"])
+
+
+@pytest.fixture(scope="module")
+def good_pile(tmp_path_factory):
+    path = tmp_path_factory.mktemp("pile") / "good.h5"
+    save_pile(load_pile(builtin_pile("projectile")), path)
+    return path
+
+
+_damage = st.one_of(
+    st.tuples(st.just("truncate"), st.floats(0.0, 0.999)),
+    st.tuples(st.just("nan"), st.sampled_from(["positions", "velocities", "omegas", "radii", "masses"])),
+    st.tuples(st.just("negative"), st.sampled_from(["radii", "masses"])),
+    st.tuples(st.just("delete"), st.sampled_from(["pile/positions", "pile/radii", "pile/size_class", "pile"])),
+    st.tuples(st.just("reshape"), st.sampled_from(["positions", "radii", "velocities"])),
+    st.tuples(st.just("format"), st.text(st.characters(blacklist_characters="\x00"), max_size=8)),
+)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(_damage, st.integers(0, 149))
+def test_damaged_pile_files_are_refused_with_a_reason(good_pile, tmp_path, damage, index):
+    good_pile_bytes = good_pile.read_bytes()
+    path = tmp_path / "damaged.h5"
+    path.write_bytes(good_pile_bytes)
+    kind, what = damage
+    if kind == "truncate":
+        path.write_bytes(good_pile_bytes[: int(what * len(good_pile_bytes))])
+    else:
+        with h5py.File(path, "r+") as f:
+            if kind == "nan":
+                data = f["pile"][what][()].astype(float)
+                data[index] = np.nan
+                del f["pile"][what]
+                f["pile"][what] = data
+            elif kind == "negative":
+                f["pile"][what][index] = -1.0
+            elif kind == "delete":
+                del f[what]
+            elif kind == "reshape":
+                data = f["pile"][what][()]
+                del f["pile"][what]
+                f["pile"][what] = data[:-1]
+            else:
+                f.attrs["format"] = what
+    with pytest.raises(FileFormatError) as raised:
+        load_pile(path)
+    assert str(raised.value) and "\n" not in str(raised.value)
+
+
+def test_a_damaged_pile_through_the_cli_is_exit_2_and_writes_nothing(good_pile, tmp_path):
+    good_pile_bytes = good_pile.read_bytes()
+    pile = tmp_path / "bad.h5"
+    pile.write_bytes(good_pile_bytes[: len(good_pile_bytes) // 2])
+    out = tmp_path / "out"
+    result = _cli("simulate", "--projectile", str(pile), "--out", str(out), "--device", "cpu")
+    assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
+    assert not out.exists()
