@@ -35,6 +35,26 @@ def fail(message: str, code: int = EXIT_INPUT) -> None:
     raise typer.Exit(code)
 
 
+def main_entry() -> None:
+    """The console script: typer's app, with usage errors as one line (exit code 2) instead of a panel."""
+    try:
+        code = app(standalone_mode=False)
+    except typer.Exit as done:
+        raise SystemExit(done.exit_code) from None
+    except Exception as error:  # typer's (or click's) usage errors carry a message and an exit code
+        if type(error).__name__ == "Abort":
+            typer.echo("decco-warp: aborted", err=True)
+            raise SystemExit(130) from None
+        if not (hasattr(error, "format_message") and hasattr(error, "exit_code")):
+            raise
+        ctx = getattr(error, "ctx", None)
+        command = f" {ctx.info_name}" if ctx is not None and ctx.parent is not None else ""
+        message = " ".join(error.format_message().split())
+        typer.echo(f"decco-warp{command}: error: {message} (see --help)", err=True)
+        raise SystemExit(error.exit_code) from None
+    raise SystemExit(code if isinstance(code, int) else 0)
+
+
 def _version_callback(value: bool) -> None:
     if value:
         typer.echo(f"decco-warp {__version__}")

@@ -16,7 +16,7 @@ from decco_warp.run import builtin_pile
 
 
 def _cli(*args):
-    return subprocess.run([sys.executable, "-c", "from decco_warp.cli import app; app()", *args], capture_output=True, text=True)
+    return subprocess.run([sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", *args], capture_output=True, text=True)
 
 
 def test_stress_shares_by_hand():

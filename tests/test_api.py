@@ -113,7 +113,7 @@ def test_split_steps_equal_one_run(device):
 
 def _cli(*args, env=None):
     return subprocess.run(
-        [sys.executable, "-c", "from decco_warp.cli import app; app()", *args],
+        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", *args],
         capture_output=True,
         text=True,
         env=env,

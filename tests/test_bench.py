@@ -21,7 +21,7 @@ def test_lattice_pile_touches_its_neighbours_lightly():
 def test_bench_cli_writes_a_table_with_its_baseline(tmp_path):
     out = tmp_path / "bench.json"
     result = subprocess.run(
-        [sys.executable, "-c", "from decco_warp.cli import app; app()", "bench", "--device", "cpu", "--n", "64,100",
+        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", "bench", "--device", "cpu", "--n", "64,100",
          "--seconds", "0.05", "--steps", "5", "--layouts", "1:2:8", "--json", str(out)],
         capture_output=True,
         text=True,
@@ -41,7 +41,7 @@ def test_bench_cli_writes_a_table_with_its_baseline(tmp_path):
 
 def test_bench_cli_rejects_bad_layouts():
     result = subprocess.run(
-        [sys.executable, "-c", "from decco_warp.cli import app; app()", "bench", "--device", "cpu", "--layouts", "128:4"],
+        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", "bench", "--device", "cpu", "--layouts", "128:4"],
         capture_output=True,
         text=True,
     )

@@ -23,7 +23,7 @@ RUN = ["--steps", "2400", "--output-every", "100", "--checkpoint-every", "600", 
 
 def _cli(*args, env=None):
     return subprocess.run(
-        [sys.executable, "-c", "from decco_warp.cli import app; app()", *args], capture_output=True, text=True, env=env
+        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", *args], capture_output=True, text=True, env=env
     )
 
 
@@ -50,7 +50,7 @@ def test_sigkill_at_a_risky_moment_then_resume_equals_an_uninterrupted_run(phase
     mark = tmp_path / "paused"
     env = dict(os.environ, DECCO_TEST_PAUSE=phase, DECCO_TEST_PAUSE_MARK=str(mark))
     process = subprocess.Popen(
-        [sys.executable, "-c", "from decco_warp.cli import app; app()", "simulate", "--name", "k", "--out", str(tmp_path), *RUN],
+        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", "simulate", "--name", "k", "--out", str(tmp_path), *RUN],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
         env=env,
@@ -195,3 +195,28 @@ def test_a_damaged_pile_through_the_cli_is_exit_2_and_writes_nothing(good_pile, 
     result = _cli("simulate", "--projectile", str(pile), "--out", str(out), "--device", "cpu")
     assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["simulate", "--steps", "abc"], "Invalid value for '--steps'"),
+        (["simulate", "--no-such-option"], "No such option: --no-such-option"),
+        (["pile"], "Missing option '--out'"),
+        (["frobnicate"], "No such command 'frobnicate'"),
+    ],
+)
+def test_command_line_mistakes_are_one_line_and_exit_2(args, message):
+    result = _cli(*args)
+    assert result.returncode == 2 and message in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_damaged_checkpoint_is_refused_on_resume(tmp_path):
+    out = tmp_path / "runs"
+    assert _cli("simulate", "--steps", "200", "--output-every", "100", "--out", str(out), "--device", "cpu").returncode == 0
+    checkpoint = out / "default" / "checkpoint.h5"
+    checkpoint.write_bytes(checkpoint.read_bytes()[:1000])
+    result = _cli("resume", str(out / "default"), "--device", "cpu")
+    assert result.returncode == 2 and "checkpoint" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1

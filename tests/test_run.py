@@ -22,7 +22,7 @@ SHORT = {"steps": 600, "output_every": 100, "checkpoint_every": 200}
 
 def _cli(*args, cwd=None):
     return subprocess.run(
-        [sys.executable, "-c", "from decco_warp.cli import app; app()", *args], capture_output=True, text=True, cwd=cwd
+        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", *args], capture_output=True, text=True, cwd=cwd
     )
 
 
@@ -128,7 +128,7 @@ def _simulate_in_background(tmp_path, name, checkpoint_every, until):
     """The demo collision, 2400 steps, in another process; returns once ``until`` is in its log."""
     args = ["--steps", "2400", "--output-every", "100", "--checkpoint-every", str(checkpoint_every), "--out", str(tmp_path)]
     process = subprocess.Popen(
-        [sys.executable, "-c", "from decco_warp.cli import app; app()", "simulate", "--name", name, *args, "--device", "cpu"],
+        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", "simulate", "--name", name, *args, "--device", "cpu"],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,

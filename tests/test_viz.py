@@ -17,7 +17,7 @@ STEPS = ["--steps", "300", "--output-every", "100"]
 
 def _cli(*args, env=None):
     return subprocess.run(
-        [sys.executable, "-c", "from decco_warp.cli import app; app()", *args], capture_output=True, text=True, env=env
+        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", *args], capture_output=True, text=True, env=env
     )
 
 
