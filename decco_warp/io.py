@@ -316,8 +316,28 @@ def pause_point(phase: str, step: int) -> None:
         time.sleep(1.0)
 
 
+def check_complete(path, what: str) -> None:
+    """Raise FileFormatError if an HDF5 file (superblock v2/3) is shorter than its recorded end of file.
+
+    A SWMR reader retries metadata reads on such a file for a long time instead of failing,
+    so a truncated trajectory is caught here first.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileFormatError(f"{what} {path} does not exist")
+    with open(path, "rb") as f:
+        head = f.read(48)
+    if len(head) < 48 or head[:8] != b"\x89HDF\r\n\x1a\n" or head[8] not in (2, 3) or head[9] != 8:
+        return
+    end = int.from_bytes(head[28:36], "little")
+    size = path.stat().st_size
+    if size < end:
+        raise FileFormatError(f"{what} {path} is truncated ({size} of {end} bytes)")
+
+
 def read_trajectory(path) -> dict:
     """A finished or running trajectory as NumPy arrays: steps, times, particle frames, observables, parameters."""
+    check_complete(path, "trajectory")
     with open_h5(path, "trajectory", swmr=True, locking=False) as f:
         particles = f["particles/all"]
         result = {
@@ -334,6 +354,7 @@ def read_trajectory(path) -> dict:
 
 def read_frame(path, index: int = 0) -> tuple[dict, dict, dict]:
     """(particles, observables, static) of one frame of a trajectory, without reading the rest."""
+    check_complete(path, "trajectory")
     with open_h5(path, "trajectory", swmr=True, locking=False) as f:
         particles = f["particles/all"]
         frame = {name: particles[name]["value"][index] for name in Trajectory.PARTICLE_ELEMENTS}

@@ -24,7 +24,7 @@ import numpy as np
 from . import spec as specs
 from .collision import setup_collision
 from .diagnostics import energy_ledger, stress_shares
-from .io import FileFormatError, Trajectory, load_pile, pause_point, read_checkpoint, write_checkpoint
+from .io import FileFormatError, Trajectory, load_pile, pause_point, read_checkpoint, read_frame, write_checkpoint
 from .simulation import Simulation
 from .state import State
 
@@ -225,8 +225,13 @@ def prepare_resume(run_dir, steps: int | None = None, device: str | None = None)
     spec = specs.resolve_spec(specs.load_spec_file(spec_path))
     try:
         snapshot, static, extra = read_checkpoint(checkpoint_path)
+        first_frame = read_frame(trajectory_path, 0)[0]
     except FileFormatError as error:
         raise RunError(str(error)) from None
+    except (IndexError, ValueError) as error:
+        raise RunError(f"trajectory {trajectory_path} has no readable first frame ({error})") from None
+    if first_frame["position"].shape != snapshot["positions"].shape:
+        raise RunError(f"{trajectory_path} and {checkpoint_path} are of different runs (particle counts differ)")
     if specs.resolve_spec(_parse_toml(extra["spec_toml"])) != spec:
         raise RunError(f"{spec_path} changed since the run started; restore it to resume")
     if steps is not None:

@@ -220,3 +220,51 @@ def test_damaged_checkpoint_is_refused_on_resume(tmp_path):
     result = _cli("resume", str(out / "default"), "--device", "cpu")
     assert result.returncode == 2 and "checkpoint" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+@pytest.fixture(scope="module")
+def finished_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("finished")
+    spec = specs.resolve_spec({"run": {"out": str(out), "device": "cpu", "steps": 200, "output_every": 100}})
+    return start_run(spec).run_dir
+
+
+_run_damage = st.one_of(
+    st.tuples(st.just("truncate"), st.sampled_from(["checkpoint.h5", "trajectory.h5"]), st.floats(0.0, 0.99)),
+    st.tuples(st.just("delete"), st.just("checkpoint.h5"), st.sampled_from(["snapshot", "state", "run", "snapshot/positions", "state/radii"])),
+    st.tuples(st.just("nan"), st.just("checkpoint.h5"), st.sampled_from(["snapshot/positions", "snapshot/velocities", "state/masses"])),
+    st.tuples(st.just("negative"), st.just("checkpoint.h5"), st.sampled_from(["state/radii", "state/masses"])),
+    st.tuples(st.just("missing"), st.sampled_from(["checkpoint.h5", "trajectory.h5", "spec.toml"]), st.just("")),
+)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(_run_damage)
+def test_damaged_run_folders_are_refused_on_resume_with_a_reason(finished_run, tmp_path_factory, damage):
+    import shutil
+
+    from decco_warp.run import prepare_resume
+
+    run_dir = tmp_path_factory.mktemp("damaged") / "run"
+    shutil.copytree(finished_run, run_dir)
+    kind, name, what = damage
+    path = run_dir / name
+    if kind == "truncate":
+        data = path.read_bytes()
+        path.write_bytes(data[: int(what * len(data))])
+    elif kind == "missing":
+        path.unlink()
+    else:
+        with h5py.File(path, "r+") as f:
+            if kind == "delete":
+                del f[what]
+            else:
+                data = f[what][()].astype(float)
+                data.flat[0] = np.nan if kind == "nan" else -1.0
+                del f[what]
+                f[what] = data
+    before = sorted(p.name for p in run_dir.iterdir())
+    with pytest.raises((RunError, FileFormatError)) as raised:
+        prepare_resume(run_dir, device="cpu")
+    assert str(raised.value) and "\n" not in str(raised.value)
+    assert sorted(p.name for p in run_dir.iterdir()) == before  # nothing written
