@@ -1,11 +1,10 @@
 """Run analysis: paper metrics on constructed examples, analysis.h5, figures and cross-run output."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from helpers import cli
 
 import decco_warp as dw
 from decco_warp.analysis.figures import RUN_FIGURES, line_data
@@ -15,8 +14,6 @@ from decco_warp.diagnostics import stress_shares
 from decco_warp.run import builtin_pile
 
 
-def _cli(*args):
-    return subprocess.run([sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", *args], capture_output=True, text=True)
 
 
 def test_stress_shares_by_hand():
@@ -60,10 +57,10 @@ def sweep(tmp_path_factory):
     """Two short runs of the demo piles at different eta, analysed as a set."""
     out = tmp_path_factory.mktemp("sweep")
     for name, eta in (("eta0.5", "0.5"), ("eta1", "1.0")):
-        result = _cli("simulate", "--name", name, "--eta", eta, "--steps", "400", "--output-every", "100",
+        result = cli("simulate", "--name", name, "--eta", eta, "--steps", "400", "--output-every", "100",
                       "--out", str(out), "--device", "cpu")
         assert result.returncode == 0, result.stderr
-    result = _cli("analyze", str(out), "--min-members", "20")
+    result = cli("analyze", str(out), "--min-members", "20")
     assert result.returncode == 0, result.stderr
     return out, result
 
@@ -105,5 +102,5 @@ def test_analyze_of_a_set_of_runs_makes_the_cross_run_table_and_figures(sweep):
 
 
 def test_analyze_refuses_a_folder_without_runs(tmp_path):
-    result = _cli("analyze", str(tmp_path))
+    result = cli("analyze", str(tmp_path))
     assert result.returncode == 2 and "no trajectory.h5" in result.stderr

@@ -1,10 +1,9 @@
 """The pinned Python API, input checking, device choice and the CLI."""
 
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from helpers import cli
 from scenes import contact_cluster
 
 import decco_warp as dw
@@ -111,26 +110,19 @@ def test_split_steps_equal_one_run(device):
     np.testing.assert_array_equal(a.state.omegas, b.state.omegas)
 
 
-def _cli(*args, env=None):
-    return subprocess.run(
-        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", *args],
-        capture_output=True,
-        text=True,
-        env=env,
-    )
 
 
 def test_cli_version_and_info():
-    out = _cli("--version")
+    out = cli("--version")
     assert out.returncode == 0 and out.stdout.strip() == f"decco-warp {dw.__version__}"
-    out = _cli("info", "--device", "cpu")
+    out = cli("info", "--device", "cpu")
     assert out.returncode == 0, out.stderr
     assert "warp-lang" in out.stdout and "would use: cpu" in out.stdout
     assert "Traceback" not in out.stderr
 
 
 def test_cli_rejects_bad_device_in_one_line():
-    out = _cli("info", "--device", "gpu0")
+    out = cli("info", "--device", "gpu0")
     assert out.returncode == 2
     assert out.stderr.strip().count("\n") == 0 and "cpu, cuda or cuda:N" in out.stderr
     assert app.info.name == "decco-warp"

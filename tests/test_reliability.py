@@ -10,6 +10,7 @@ import time
 import h5py
 import numpy as np
 import pytest
+from helpers import assert_same_run, cli
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -21,10 +22,6 @@ from decco_warp.run import RunError, builtin_pile, prepare_start, start_run
 RUN = ["--steps", "2400", "--output-every", "100", "--checkpoint-every", "600", "--device", "cpu"]
 
 
-def _cli(*args, env=None):
-    return subprocess.run(
-        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", *args], capture_output=True, text=True, env=env
-    )
 
 
 @pytest.fixture(scope="module")
@@ -36,13 +33,6 @@ def straight(tmp_path_factory):
     return dw.read_trajectory(start_run(spec).run_dir / "trajectory.h5")
 
 
-def _same(a, b):
-    assert a["step"].tolist() == b["step"].tolist()
-    for name in a["particles"]:
-        assert np.array_equal(a["particles"][name], b["particles"][name]), name
-    for name in a["observables"]:
-        assert np.array_equal(a["observables"][name], b["observables"][name], equal_nan=True), name
-        assert b["observable_step"][name].tolist() == b["step"].tolist(), name
 
 
 @pytest.mark.parametrize("phase", ["step@1250", "trajectory-write@1300", "checkpoint-write@1200"])
@@ -66,26 +56,26 @@ def test_sigkill_at_a_risky_moment_then_resume_equals_an_uninterrupted_run(phase
     frames = dw.read_trajectory(run_dir / "trajectory.h5")
     assert frames["step"][0] == 0
     assert read_checkpoint(run_dir / "checkpoint.h5")[0]["step"] in (600, 1200)
-    result = _cli("resume", str(run_dir), "--device", "cpu")
+    result = cli("resume", str(run_dir), "--device", "cpu")
     assert result.returncode == 0, result.stderr
-    _same(straight, dw.read_trajectory(run_dir / "trajectory.h5"))
+    assert_same_run(straight, dw.read_trajectory(run_dir / "trajectory.h5"))
     assert not list(run_dir.glob(".*.tmp"))
 
 
 def test_full_disk_stops_cleanly_and_the_checkpoint_survives(straight, tmp_path):
     env = dict(os.environ, DECCO_TEST_FAIL="trajectory-write@1300")
-    result = _cli("simulate", "--name", "full", "--out", str(tmp_path), *RUN, env=env)
+    result = cli("simulate", "--name", "full", "--out", str(tmp_path), *RUN, env=env)
     assert result.returncode == 5, result.stderr
     assert "No space left on device" in result.stderr and "checkpoint of step 1200 is intact" in result.stderr
     assert "Traceback" not in result.stderr
     assert read_checkpoint(tmp_path / "full" / "checkpoint.h5")[0]["step"] == 1200
-    assert _cli("resume", str(tmp_path / "full"), "--device", "cpu").returncode == 0
-    _same(straight, dw.read_trajectory(tmp_path / "full" / "trajectory.h5"))
+    assert cli("resume", str(tmp_path / "full"), "--device", "cpu").returncode == 0
+    assert_same_run(straight, dw.read_trajectory(tmp_path / "full" / "trajectory.h5"))
 
 
 def test_failed_checkpoint_write_keeps_the_previous_checkpoint(tmp_path):
     env = dict(os.environ, DECCO_TEST_FAIL="checkpoint-write@1200")
-    result = _cli("simulate", "--name", "ck", "--out", str(tmp_path), *RUN, env=env)
+    result = cli("simulate", "--name", "ck", "--out", str(tmp_path), *RUN, env=env)
     assert result.returncode == 5 and "checkpoint of step 600 is intact" in result.stderr
     assert not list((tmp_path / "ck").glob(".*.tmp"))
 
@@ -107,7 +97,7 @@ def test_unwritable_output_folder_is_refused_before_any_work(tmp_path):
 def test_output_path_through_a_file_is_refused(tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
-    result = _cli("simulate", "--out", str(blocker / "runs"), "--steps", "10", "--device", "cpu")
+    result = cli("simulate", "--out", str(blocker / "runs"), "--steps", "10", "--device", "cpu")
     assert result.returncode == 2 and "not a writable folder" in result.stderr
     assert blocker.read_text() == "not a folder"
 
@@ -192,7 +182,7 @@ def test_a_damaged_pile_through_the_cli_is_exit_2_and_writes_nothing(good_pile, 
     pile = tmp_path / "bad.h5"
     pile.write_bytes(good_pile_bytes[: len(good_pile_bytes) // 2])
     out = tmp_path / "out"
-    result = _cli("simulate", "--projectile", str(pile), "--out", str(out), "--device", "cpu")
+    result = cli("simulate", "--projectile", str(pile), "--out", str(out), "--device", "cpu")
     assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
     assert not out.exists()
 
@@ -207,17 +197,17 @@ def test_a_damaged_pile_through_the_cli_is_exit_2_and_writes_nothing(good_pile, 
     ],
 )
 def test_command_line_mistakes_are_one_line_and_exit_2(args, message):
-    result = _cli(*args)
+    result = cli(*args)
     assert result.returncode == 2 and message in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
 
 
 def test_damaged_checkpoint_is_refused_on_resume(tmp_path):
     out = tmp_path / "runs"
-    assert _cli("simulate", "--steps", "200", "--output-every", "100", "--out", str(out), "--device", "cpu").returncode == 0
+    assert cli("simulate", "--steps", "200", "--output-every", "100", "--out", str(out), "--device", "cpu").returncode == 0
     checkpoint = out / "default" / "checkpoint.h5"
     checkpoint.write_bytes(checkpoint.read_bytes()[:1000])
-    result = _cli("resume", str(out / "default"), "--device", "cpu")
+    result = cli("resume", str(out / "default"), "--device", "cpu")
     assert result.returncode == 2 and "checkpoint" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
 

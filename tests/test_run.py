@@ -10,6 +10,7 @@ import time
 import h5py
 import numpy as np
 import pytest
+from helpers import assert_same_run, cli
 
 import decco_warp as dw
 from decco_warp import spec as specs
@@ -20,10 +21,6 @@ from decco_warp.run import resume_run, start_run
 SHORT = {"steps": 600, "output_every": 100, "checkpoint_every": 200}
 
 
-def _cli(*args, cwd=None):
-    return subprocess.run(
-        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", *args], capture_output=True, text=True, cwd=cwd
-    )
 
 
 def _spec(tmp_path, name="r", **run):
@@ -34,7 +31,7 @@ def _spec(tmp_path, name="r", **run):
 def finished(tmp_path_factory):
     """The default collision, shortened, run through the CLI."""
     out = tmp_path_factory.mktemp("runs")
-    result = _cli(
+    result = cli(
         "simulate", "--steps", "600", "--output-every", "100", "--checkpoint-every", "200", "--out", str(out), "--device", "cpu"
     )
     assert result.returncode == 0, result.stderr
@@ -103,13 +100,6 @@ def _frames(run_dir):
     return data
 
 
-def _assert_same_run(a, b):
-    assert a["step"].tolist() == b["step"].tolist()
-    for name in a["particles"]:
-        assert np.array_equal(a["particles"][name], b["particles"][name]), name
-    for name in a["observables"]:
-        assert np.array_equal(a["observables"][name], b["observables"][name], equal_nan=True), name
-        assert a["observable_step"][name].tolist() == a["step"].tolist(), name
 
 
 def test_stopped_run_resumes_bit_identically(tmp_path):
@@ -117,7 +107,7 @@ def test_stopped_run_resumes_bit_identically(tmp_path):
     start_run(_spec(tmp_path, "parts", steps=300))
     resumed = resume_run(tmp_path / "parts", steps=600)
     assert resumed.steps == 600 and resumed.steps_this_session == 300
-    _assert_same_run(_frames(straight.run_dir), _frames(tmp_path / "parts"))
+    assert_same_run(_frames(straight.run_dir), _frames(tmp_path / "parts"))
     snap_a, _, _ = read_checkpoint(tmp_path / "straight" / "checkpoint.h5")
     snap_b, _, _ = read_checkpoint(tmp_path / "parts" / "checkpoint.h5")
     for key in ("positions", "velocities", "omegas", "force", "torque", "work"):
@@ -147,15 +137,15 @@ def test_killed_run_resumes_without_lost_or_duplicated_frames(tmp_path):
     process.wait()
     text = log.read_text()
     assert "checkpoint: step 1200" in text and "done" not in text, "the run was not killed mid-way"
-    result = _cli("resume", str(tmp_path / "killed"), "--device", "cpu")
+    result = cli("resume", str(tmp_path / "killed"), "--device", "cpu")
     assert result.returncode == 0, result.stderr
-    _assert_same_run(_frames(straight.run_dir), _frames(tmp_path / "killed"))
+    assert_same_run(_frames(straight.run_dir), _frames(tmp_path / "killed"))
 
 
 def test_existing_run_folder_is_not_overwritten(finished, tmp_path):
     run_dir, _ = finished
     before = (run_dir / "trajectory.h5").stat().st_mtime_ns
-    result = _cli("simulate", "--steps", "10", "--out", str(run_dir.parent), "--device", "cpu")
+    result = cli("simulate", "--steps", "10", "--out", str(run_dir.parent), "--device", "cpu")
     assert result.returncode == 2 and "already exists" in result.stderr
     assert (run_dir / "trajectory.h5").stat().st_mtime_ns == before
 
@@ -189,7 +179,7 @@ def bad_piles(tmp_path_factory):
 )
 def test_bad_input_is_one_line_and_exit_code_2(args, message, bad_piles, tmp_path):
     args = [a.replace("{piles}", str(bad_piles)) for a in args]
-    result = _cli("simulate", *args, "--out", str(tmp_path))
+    result = cli("simulate", *args, "--out", str(tmp_path))
     assert result.returncode == 2, result.stderr
     assert message in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.stderr
@@ -210,7 +200,7 @@ def test_bad_spec_files_are_refused_before_any_work(text, message, tmp_path):
     config = tmp_path / "spec.toml"
     config.write_text(text)
     out = tmp_path / "out"
-    result = _cli("simulate", str(config), "--out", str(out))
+    result = cli("simulate", str(config), "--out", str(out))
     assert result.returncode == 2 and message in result.stderr, result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
     assert not out.exists()
@@ -219,7 +209,7 @@ def test_bad_spec_files_are_refused_before_any_work(text, message, tmp_path):
 def test_spec_file_and_options_combine_and_resolve(tmp_path):
     config = tmp_path / "c.toml"
     config.write_text('[run]\nname = "mine"\nduration = 8.0\n[collision]\nspeed = 2e4\ntheta_deg = 10\n[params]\ndt = 0.05\n')
-    result = _cli("simulate", str(config), "--theta", "30", "--output-every", "40", "--out", str(tmp_path), "--device", "cpu")
+    result = cli("simulate", str(config), "--theta", "30", "--output-every", "40", "--out", str(tmp_path), "--device", "cpu")
     assert result.returncode == 0, result.stderr
     spec = specs.load_spec_file(tmp_path / "mine" / "spec.toml")
     assert spec["run"]["steps"] == 160 and "duration" not in spec["run"]
@@ -238,7 +228,7 @@ def test_shipped_default_spec_file_is_the_default():
 def test_blow_up_stops_with_its_exit_code_and_keeps_the_checkpoint(tmp_path):
     config = tmp_path / "unstable.toml"
     config.write_text("[run]\nallow_unstable = true\nsteps = 3000\noutput_every = 50\ncheckpoint_every = 500\n[params]\ndt = 5.0\n")
-    result = _cli("simulate", str(config), "--out", str(tmp_path), "--name", "boom", "--device", "cpu")
+    result = cli("simulate", str(config), "--out", str(tmp_path), "--name", "boom", "--device", "cpu")
     assert result.returncode == 4, result.stderr
     assert "blew up: step 50" in result.stderr and "time step is probably too long" in result.stderr
     assert "Traceback" not in result.stderr
@@ -257,6 +247,6 @@ def test_signal_stops_cleanly_and_resume_equals_an_uninterrupted_run(signal_numb
     assert f"stopped by {signal.Signals(signal_number).name}" in stderr and "decco-warp resume" in stderr
     stopped_at = read_checkpoint(tmp_path / "stopped" / "checkpoint.h5")[0]["step"]
     assert 300 <= stopped_at < 2400
-    result = _cli("resume", str(tmp_path / "stopped"), "--device", "cpu")
+    result = cli("resume", str(tmp_path / "stopped"), "--device", "cpu")
     assert result.returncode == 0, result.stderr
-    _assert_same_run(_frames(straight.run_dir), _frames(tmp_path / "stopped"))
+    assert_same_run(_frames(straight.run_dir), _frames(tmp_path / "stopped"))

@@ -6,6 +6,7 @@ from collections import defaultdict
 
 import numpy as np
 import pytest
+from helpers import cli
 
 import decco_warp as dw
 
@@ -15,10 +16,6 @@ from rerun.chunk import RrdReader  # noqa: E402
 STEPS = ["--steps", "300", "--output-every", "100"]
 
 
-def _cli(*args, env=None):
-    return subprocess.run(
-        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", *args], capture_output=True, text=True, env=env
-    )
 
 
 def read_recording(path):
@@ -46,11 +43,11 @@ def _series(temporal, entity):
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     out = tmp_path_factory.mktemp("rr")
-    result = _cli("simulate", *STEPS, "--rerun", "save", "--out", str(out), "--device", "cpu")
+    result = cli("simulate", *STEPS, "--rerun", "save", "--out", str(out), "--device", "cpu")
     assert result.returncode == 0, result.stderr
     run_dir = out / "default"
     assert "recording.rrd" in result.stdout
-    view = _cli("view", str(run_dir), "--save", str(out / "replay.rrd"))
+    view = cli("view", str(run_dir), "--save", str(out / "replay.rrd"))
     assert view.returncode == 0, view.stderr
     return run_dir, out / "replay.rrd"
 
@@ -109,8 +106,8 @@ def test_missing_rerun_is_one_line_telling_how_to_install(tmp_path):
     import os
 
     env = dict(os.environ, PYTHONPATH=str(fake))
-    result = _cli("simulate", *STEPS, "--rerun", "save", "--out", str(tmp_path / "out"), "--device", "cpu", env=env)
+    result = cli("simulate", *STEPS, "--rerun", "save", "--out", str(tmp_path / "out"), "--device", "cpu", env=env)
     assert result.returncode == 2
     assert "pip install" in result.stderr and len(result.stderr.strip().splitlines()) == 1
-    bad = _cli("simulate", *STEPS, "--rerun", "tv", "--out", str(tmp_path / "out2"), "--device", "cpu")
+    bad = cli("simulate", *STEPS, "--rerun", "tv", "--out", str(tmp_path / "out2"), "--device", "cpu")
     assert bad.returncode == 2 and "spawn, save, connect[=ADDR], serve" in bad.stderr
