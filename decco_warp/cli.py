@@ -462,7 +462,7 @@ def analyze(
     import csv
     import json
 
-    from .analysis.figures import CROSS_RUN_FIGURES, RUN_FIGURES, plot_runs, save
+    from .analysis.figures import RUN_FIGURES, save, write_cross_run
     from .analysis.runs import analyse_run
     from .io import FileFormatError
 
@@ -504,9 +504,7 @@ def analyze(
             writer = csv.DictWriter(f, fieldnames=list(summaries[0]))
             writer.writeheader()
             writer.writerows(summaries)
-        usable = [s for s in summaries if s.get("eta") is not None and s.get("mass_ratio") is not None]
-        for name, (metric, label) in CROSS_RUN_FIGURES.items():
-            save(plot_runs(usable, metric, label), path / "figures", name)
+        write_cross_run(path, summaries)
         (path / "summaries.json").write_text(json.dumps(summaries, indent=2) + "\n")
         typer.echo(f"{path}: summary.csv and cross-run figures in {path / 'figures'}")
 
@@ -544,3 +542,45 @@ def view(
         typer.echo(f"wrote {save_to} (view it with: rerun {save_to})")
     elif logger.url:
         typer.echo(f"rerun: serving {logger.url}")
+
+
+# --- sweep ---------------------------------------------------------------------------------
+
+
+@app.command()
+def sweep(
+    spec_file: Path = typer.Argument(..., help="Sweep specification (TOML): a run spec plus [sweep] and [sweep.grid]."),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Address of a running Dask scheduler."),
+    workers: Optional[int] = typer.Option(None, "--workers", help="Local workers (default: one per GPU, else 2)."),
+) -> None:
+    """Run a grid of collisions with Dask (skipping finished runs), then analyse them together."""
+    from .analysis.figures import write_cross_run
+    from .spec import SpecError
+    from .sweep import load_sweep, run_sweep, write_summary
+
+    try:
+        settings, runs = load_sweep(spec_file)
+    except SpecError as error:
+        fail(str(error))
+    if workers is not None and workers < 1:
+        fail("--workers must be >= 1")
+    folder = Path(settings["out"]) / settings["name"]
+    typer.echo(f"sweep {settings['name']}: {len(runs)} runs into {folder}")
+    bar = _progress_bar("sweep", "runs")
+    finished = []
+    with bar:
+        task = bar.add_task(settings["name"], total=len(runs), runs="")
+
+        def report(row):
+            finished.append(row)
+            outcome = row["status"] if row["status"] != "failed" else f"FAILED: {row.get('reason', '')}"
+            ratio = row.get("largest_mass_ratio")
+            detail = f", m_lf/m_t {ratio:.4g}" if isinstance(ratio, float) else ""
+            bar.console.print(f"{row['run']}: {outcome}{detail} ({row.get('wall_seconds', 0):.1f} s on {row.get('device')})")
+            bar.update(task, completed=len(finished), runs=f"{len(finished)}/{len(runs)} runs")
+
+        rows = run_sweep(settings, runs, scheduler=scheduler, workers=workers, on_result=report)
+    summary = write_summary(folder, rows)
+    write_cross_run(folder, [r for r in rows if r.get("status") != "failed"])
+    failed = [r for r in rows if r.get("status") == "failed"]
+    typer.echo(f"summary: {summary}; figures in {folder / 'figures'}; {len(failed)} failed")

@@ -415,6 +415,9 @@ def check_sanity(step: int, particles: dict, radii: np.ndarray) -> None:
         )
 
 
+#: What can go wrong with one run (its input, its numerics, its output), as a sweep records it.
+RUN_FAILURES = (RunError, BlowUp, OutputError, FileFormatError, ValueError, RuntimeError, OSError)
+
 #: A frame stops the run if the total energy has grown by this fraction of |U| + KE at the start.
 BLOW_UP_ENERGY_GAIN = 0.1
 

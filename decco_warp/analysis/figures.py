@@ -154,3 +154,13 @@ CROSS_RUN_FIGURES = {
 def line_data(fig) -> list[tuple[np.ndarray, np.ndarray]]:
     """(x, y) of every line drawn in a figure, for checking a figure against its data."""
     return [(np.asarray(line.get_xdata()), np.asarray(line.get_ydata())) for ax in fig.axes for line in ax.lines]
+
+
+def write_cross_run(folder: Path, summaries: list[dict]) -> list[Path]:
+    """The cross-run figures of a set of analysed runs (those with an eta and a mass ratio)."""
+    usable = [s for s in summaries if s.get("eta") is not None and s.get("mass_ratio") is not None]
+    paths = []
+    if usable:
+        for name, (metric, label) in CROSS_RUN_FIGURES.items():
+            paths += save(plot_runs(usable, metric, label), folder / "figures", name)
+    return paths

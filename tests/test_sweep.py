@@ -1,0 +1,84 @@
+"""Sweeps: a reduced grid on a local Dask cluster of two workers, resumed, with a failing run."""
+
+import csv
+
+import pytest
+from helpers import cli
+
+from decco_warp import spec as specs
+from decco_warp.sweep import load_sweep
+
+pytest.importorskip("distributed")
+
+SWEEP = """
+[sweep]
+name = "grid"
+out = "{out}"
+min_members = 20
+[sweep.grid]
+"collision.eta" = [0.5, 1.0]
+"params.dt" = [0.04, 5.0]
+[run]
+steps = 200
+output_every = 50
+device = "cpu"
+allow_unstable = true
+"""
+
+
+def _rows(path):
+    with open(path) as f:
+        return {row["run"]: row for row in csv.DictReader(f)}
+
+
+def test_grid_expands_to_checked_run_specs(tmp_path):
+    path = tmp_path / "s.toml"
+    path.write_text(SWEEP.format(out=tmp_path))
+    settings, runs = load_sweep(path)
+    assert settings["name"] == "grid" and len(runs) == 4
+    assert sorted(r["run"]["name"] for r in runs) == ["eta0.5_dt0.04", "eta0.5_dt5", "eta1_dt0.04", "eta1_dt5"]
+    assert {(r["collision"]["eta"], r["params"]["dt"]) for r in runs} == {(0.5, 0.04), (0.5, 5.0), (1.0, 0.04), (1.0, 5.0)}
+    assert all(r["run"]["out"] == str(tmp_path / "grid") for r in runs)
+    path.write_text(SWEEP.format(out=tmp_path).replace('"params.dt"', '"params.spin"'))
+    with pytest.raises(specs.SpecError, match="not a sweepable"):
+        load_sweep(path)
+
+
+def test_sweep_runs_on_two_workers_reports_failures_and_resumes(tmp_path):
+    path = tmp_path / "s.toml"
+    path.write_text(SWEEP.format(out=tmp_path))
+    result = cli("sweep", str(path), "--workers", "2")
+    assert result.returncode == 0, result.stderr
+    rows = _rows(tmp_path / "grid" / "summary.csv")
+    assert len(rows) == 4
+    good = [r for r in rows.values() if r["status"] == "ok"]
+    failed = [r for r in rows.values() if r["status"] == "failed"]
+    assert len(good) == 2 and len(failed) == 2  # dt = 5 s blows up; the others finish
+    # The blow-up guard's reason, naming the step: "step N: ..."
+    assert all(r["reason"].startswith("step ") and "too long" in r["reason"] for r in failed), failed
+    assert {float(r["eta"]) for r in failed} == {0.5, 1.0}
+    assert all(float(r["largest_mass_ratio"]) > 0 for r in good)
+    assert (tmp_path / "grid" / "figures" / "largest_fragment.png").stat().st_size > 1000
+    # Again: the finished runs are skipped, the failed ones tried again (and fail the same way).
+    again = cli("sweep", str(path), "--workers", "2")
+    assert again.returncode == 0, again.stderr
+    rows = _rows(tmp_path / "grid" / "summary.csv")
+    assert sorted(r["status"] for r in rows.values()) == ["failed", "failed", "skipped (complete)", "skipped (complete)"]
+
+
+def test_bad_sweep_files_are_exit_2(tmp_path):
+    path = tmp_path / "s.toml"
+    path.write_text("[sweep]\nname = 'x'\n[sweep.grid]\n'collision.eta' = []\n")
+    result = cli("sweep", str(path))
+    assert result.returncode == 2 and "non-empty list" in result.stderr
+
+
+@pytest.mark.parametrize("name", ["fig3_validation", "fig3_reduced", "fig8_stress", "fig8_reduced", "fig9_spin", "fig9_reduced"])
+def test_shipped_paper_sweeps_are_valid(name):
+    from pathlib import Path
+
+    settings, runs = load_sweep(Path(__file__).parent.parent / "runs" / "paper" / f"{name}.toml")
+    assert runs and len({r["run"]["name"] for r in runs}) == len(runs)
+    expected = {"fig3_validation": 63, "fig8_stress": 3, "fig9_spin": 12}
+    if name in expected:
+        assert len(runs) == expected[name]
