@@ -89,7 +89,7 @@ def _slug(value) -> str:
     return "".join(c if c.isalnum() or c in ".-" else "_" for c in text)
 
 
-def run_one(spec: dict, min_members: int, gpus: int) -> dict:
+def run_one(spec: dict, min_members: int) -> dict:
     """Run (or resume, or skip) one run of a sweep and analyse it; never raises."""
     from .analysis.runs import analyse_run
     from .io import read_checkpoint
@@ -97,7 +97,7 @@ def run_one(spec: dict, min_members: int, gpus: int) -> dict:
 
     started = time.perf_counter()
     run_dir = run_dir_of(spec)
-    device = _worker_device(gpus)
+    device = _worker_device()
     row = {"run": spec["run"]["name"], "device": device or "auto"}
     try:
         checkpoint = run_dir / "checkpoint.h5"
@@ -120,15 +120,20 @@ def run_one(spec: dict, min_members: int, gpus: int) -> dict:
     return row
 
 
-def _worker_device(gpus: int) -> str | None:
-    """One GPU per Dask worker (by worker number), each with its own Warp kernel cache."""
+def _worker_device() -> str | None:
+    """One GPU per Dask worker (by worker number, among the GPUs of the worker's own machine),
+    each worker with its own Warp kernel cache."""
     try:
         from distributed import get_worker
 
         worker = get_worker()
     except (ImportError, ValueError):
         return None
-    index = int(worker.name) if str(worker.name).isdigit() else abs(hash(worker.name)) % 1000
+    from .device import cuda_device_count
+
+    gpus = cuda_device_count()
+    digits = "".join(c for c in str(worker.name) if c.isdigit())
+    index = int(digits) if digits else 0
     import warp as wp
 
     cache = Path(os.environ.get("DECCO_CACHE", Path.home() / ".cache" / "decco-warp")) / f"warp-worker-{index}"
@@ -152,7 +157,7 @@ def run_sweep(settings: dict, runs: list[dict], scheduler: str | None = None, wo
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
         client = Client(cluster)
     try:
-        futures = {client.submit(run_one, spec, settings["min_members"], gpus, pure=False): k for k, spec in enumerate(runs)}
+        futures = {client.submit(run_one, spec, settings["min_members"], pure=False): k for k, spec in enumerate(runs)}
         rows: list[dict | None] = [None] * len(runs)
         for future in as_completed(futures):
             k = futures[future]
