@@ -584,3 +584,56 @@ def sweep(
     write_cross_run(folder, [r for r in rows if r.get("status") != "failed"])
     failed = [r for r in rows if r.get("status") == "failed"]
     typer.echo(f"summary: {summary}; figures in {folder / 'figures'}; {len(failed)} failed")
+
+
+# --- piles (a list of piles from a TOML file) ------------------------------------------------
+
+PILE_KEYS = {"out": str, "particles": int, "seed": int, "radii": list, "density": float, "ke_threshold": float,
+             "fill": float, "dt": float, "k_in": float, "restitution": float, "mu_k": float, "mu_r": float}  # fmt: skip
+
+
+@app.command()
+def piles(
+    spec_file: Path = typer.Argument(..., help="TOML with [[pile]] tables: out, particles, seed, and any pile option."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Rebuild piles whose file exists."),
+    device: Optional[str] = DeviceOption,
+) -> None:
+    """Build every pile a TOML file lists (the paper's: runs/paper/piles.toml), skipping those already built."""
+    import subprocess
+    import sys
+
+    from .spec import SpecError, load_spec_file
+
+    try:
+        raw = load_spec_file(spec_file)
+        entries = raw.get("pile")
+        if set(raw) - {"pile"} or not isinstance(entries, list) or not entries:
+            raise SpecError(f"{spec_file} must hold only [[pile]] tables")
+        for k, entry in enumerate(entries):
+            for key, value in entry.items():
+                kind = PILE_KEYS.get(key)
+                if kind is None:
+                    raise SpecError(f"[[pile]] {k + 1}: unknown key {key}; allowed: {', '.join(PILE_KEYS)}")
+                if not (isinstance(value, kind) or kind is float and isinstance(value, int)) or isinstance(value, bool):
+                    raise SpecError(f"[[pile]] {k + 1}: {key} = {value!r} must be {kind.__name__}")
+            if "out" not in entry or "particles" not in entry:
+                raise SpecError(f"[[pile]] {k + 1}: out and particles are required")
+    except SpecError as error:
+        fail(str(error))
+    for entry in entries:
+        out = Path(entry["out"]) if Path(entry["out"]).is_absolute() else Path.cwd() / entry["out"]
+        if out.exists() and not overwrite:
+            typer.echo(f"{out}: exists, skipped")
+            continue
+        args = ["pile", "--out", str(out), "--overwrite"]
+        for key, value in entry.items():
+            if key == "out":
+                continue
+            flag = "--" + key.replace("_", "-")
+            args += [flag, ",".join(str(v) for v in value) if isinstance(value, list) else str(value)]
+        if device:
+            args += ["--device", device]
+        # Each pile in its own process, with its own progress bar and messages.
+        done = subprocess.run([sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", *args])
+        if done.returncode != 0:
+            fail(f"building {out} failed (exit code {done.returncode})", code=done.returncode)

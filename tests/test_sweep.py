@@ -82,3 +82,30 @@ def test_shipped_paper_sweeps_are_valid(name):
     expected = {"fig3_validation": 63, "fig8_stress": 3, "fig9_spin": 12}
     if name in expected:
         assert len(runs) == expected[name]
+
+
+def test_piles_from_a_toml_list_are_built_once(tmp_path):
+    listing = tmp_path / "piles.toml"
+    listing.write_text(
+        f'[[pile]]\nout = "{tmp_path}/a.h5"\nparticles = 12\nseed = 1\ndt = 0.2\nke_threshold = 1e-4\n\n'
+        f'[[pile]]\nout = "{tmp_path}/b.h5"\nparticles = 10\nseed = 2\ndt = 0.2\nke_threshold = 1e-4\n'
+    )
+    result = cli("piles", str(listing), "--device", "cpu")
+    assert result.returncode == 0, result.stderr
+    import decco_warp as dw
+
+    assert dw.load_pile(tmp_path / "a.h5").n == 12 and dw.load_pile(tmp_path / "b.h5").n == 10
+    again = cli("piles", str(listing), "--device", "cpu")
+    assert again.returncode == 0 and again.stdout.count("exists, skipped") == 2
+    listing.write_text('[[pile]]\nout = "x.h5"\nparticles = 10\ncolour = "red"\n')
+    bad = cli("piles", str(listing))
+    assert bad.returncode == 2 and "unknown key colour" in bad.stderr
+
+
+def test_shipped_pile_list_is_valid():
+    from pathlib import Path
+
+    from decco_warp.spec import load_spec_file
+
+    entries = load_spec_file(Path(__file__).parent.parent / "runs" / "paper" / "piles.toml")["pile"]
+    assert [e["particles"] for e in entries] == [5000, 5000, 1250, 500]
