@@ -150,8 +150,6 @@ def pile(
 
     if out.exists() and not overwrite:
         fail(f"{out} already exists; use --overwrite to replace it")
-    if not out.parent.exists() and str(out.parent) not in ("", "."):
-        out.parent.mkdir(parents=True, exist_ok=True)
     try:
         chosen = resolve_device(device)
         params = Params(k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt)
@@ -243,7 +241,7 @@ def _rerun_observer(prepared, mode_text: str | None, every: int | None):
             static = {"radius": state.radii, "mass": state.masses, "species": state.size_class, "pile_id": state.pile_id}
         logger = RerunLogger(mode, address, prepared.run_dir, static, name=prepared.run_dir.name)
         if prepared.resume:  # drifts are measured from the run's first frame, not from the restart
-            logger._log_drift(first_observables, first_particles)
+            logger.set_reference(first_particles, first_observables)
     except (ValueError, RerunUnavailable) as error:
         fail(str(error))
     if logger.url:

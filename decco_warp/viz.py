@@ -170,15 +170,19 @@ class RerunLogger:
             if np.isfinite(value):
                 rec.log(f"stress_share/class_{k}", rr.Scalars(float(value)))
 
+    def set_reference(self, particles: dict, observables: dict) -> None:
+        """Measure the drifts from this frame (the run's first), with its momentum scales."""
+        v = particles["velocity"]
+        p_scale = np.linalg.norm(self.mass[:, None] * v, axis=1).sum() or 1.0
+        l_scale = np.linalg.norm(self.mass[:, None] * np.cross(particles["position"], v), axis=1).sum() or 1.0
+        self.reference = (np.asarray(observables["momentum"]), np.asarray(observables["angular_momentum"]), p_scale, l_scale)
+
     def _log_drift(self, observables: dict, particles: dict) -> None:
+        if self.reference is None:
+            self.set_reference(particles, observables)
+        p0, l0, p_scale, l_scale = self.reference
         momentum = np.asarray(observables["momentum"])
         angular = np.asarray(observables["angular_momentum"])
-        if self.reference is None:
-            v = particles["velocity"]
-            p_scale = np.linalg.norm(self.mass[:, None] * v, axis=1).sum() or 1.0
-            l_scale = np.linalg.norm(self.mass[:, None] * np.cross(particles["position"], v), axis=1).sum() or 1.0
-            self.reference = (momentum, angular, p_scale, l_scale)
-        p0, l0, p_scale, l_scale = self.reference
         self.rec.log("conservation/momentum_drift", self.rr.Scalars(float(np.linalg.norm(momentum - p0) / p_scale)))
         self.rec.log("conservation/angular_momentum_drift", self.rr.Scalars(float(np.linalg.norm(angular - l0) / l_scale)))
 

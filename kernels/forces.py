@@ -174,7 +174,7 @@ def pair_forces_tiled(
     (CUDA, 0 = the compiler's choice) caps registers per thread: the float64
     contact code, which runs rarely, then spills instead of the sweep losing occupancy.
     """
-    real, vec_real = _real_types(precision)
+    real, _ = _real_types(precision)
     Body = BODY_TYPES[precision]
     contact_channels = contact_function(rolling)
     T, P, K = block_dim, particles_per_block, contact_slots
