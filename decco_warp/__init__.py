@@ -23,12 +23,21 @@ from .io import load_pile, read_trajectory, save_pile  # noqa: E402
 from .params import G_CGS, ROLLING_FRICTION_FORMS, Params  # noqa: E402
 from .pile import form_pile  # noqa: E402
 from .simulation import Simulation, compute_forces  # noqa: E402
-from .stability import StabilityError, StabilityReport, check_stability  # noqa: E402
+from .stability import (  # noqa: E402
+    CompressionForecast,
+    StabilityError,
+    StabilityReport,
+    check_stability,
+    choose_stiffness,
+    choose_time_step,
+    predict_compression,
+)
 from .state import State  # noqa: E402
 
 __all__ = [
     "__version__",
     "Cluster",
+    "CompressionForecast",
     "find_clusters",
     "DeviceError",
     "G_CGS",
@@ -40,10 +49,13 @@ __all__ = [
     "StabilityReport",
     "State",
     "check_stability",
+    "choose_stiffness",
+    "choose_time_step",
     "compute_forces",
     "diagnostics",
     "form_pile",
     "load_pile",
+    "predict_compression",
     "read_trajectory",
     "resolve_device",
     "save_pile",

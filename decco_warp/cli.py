@@ -237,7 +237,7 @@ def _rerun_observer(prepared, mode_text: str | None, every: int | None):
         if prepared.resume:
             first_particles, first_observables, static = read_frame(prepared.run_dir / TRAJECTORY_FILE, 0)
         else:
-            state = prepared.state
+            state = prepared.plan.state
             static = {"radius": state.radii, "mass": state.masses, "species": state.size_class, "pile_id": state.pile_id}
         logger = RerunLogger(mode, address, prepared.run_dir, static, name=prepared.run_dir.name)
         if prepared.resume:  # drifts are measured from the run's first frame, not from the restart
@@ -264,30 +264,36 @@ def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: in
     except (SpecError, RunError, FileFormatError, DeviceError, ValueError) as error:
         fail(str(error))
     logger, observers = _rerun_observer(prepared, rerun, rerun_every)
-    bar = _progress_bar("simulating", "step", "time")
+    bar = _progress_bar("simulating", "step", "time", "overlap")
     try:
         with bar:
-            task = bar.add_task("run", total=None, step="", time="")
+            task = bar.add_task("run", total=None, step="", time="", overlap="")
 
             def show(p):
+                if p.warning:
+                    bar.console.print(f"[yellow]{p.warning}[/yellow]")
+                style = "yellow" if p.deepest_overlap > 0.5 else "default"
                 bar.update(
                     task,
                     total=p.total_steps - p.first_step,
                     completed=p.step - p.first_step,
                     step=f"step {p.step}/{p.total_steps}",
                     time=f"t {p.time:.0f} s",
+                    overlap=f"[{style}]deepest overlap {p.deepest_overlap:.2f}[/{style}]",
                 )
 
+            # The run's outcome is reported after the bar's last line, so that it ends the output.
             try:
                 return execute(prepared, progress=show, observers=observers)
             except (RunError, FileFormatError) as error:
-                fail(str(error))
+                stopped_by = (str(error), EXIT_INPUT)
             except RunStopped as stopped:
-                fail(str(stopped), code=EXIT_STOPPED)
+                stopped_by = (str(stopped), EXIT_STOPPED)
             except BlowUp as error:
-                fail(f"the run blew up: {error}; the last checkpoint is kept", code=EXIT_BLOW_UP)
+                stopped_by = (f"the run blew up: {error}; the last checkpoint is kept", EXIT_BLOW_UP)
             except OutputError as error:
-                fail(str(error), code=EXIT_OUTPUT)
+                stopped_by = (str(error), EXIT_OUTPUT)
+        fail(*stopped_by)
     finally:
         if logger is not None:
             logger.close()
@@ -319,7 +325,14 @@ def simulate(
     spin_projectile: Optional[str] = typer.Option(None, "--spin-projectile", help="FRACTION[,AXIS] of breakup spin."),
     steps: Optional[int] = typer.Option(None, "--steps", help="Steps to run."),
     duration: Optional[float] = typer.Option(None, "--duration", help="Simulated time to run [s], instead of --steps."),
-    dt: Optional[float] = typer.Option(None, "--dt", help="Time step [s]."),
+    dt: Optional[str] = typer.Option(None, "--dt", help='Time step [s], or "auto" (eq. 17 for k_in).'),
+    k_in: Optional[str] = typer.Option(
+        None, "--k-in", help='Spring constant while approaching [dyne/cm], or "auto" (from the impact speed, eq. 12).'
+    ),
+    max_overlap: Optional[float] = typer.Option(
+        None, "--max-overlap", help="Stop the run when a contact is deeper than this fraction of the smaller radius."
+    ),
+    check: bool = typer.Option(False, "--check", help="Set up the collision, print its margins and predicted deepest overlap, run nothing."),
     output_every: Optional[int] = typer.Option(None, "--output-every", help="Steps between trajectory frames."),
     checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Steps between checkpoints."),
     precision: Optional[str] = typer.Option(None, "--precision", help="mixed or float64."),
@@ -338,7 +351,7 @@ def simulate(
         if steps is not None and duration is not None:
             raise specs.SpecError("give --steps or --duration, not both")
         run_overrides = {"name": name, "output_every": output_every, "checkpoint_every": checkpoint_every}
-        run_overrides.update(precision=precision, out=out, device=device)
+        run_overrides.update(precision=precision, out=out, device=device, max_overlap=max_overlap)
         if steps is not None or duration is not None:  # a command-line length replaces the file's
             raw.get("run", {}).pop("steps", None)
             raw.get("run", {}).pop("duration", None)
@@ -352,13 +365,53 @@ def simulate(
             "run": run_overrides,
             "piles": {"target": target, "projectile": projectile},
             "collision": collision,
-            "params": {"dt": dt},
+            "params": {"dt": _number_or_auto(dt, "--dt"), "k_in": _number_or_auto(k_in, "--k-in")},
         }
         spec = specs.resolve_spec(raw, overrides)
     except specs.SpecError as error:
         fail(str(error))
+    if check:
+        _check(spec)
+        return
     result = _run_with_progress(prepare_start, spec, overwrite=overwrite, rerun=rerun, rerun_every=rerun_every)
     _report(result)
+
+
+def _number_or_auto(text: Optional[str], option: str):
+    """An option that takes a number or "auto"; None when not given."""
+    if text is None or text.strip() == "auto":
+        return None if text is None else "auto"
+    try:
+        return float(text)
+    except ValueError:
+        fail(f'{option} must be a number or "auto"; got {text!r}')
+
+
+def _check(spec: dict) -> None:
+    """``simulate --check``: the set-up's margins and predicted deepest overlap; exit 2 if it would be refused."""
+    from .device import DeviceError
+    from .io import FileFormatError
+    from .run import RunError, plan_start, run_dir_of
+    from .spec import SpecError
+
+    try:
+        plan = plan_start(spec)
+    except (SpecError, RunError, FileFormatError, DeviceError, ValueError) as error:
+        fail(str(error))
+    for line in plan.lines():
+        typer.echo(line)
+    run_dir = run_dir_of(plan.spec)
+    if run_dir.exists():
+        typer.echo(f"note: run folder {run_dir} exists (resume continues it, --overwrite replaces it)")
+    if not plan.stability.stable and not plan.spec["run"]["allow_unstable"]:
+        fail(f"unstable set-up: {'; '.join(plan.stability.problems())}; set allow_unstable = true in [run] to run it anyway")
+    depth = plan.forecast.fraction
+    verdict = "would run"
+    if depth > 1:
+        verdict += "; contacts may pass a centre into the other sphere, outside the model's validity (k_in = \"auto\" keeps them shallow)"
+    elif depth > 0.5:
+        verdict += "; contacts deeper than half the smaller radius are likely, and would be warned about"
+    typer.echo(f"verdict: {verdict}")
 
 
 @app.command()
@@ -460,7 +513,7 @@ def analyze(
     import csv
     import json
 
-    from .analysis.figures import RUN_FIGURES, save, write_cross_run
+    from .analysis.figures import draw_run, write_cross_run
     from .analysis.runs import analyse_run
     from .io import FileFormatError
 
@@ -488,8 +541,7 @@ def analyze(
                 )
             except FileFormatError as error:
                 fail(str(error))
-            for name, plot in RUN_FIGURES.items():
-                save(plot(analysis), run_dir / "figures", name)
+            draw_run(analysis, run_dir)
             summaries.append(analysis["summary"])
     for run_dir, summary in zip(runs, summaries):
         typer.echo(
@@ -550,18 +602,24 @@ def sweep(
     spec_file: Path = typer.Argument(..., help="Sweep specification (TOML): a run spec plus [sweep] and [sweep.grid]."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Address of a running Dask scheduler."),
     workers: Optional[int] = typer.Option(None, "--workers", help="Local workers (default: one per GPU, else 2)."),
+    analysis_workers: Optional[int] = typer.Option(
+        None, "--analysis-workers", help="Processes analysing finished runs here (default: this machine's cores)."
+    ),
 ) -> None:
-    """Run a grid of collisions with Dask (skipping finished runs), then analyse them together."""
+    """Run a grid of collisions with Dask (skipping finished runs), analysing each as it finishes."""
+    import time
+
     from .analysis.figures import write_cross_run
     from .spec import SpecError
-    from .sweep import load_sweep, run_sweep, write_summary
+    from .sweep import load_sweep, run_sweep, write_record, write_summary
 
     try:
         settings, runs = load_sweep(spec_file)
     except SpecError as error:
         fail(str(error))
-    if workers is not None and workers < 1:
-        fail("--workers must be >= 1")
+    if workers is not None and workers < 1 or analysis_workers is not None and analysis_workers < 1:
+        fail("--workers and --analysis-workers must be >= 1")
+    started = time.perf_counter()
     folder = Path(settings["out"]) / settings["name"]
     typer.echo(f"sweep {settings['name']}: {len(runs)} runs into {folder}")
     bar = _progress_bar("sweep", "runs")
@@ -574,14 +632,17 @@ def sweep(
             outcome = row["status"] if row["status"] != "failed" else f"FAILED: {row.get('reason', '')}"
             ratio = row.get("largest_mass_ratio")
             detail = f", m_lf/m_t {ratio:.4g}" if isinstance(ratio, float) else ""
-            bar.console.print(f"{row['run']}: {outcome}{detail} ({row.get('wall_seconds', 0):.1f} s on {row.get('device')})")
+            depth = row.get("deepest_overlap")
+            detail += f", deepest overlap {depth:.2f}" if isinstance(depth, float) else ""
+            bar.console.print(f"{row['run']}: {outcome}{detail} ({row.get('wall_seconds') or 0:.1f} s on {row.get('device')})")
             bar.update(task, completed=len(finished), runs=f"{len(finished)}/{len(runs)} runs")
 
-        rows = run_sweep(settings, runs, scheduler=scheduler, workers=workers, on_result=report)
+        rows = run_sweep(settings, runs, scheduler, workers, on_result=report, analysis_workers=analysis_workers)
     summary = write_summary(folder, rows)
     write_cross_run(folder, [r for r in rows if r.get("status") != "failed"])
+    write_record(folder, settings, rows, time.perf_counter() - started)
     failed = [r for r in rows if r.get("status") == "failed"]
-    typer.echo(f"summary: {summary}; figures in {folder / 'figures'}; {len(failed)} failed")
+    typer.echo(f"summary: {summary}, sweep.json; figures in {folder / 'figures'}; {len(failed)} failed")
 
 
 # --- piles (a list of piles from a TOML file) ------------------------------------------------

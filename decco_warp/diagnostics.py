@@ -29,7 +29,9 @@ def diagnostics(state: State, params: Params, device: str | None = None) -> dict
     of -G m_i m_j / d), elastic (sum over contacts of (k/4) delta^2, with k the
     spring the force kernel would use now), total_energy, momentum (3,),
     angular_momentum (3,) about the origin, orbital (sum m x cross v) plus spin
-    (sum I w), number_of_contacts and max_overlap [cm].
+    (sum I w), number_of_contacts, max_overlap [cm], deepest_overlap (the deepest
+    contact as a fraction of the smaller radius of its pair; past 1 a centre lies inside
+    the other sphere) and deepest_overlap_pair (its two particles, -1 -1 without contacts).
     """
     pairs = Engine(state, params, device, force_kernel="reference").pair_observables()
     return state_diagnostics(state, pairs)
@@ -55,7 +57,17 @@ def state_diagnostics(state: State, pairs: dict[str, np.ndarray]) -> dict:
         "angular_momentum": orbital + spin,
         "number_of_contacts": int(pairs["contacts"].sum()) // 2,
         "max_overlap": float(pairs["max_overlap"].max()),
+        **deepest_overlap(pairs),
     }
+
+
+def deepest_overlap(pairs: dict[str, np.ndarray]) -> dict:
+    """The deepest contact of a state from per-particle depths: its depth as a fraction of the
+    smaller radius of the pair, and the pair (lower index first; -1 -1 when nothing touches)."""
+    i = int(np.argmax(pairs["overlap_depth"]))
+    j = int(pairs["overlap_partner"][i])
+    pair = np.array(sorted((i, j)) if j >= 0 else (-1, -1), dtype=np.int64)
+    return {"deepest_overlap": float(pairs["overlap_depth"][i]), "deepest_overlap_pair": pair}
 
 
 def energy_ledger(current: dict, start: dict, work: np.ndarray) -> dict:
@@ -78,10 +90,26 @@ def energy_ledger(current: dict, start: dict, work: np.ndarray) -> dict:
     }
 
 
+#: Energy-ledger entries that, added to the total energy, give back the starting total energy.
+LEDGER_ENTRIES = ("dissipated_sliding", "dissipated_rolling", "dissipated_hysteresis", "integration_error")
+
+
+def energy_scale(start: dict) -> float:
+    """|U| + KE at the start: the yardstick of energy errors [erg]."""
+    return abs(start["potential"]) + abs(start["total_energy"] - start["potential"])
+
+
+def ledger_closure(observables: dict, start_energy: float, scale: float):
+    """(total energy + every ledger entry - starting total energy) / scale: zero to round-off
+    when every erg is accounted for.  Works on one frame or on time series."""
+    total = observables["total_energy"] + sum(observables[name] for name in LEDGER_ENTRIES)
+    return (total - start_energy) / scale
+
+
 def stress_shares(max_overlap: np.ndarray, size_class: np.ndarray, classes: int) -> np.ndarray:
     """100 N_c,top / N_c for each size class c, the top being the 1 % most stressed particles.
 
-    A particle's stress is its largest overlap (physics.md); the top holds
+    A particle's stress is its largest overlap (docs/model.md); the top holds
     ceil(1 % of N) particles, ties broken by index so the result is deterministic.
     A value of 1 everywhere means stress is shared evenly.  Classes with no
     particles give NaN.

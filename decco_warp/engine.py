@@ -23,6 +23,16 @@ from .state import State
 PRECISIONS = force_kernels.PRECISIONS
 FORCE_KERNELS = ("tiled", "reference")
 
+#: Per-particle outputs of kernels/observables.py, in the kernel's order.
+PAIR_OBSERVABLES = {
+    "potential": wp.float64,
+    "elastic": wp.float64,
+    "contacts": wp.int32,
+    "max_overlap": wp.float64,
+    "overlap_depth": wp.float64,
+    "overlap_partner": wp.int32,
+}
+
 
 @dataclass(frozen=True)
 class Layout:
@@ -195,7 +205,7 @@ class Engine:
         )
 
     def step(self) -> None:
-        """One kick-drift-kick step (physics.md): forces at x(n+1) with the half-step velocities."""
+        """One kick-drift-kick step (docs/model.md): forces at x(n+1) with the half-step velocities."""
         self.kick_drift()
         self.eval_forces()
         self.kick()
@@ -203,24 +213,17 @@ class Engine:
     # -- host side ----------------------------------------------------------------
 
     def pair_observables(self) -> dict[str, np.ndarray]:
-        """Per particle: half its pair potential and elastic energy, its contacts and largest overlap."""
-        potential = wp.zeros(self.count, dtype=wp.float64, device=self.device)
-        elastic = wp.zeros(self.count, dtype=wp.float64, device=self.device)
-        contacts = wp.zeros(self.count, dtype=wp.int32, device=self.device)
-        max_overlap = wp.zeros(self.count, dtype=wp.float64, device=self.device)
+        """Per particle: half its pair potential and elastic energy, its contacts, its largest
+        overlap [cm], and its deepest contact as a fraction of the pair's smaller radius with that partner."""
+        outputs = {name: wp.zeros(self.count, dtype=dtype, device=self.device) for name, dtype in PAIR_OBSERVABLES.items()}
         wp.launch(
             observables.pair_observables,
             dim=self.count,
             inputs=[self.model, self.count, self.radius, self.mass, self.position, self.velocity],
-            outputs=[potential, elastic, contacts, max_overlap],
+            outputs=list(outputs.values()),
             device=self.device,
         )
-        return {
-            "potential": potential.numpy(),
-            "elastic": elastic.numpy(),
-            "contacts": contacts.numpy(),
-            "max_overlap": max_overlap.numpy(),
-        }
+        return {name: array.numpy() for name, array in outputs.items()}
 
     def read(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Positions, velocities and angular velocities copied to the host."""

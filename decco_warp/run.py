@@ -23,9 +23,10 @@ import numpy as np
 
 from . import spec as specs
 from .collision import setup_collision
-from .diagnostics import energy_ledger, stress_shares
+from .diagnostics import energy_ledger, energy_scale, ledger_closure, stress_shares
 from .io import FileFormatError, Trajectory, load_pile, pause_point, read_checkpoint, read_frame, write_checkpoint
 from .simulation import Simulation
+from .stability import CompressionForecast, StabilityReport, check_stability, predict_compression
 from .state import State
 
 SPEC_FILE = "spec.toml"
@@ -48,6 +49,10 @@ class RunProgress:
     time: float
     first_step: int
     elapsed: float
+    deepest_overlap: float = 0.0
+    """The deepest contact so far, as a fraction of the smaller radius of its pair."""
+    warning: str | None = None
+    """A warning raised at this step (shown once), else None."""
 
 
 @dataclass
@@ -141,6 +146,8 @@ def record(sim: Simulation, size_classes: int) -> tuple[dict, dict]:
         "angular_momentum": d["angular_momentum"],
         "number_of_contacts": np.int64(d["number_of_contacts"]),
         "max_overlap": d["max_overlap"],
+        "deepest_overlap": d["deepest_overlap"],
+        "deepest_overlap_pair": d["deepest_overlap_pair"],
         "stress_share": stress_shares(pairs["max_overlap"], state.size_class, size_classes),
     }
     return particles, observables
@@ -191,8 +198,46 @@ class PreparedRun:
     run_dir: Path
     extra: dict
     resume: bool
-    state: State | None = None
-    pile_info: dict | None = None
+    plan: Plan | None = None
+    """A new run's set-up (None when resuming)."""
+
+
+@dataclass
+class Plan:
+    """A new run's collision set up and checked, nothing compiled or written: what ``--check`` shows."""
+
+    spec: dict
+    """The resolved spec with every "auto" value chosen."""
+    state: State
+    pile_info: dict
+    stability: StabilityReport
+    forecast: CompressionForecast
+    notes: list[str]
+    """One line per value chosen from the set-up (k_in = "auto", ...)."""
+
+    def lines(self) -> list[str]:
+        """What run.log and ``--check`` say about the set-up before any step."""
+        meta = self.state.metadata
+        params = self.spec["params"]
+        return [
+            f"collision: {self.state.n} particles ({int((self.state.pile_id == 0).sum())} target + "
+            f"{int((self.state.pile_id == 1).sum())} projectile), eta {meta['eta']:.6g}, speed {meta['speed']:.6g} cm/s, "
+            f"theta {meta['theta_deg']:g} deg, b {meta['impact_parameter']:.6g} cm",
+            *self.notes,
+            f"parameters: k_in {params['k_in']:.6g} dyne/cm, dt {params['dt']:.6g} s, {self.spec['run']['steps']} steps "
+            f"({self.spec['run']['steps'] * params['dt']:.6g} s)",
+            f"stability: {self.stability.summary()}",
+            f"compression: {self.forecast.summary()}",
+        ]
+
+
+def plan_start(spec: dict, device: str | None = None) -> Plan:
+    """Set up a resolved ``spec``'s collision and check it (eqs. 12, 15, 17), compiling and writing nothing."""
+    device = _device(spec, device)
+    state, pile_info = prepare_collision(spec, device)
+    spec, notes = specs.settle_auto(spec, state)
+    params = specs.params_of(spec)
+    return Plan(spec, state, pile_info, check_stability(state, params), predict_compression(state, params.k_in), notes)
 
 
 def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None) -> PreparedRun:
@@ -201,18 +246,18 @@ def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None
     if run_dir.exists() and (not run_dir.is_dir() or any(run_dir.iterdir())) and not overwrite:
         raise RunError(f"run folder {run_dir} already exists; use --overwrite to replace it or resume to continue it")
     check_writable(run_dir)
-    device = _device(spec, device)
-    state, pile_info = prepare_collision(spec, device)
+    plan = plan_start(spec, device)
+    spec = plan.spec
     sim = Simulation(
-        state,
+        plan.state,
         specs.params_of(spec),
-        device=device,
+        device=_device(spec, device),
         precision=spec["run"]["precision"],
         allow_unstable=spec["run"]["allow_unstable"],
         ledger=True,
     )
-    extra = {"size_classes": int(state.size_class.max()) + 1, "wall_seconds": 0.0}
-    return PreparedRun(sim, spec, run_dir, extra, resume=False, state=state, pile_info=pile_info)
+    extra = {"size_classes": int(plan.state.size_class.max()) + 1, "wall_seconds": 0.0}
+    return PreparedRun(sim, spec, run_dir, extra, resume=False, plan=plan)
 
 
 def prepare_resume(run_dir, steps: int | None = None, device: str | None = None) -> PreparedRun:
@@ -273,13 +318,24 @@ def execute(
     (run_dir / SPEC_FILE).write_text(spec_text)
     extra["spec_toml"] = spec_text
     log = RunLog(run_dir / LOG_FILE)
-    state = run.state
+    plan = run.plan
+    state = plan.state
     log(f"start: {state.n} particles on {sim.device}, precision {spec['run']['precision']}, {spec['run']['steps']} steps")
-    log(f"stability: {sim.stability.summary()}")
-    meta = state.metadata
-    log(f"collision: eta {meta['eta']:.6g}, speed {meta['speed']:.6g} cm/s, b {meta['impact_parameter']:.6g} cm")
+    for line in plan.lines():
+        log(line)
     particles, observables = record(sim, extra["size_classes"])
-    parameters = {"spec": spec, "collision": meta, "piles": run.pile_info, "size_classes": extra["size_classes"]}
+    parameters = {
+        "spec": spec,
+        "collision": state.metadata,
+        "piles": plan.pile_info,
+        "size_classes": extra["size_classes"],
+        "stability": {
+            "stiffness_margin": plan.stability.stiffness_margin,
+            "time_step_margin": plan.stability.time_step_margin,
+            "impact_speed": plan.forecast.impact_speed,
+            "predicted_overlap": plan.forecast.fraction,
+        },
+    }
     trajectory = Trajectory.create(run_dir / TRAJECTORY_FILE, state, observables, parameters)
     trajectory.append(sim.step_count, sim.time, particles, observables)
     for _, observe in observers:
@@ -312,10 +368,10 @@ def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, pro
     started = _time.perf_counter()
     # Progress is reported about 200 times per run, never between graph blocks.
     report_every = max(50, total // 200)
-    radii = sim.state.radii
     start_energy = sim.energy_start["total_energy"]
-    # Dissipation only lowers the total energy; this much gain means the integration broke down.
-    energy_scale = abs(sim.energy_start["potential"]) + abs(start_energy - sim.energy_start["potential"])
+    # Dissipation only lowers the total energy; a gain of a fraction of this means the integration broke down.
+    scale = energy_scale(sim.energy_start)
+    overlaps = OverlapWatch(extra, spec["run"].get("max_overlap"), log)
     stop = _StopRequests()
 
     def checkpoint(step: int) -> None:
@@ -333,14 +389,18 @@ def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, pro
                 step = sim.step_count
                 pause_point("step", step)
                 frame = None
+                warning = None
                 if step % output_every == 0 or step == total:
                     frame = particles, observables = record(sim, size_classes)
-                    check_sanity(step, particles, radii)
-                    check_energy(step, observables["total_energy"], start_energy, energy_scale)
+                    check_sanity(step, particles)
+                    check_energy(step, observables["total_energy"], start_energy, scale)
+                    warning = overlaps.see(step, observables)
                     trajectory.append(step, sim.time, particles, observables)
                     log(
                         f"frame: step {step}, t {sim.time:.6g} s, E {observables['total_energy']:.9g} erg, "
-                        f"contacts {int(observables['number_of_contacts'])}"
+                        f"ledger closed to {ledger_closure(observables, start_energy, scale):.2g}, "
+                        f"contacts {int(observables['number_of_contacts'])}, "
+                        f"deepest overlap {float(observables['deepest_overlap']):.3g}"
                     )
                 for every, observe in observers:
                     if step % every == 0 or step == total:
@@ -349,7 +409,8 @@ def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, pro
                 if step % checkpoint_every == 0 or step == total:
                     checkpoint(step)
                 if progress is not None:
-                    progress(RunProgress(step, total, sim.time, first_step, _time.perf_counter() - started))
+                    elapsed = _time.perf_counter() - started
+                    progress(RunProgress(step, total, sim.time, first_step, elapsed, overlaps.deepest, warning))
                 if stop.signal is not None and step < total:
                     checkpoint(step)
                     log(f"stopped by {stop.signal} at step {step}; decco-warp resume {run_dir} continues")
@@ -371,13 +432,9 @@ def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, pro
             trajectory.close()
         wall = _time.perf_counter() - started
         if sim.step_count >= total:
-            log(f"done: step {sim.step_count}, t {sim.time:.6g} s, {wall:.1f} s wall this session")
+            log(f"done: step {sim.step_count}, t {sim.time:.6g} s, {wall:.1f} s wall this session; {overlaps.summary()}")
         log.close()
     return RunResult(run_dir, sim.step_count, sim.time, wall_before + wall, sim.step_count - first_step)
-
-
-#: A frame stops the run if any particle's largest overlap exceeds this fraction of its radius.
-BLOW_UP_OVERLAP = 0.5
 
 
 class BlowUp(RuntimeError):
@@ -396,8 +453,8 @@ class RunStopped(RuntimeError):
         super().__init__(f"stopped by {signal_name} at step {step}; continue with: decco-warp resume {run_dir}")
 
 
-def check_sanity(step: int, particles: dict, radii: np.ndarray) -> None:
-    """Raise BlowUp naming the step, the particle and the quantity that went wrong."""
+def check_sanity(step: int, particles: dict) -> None:
+    """Raise BlowUp naming the step, the particle and the quantity that is not finite."""
     for name in ("position", "velocity", "omega"):
         bad = np.flatnonzero(~np.isfinite(particles[name]).all(axis=1))
         if bad.size:
@@ -405,13 +462,65 @@ def check_sanity(step: int, particles: dict, radii: np.ndarray) -> None:
                 f"step {step}: particle {bad[0]} has a non-finite {name}; the time step is probably "
                 "too long for k_in (see the eq. 17 margin in run.log)"
             )
-    depth = particles["stress"] / radii
-    worst = int(np.argmax(depth))
-    if depth[worst] > BLOW_UP_OVERLAP:
-        raise BlowUp(
-            f"step {step}: particle {worst} overlaps a neighbour by {depth[worst]:.2f} of its radius "
-            f"(limit {BLOW_UP_OVERLAP}); k_in is probably too soft for the impact speed, or dt too long "
-            "(see the eq. 15 and 17 margins in run.log)"
+
+
+#: Depths (fractions of the smaller radius of a pair) past which a run warns, once each, and why.
+OVERLAP_WARNINGS = {
+    0.5: "deeper than half the smaller radius",
+    1.0: "a centre inside the other sphere, outside the model's validity",
+}
+
+
+class OverlapWatch:
+    """The deepest contact of a run, frame by frame: warned about past each of OVERLAP_WARNINGS
+    (once, in run.log and on the progress line), and a stop past ``[run] max_overlap`` if set.
+
+    Its record lives in the run's checkpoint ``extra``, so that a resumed run neither
+    forgets its deepest contact nor warns twice.
+    """
+
+    def __init__(self, extra: dict, limit: float | None, log: Callable[[str], None]):
+        self.extra, self.limit, self.log = extra, limit, log
+        extra.setdefault("deepest_overlap", 0.0)
+        extra.setdefault("deepest_overlap_step", -1)
+        extra.setdefault("deepest_overlap_pair", np.array([-1, -1], dtype=np.int64))
+        extra.setdefault("overlap_warned", 0.0)
+
+    @property
+    def deepest(self) -> float:
+        return float(self.extra["deepest_overlap"])
+
+    def see(self, step: int, observables: dict) -> str | None:
+        """Note a frame's deepest contact; returns a warning when it first passes a level."""
+        depth = float(observables["deepest_overlap"])
+        i, j = (int(k) for k in observables["deepest_overlap_pair"])
+        if depth > self.deepest:
+            self.extra.update(deepest_overlap=depth, deepest_overlap_step=step, deepest_overlap_pair=np.array([i, j]))
+        if self.limit is not None and depth > self.limit:
+            raise BlowUp(
+                f"step {step}: particles {i} and {j} overlap by {depth:.3g} of the smaller radius, past "
+                f"[run] max_overlap = {self.limit:g}; k_in is too soft for the impact speed (see the predicted "
+                "deepest overlap in run.log, or set k_in = \"auto\")"
+            )
+        warning = None
+        for level, meaning in OVERLAP_WARNINGS.items():
+            if depth > level > float(self.extra["overlap_warned"]):
+                self.extra["overlap_warned"] = level
+                warning = (
+                    f"warning: step {step}: particles {i} and {j} overlap by {depth:.3g} of the smaller radius "
+                    f"({meaning}); the run goes on"
+                )
+        if warning:
+            self.log(warning)
+        return warning
+
+    def summary(self) -> str:
+        if self.extra["deepest_overlap_step"] < 0:
+            return "no contacts seen at the frames"
+        i, j = (int(k) for k in self.extra["deepest_overlap_pair"])
+        return (
+            f"deepest overlap {self.deepest:.3g} of the smaller radius at step {int(self.extra['deepest_overlap_step'])} "
+            f"(particles {i} and {j})"
         )
 
 

@@ -2,15 +2,18 @@
 
 A specification has four tables, every key optional (defaults below):
 
-    [run]        name, steps | duration, output_every, checkpoint_every, device, precision, out, allow_unstable
+    [run]        name, steps | duration, output_every, checkpoint_every, device, precision, out,
+                 allow_unstable, max_overlap
     [piles]      target, projectile          (pile files, or builtin:target / builtin:projectile)
     [collision]  eta | speed, theta_deg, gap, target_spin, target_spin_axis, projectile_spin, projectile_spin_axis
-    [params]     k_in, restitution, mu_k, mu_r, dt, G, rolling_friction
+    [params]     k_in, restitution, mu_k, mu_r, dt, G, rolling_friction, max_compression
 
 Every problem is a :class:`SpecError` naming the table, the key and what is allowed.
 The resolved form has every default filled in, ``steps`` rather than
 ``duration`` and exactly one of ``eta`` / ``speed``, so that a run folder's
-``spec.toml`` repeats the run exactly.
+``spec.toml`` repeats the run exactly.  ``k_in = "auto"`` (and ``dt = "auto"``,
+which it implies unless dt is given) depend on the collision: they stay "auto",
+with ``duration`` kept, until :func:`settle_auto` fills them in from the set-up.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from typing import Any, Callable
 from .collision import SPIN_AXES
 from .engine import PRECISIONS
 from .params import ROLLING_FRICTION_FORMS, Params
+from .stability import DEFAULT_MAX_COMPRESSION, choose_stiffness, choose_time_step
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -42,6 +46,8 @@ class Key:
     default: Any
     check: Callable[[Any], bool]
     allowed: str
+    auto: bool = False
+    """Whether the string "auto" is accepted (chosen from the set-up at run time)."""
 
 
 def _positive(v):
@@ -72,6 +78,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "precision": Key(str, "mixed", lambda v: v in PRECISIONS, " or ".join(PRECISIONS)),
         "out": Key(str, "runs/out", lambda v: bool(v.strip()), "a folder path"),
         "allow_unstable": Key(bool, False, _any, "true or false"),
+        "max_overlap": Key(
+            float, None, _positive, "> 0 (fraction of the smaller radius of a pair; a deeper contact stops the run)"
+        ),
     },
     "piles": {
         "target": Key(str, "builtin:target", lambda v: bool(v.strip()), "a pile file or builtin:target"),
@@ -88,13 +97,16 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "projectile_spin_axis": Key(str, "+z", lambda v: v in SPIN_AXES, ", ".join(SPIN_AXES)),
     },
     "params": {
-        "k_in": Key(float, _PARAMS_DEFAULT.k_in, _positive, "> 0 (dyne/cm)"),
+        "k_in": Key(float, _PARAMS_DEFAULT.k_in, _positive, "> 0 (dyne/cm) or \"auto\"", auto=True),
         "restitution": Key(float, _PARAMS_DEFAULT.restitution, lambda v: 0 < v <= 1, "in (0, 1]"),
         "mu_k": Key(float, _PARAMS_DEFAULT.mu_k, _non_negative, ">= 0"),
         "mu_r": Key(float, _PARAMS_DEFAULT.mu_r, _non_negative, ">= 0"),
-        "dt": Key(float, _PARAMS_DEFAULT.dt, _positive, "> 0 (s)"),
+        "dt": Key(float, _PARAMS_DEFAULT.dt, _positive, "> 0 (s) or \"auto\"", auto=True),
         "G": Key(float, _PARAMS_DEFAULT.G, _non_negative, ">= 0 (cm^3 g^-1 s^-2)"),
         "rolling_friction": Key(str, "couple", lambda v: v in ROLLING_FRICTION_FORMS, " or ".join(ROLLING_FRICTION_FORMS)),
+        "max_compression": Key(
+            float, DEFAULT_MAX_COMPRESSION, lambda v: 0 < v <= 1, "in (0, 1] (deepest overlap for k_in = \"auto\", fraction of the smallest radius)"
+        ),
     },
 }
 
@@ -145,21 +157,62 @@ def resolve_spec(raw: dict | None = None, overrides: dict | None = None) -> dict
             elif rule.default is not None:
                 spec[table][key] = rule.default
 
-    run, collision = spec["run"], spec["collision"]
+    run, collision, params = spec["run"], spec["collision"], spec["params"]
+    if params["k_in"] == AUTO and "dt" not in merged.get("params", {}):
+        params["dt"] = AUTO  # a spring chosen from the set-up needs its own time step
     if "steps" in run and "duration" in run:
         raise SpecError("[run] give steps or duration, not both")
-    if "duration" in run:
-        run["steps"] = max(1, math.ceil(run.pop("duration") / spec["params"]["dt"] - 1e-9))
-    run.setdefault("steps", 50_000)
+    if "duration" in run and params["dt"] != AUTO:
+        run["steps"] = steps_of(run.pop("duration"), params["dt"])
+    if "duration" not in run:
+        run.setdefault("steps", 50_000)
     if "eta" in collision and "speed" in collision:
         raise SpecError("[collision] give eta or speed, not both")
     if "eta" not in collision and "speed" not in collision:
         collision["eta"] = DEFAULT_ETA
     try:
-        Params(**spec["params"])
+        Params(**{key: value for key, value in params_values(spec).items() if value != AUTO})
     except ValueError as error:
         raise SpecError(f"[params] {error}") from None
     return spec
+
+
+#: The value of a key chosen from the collision set-up at run time.
+AUTO = "auto"
+
+
+def steps_of(duration: float, dt: float) -> int:
+    return max(1, math.ceil(duration / dt - 1e-9))
+
+
+def is_settled(spec: dict) -> bool:
+    """True when no value waits for the set-up (no "auto", steps known)."""
+    return AUTO not in (spec["params"]["k_in"], spec["params"]["dt"]) and "steps" in spec["run"]
+
+
+def settle_auto(spec: dict, state) -> tuple[dict, list[str]]:
+    """A copy of ``spec`` with "auto" k_in and dt chosen for the collision ``state`` (paper eqs. 12
+    and 17, docs/model.md) and a duration turned into steps; plus one line per choice made."""
+    spec = {table: dict(values) for table, values in spec.items()}
+    params, run = spec["params"], spec["run"]
+    notes = []
+    if params["k_in"] == AUTO:
+        try:
+            params["k_in"] = choose_stiffness(state, params["max_compression"])
+        except ValueError as error:
+            raise SpecError(f'[params] k_in = "auto": {error}') from None
+        notes.append(
+            f'k_in = "auto": {params["k_in"]:.3g} dyne/cm, the softest spring whose predicted deepest overlap '
+            f"is {params['max_compression']:g} of the smallest radius"
+        )
+    if params["dt"] == AUTO:
+        params["dt"] = choose_time_step(state, params["k_in"])
+        notes.append(f'dt = "auto": {params["dt"]:.3g} s, eq. 17 with the required margin for k_in = {params["k_in"]:.3g} dyne/cm')
+    if "duration" in run:
+        duration = run.pop("duration")
+        run["steps"] = steps_of(duration, params["dt"])
+        notes.append(f"duration {duration:g} s: {run['steps']} steps of {params['dt']:.3g} s")
+    return spec, notes
 
 
 def _shown(name) -> str:
@@ -170,6 +223,8 @@ def _shown(name) -> str:
 
 def _checked(table: str, key: str, value, rule: Key):
     where = f"[{table}] {key} = {value!r}"
+    if rule.auto and value == AUTO:
+        return value
     if rule.kind is bool:
         ok = isinstance(value, bool)
     elif rule.kind is int:
@@ -188,8 +243,16 @@ def _checked(table: str, key: str, value, rule: Key):
     return value
 
 
+def params_values(spec: dict) -> dict:
+    """The [params] entries that are Params fields (max_compression only steers k_in = "auto")."""
+    return {key: value for key, value in spec["params"].items() if key != "max_compression"}
+
+
 def params_of(spec: dict) -> Params:
-    return Params(**spec["params"])
+    values = params_values(spec)
+    if AUTO in values.values():
+        raise SpecError("[params] k_in and dt must be settled from the collision set-up first (settle_auto)")
+    return Params(**values)
 
 
 def spin_of(spec: dict, which: str):

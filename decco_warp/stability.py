@@ -1,18 +1,24 @@
-"""Stability of a set-up: paper sect. 2.5, eqs. 15 and 17.
+"""Stability of a set-up: paper sect. 2.5, eqs. 12-17 (docs/model.md, "Stability").
 
 Eq. 15 asks the spring to be stiff enough that the fastest particle cannot
 penetrate deeply: k >> (4 pi / 3) rho r_max v_max^2.  Eq. 17 asks the step to
 resolve the stiffest oscillation: dt << sqrt(m_min / k).
 
-Eq. 15 is printed (and copied in physics.md) with r_max^2, which has units of a
-force (dyne), not of a spring constant (dyne/cm).  It comes from eq. 14, which
-reduces to (4 pi / 3) rho r v^2 = m v^2 / r^2 for the lighter sphere of a pair;
-that is the dimensionally consistent form used here, taken over the particles as
+Eq. 15 is printed with r_max^2, which has units of a force (dyne), not of a
+spring constant (dyne/cm).  It comes from eq. 14, which reduces to
+(4 pi / 3) rho r v^2 = m v^2 / r^2 for the lighter sphere of a pair; that is the
+dimensionally consistent form used here, taken over the particles as
 max(m / R^2) v_max^2.  (With r_max^2 the paper's own k_in = 1e18 would fail
 its 1 km/s collisions by six orders of magnitude; with r_max it passes with a
 margin of about 4, as the paper says it does.)
 
 A margin is bound / need: how many times over the inequality holds.
+
+Eq. 12 assumes the lighter sphere of a pair moves.  In a collision of piles the
+deepest contacts come from a heavy sphere driven into a light one that its own
+pile holds in place; :func:`predict_compression` takes eq. 12 with i the
+heaviest sphere and j the lightest in that limit, and :func:`choose_stiffness`
+inverts it for ``k_in = "auto"``.
 """
 
 from __future__ import annotations
@@ -112,3 +118,105 @@ def check_stability(state: State, params: Params) -> StabilityReport:
         k_in=params.k_in,
         dt=params.dt,
     )
+
+
+# --- the deepest compression of a collision (eq. 12 with i the heavier sphere) ---------
+
+#: Default of ``[params] max_compression``: the deepest overlap ``k_in = "auto"`` allows,
+#: as a fraction of the smallest radius.
+DEFAULT_MAX_COMPRESSION = 0.1
+
+
+@dataclass(frozen=True)
+class CompressionForecast:
+    """The deepest overlap a set-up should reach, from its impact speed (paper eq. 12).
+
+    The heaviest sphere, arriving at the impact speed, drives into the lightest one,
+    which its pile holds in place: eq. 12 with i the heavier sphere and m_j -> infinity,
+    so that its whole kinetic energy 1/2 m_H v^2 goes into the contact spring,
+    (k_in / 4) delta^2 (two springs in series).  Hence delta = v sqrt(2 m_H / k_in).
+    It is an upper estimate: collisions of the shipped piles reach 0.25 to 0.4 of it
+    (docs/model.md); a free light sphere (eq. 12 as printed, in the pair's frame)
+    would give v sqrt(2 mu / k_in), about 5 times less at the paper's sizes.
+    """
+
+    impact_speed: float
+    """Largest approach speed of a particle of one pile to one of the other [cm/s]."""
+    heavy_mass: float
+    """Mass of the heaviest sphere [g]."""
+    light_mass: float
+    """Mass of the lightest sphere [g]."""
+    light_radius: float
+    """Radius of the lightest sphere [cm]."""
+    k_in: float
+    overlap: float
+    """Predicted deepest overlap delta [cm]."""
+
+    @property
+    def fraction(self) -> float:
+        """The predicted deepest overlap as a fraction of the lightest sphere's radius."""
+        return self.overlap / self.light_radius
+
+    def summary(self) -> str:
+        return (
+            f"predicted deepest overlap {self.fraction:.3g} of the smallest radius ({self.overlap:.3g} cm: "
+            f"a {self.heavy_mass:.3g} g sphere at the impact speed {self.impact_speed:.4g} cm/s into a "
+            f"{self.light_mass:.3g} g one held by its pile, eq. 12)"
+        )
+
+
+def impact_speed(state: State) -> float:
+    """The largest speed at which a particle of one pile can approach one of the other [cm/s].
+
+    With two piles (``pile_id`` 0 and 1): max |v_p - V_t| over the projectile's particles
+    plus max |v_t - V_t| over the target's (V_t the target's bulk velocity), which bounds
+    every cross-pile approach speed, spins included.  With one pile: twice the fastest
+    particle's speed in its centre-of-mass frame.
+    """
+    masses, velocities = state.masses, state.velocities
+    pile_id = state.pile_id if state.pile_id is not None else np.zeros(state.n, dtype=np.int32)
+    target = pile_id == 0
+    if target.all() or not target.any():
+        bulk = (masses[:, None] * velocities).sum(axis=0) / masses.sum()
+        return 2.0 * float(np.linalg.norm(velocities - bulk, axis=1).max())
+    bulk_t = (masses[target, None] * velocities[target]).sum(axis=0) / masses[target].sum()
+    relative = np.linalg.norm(velocities - bulk_t, axis=1)
+    return float(relative[~target].max() + relative[target].max())
+
+
+def predict_compression(state: State, k_in: float) -> CompressionForecast:
+    """The deepest overlap ``state``'s collision should reach with spring constant ``k_in``."""
+    heavy, light = int(np.argmax(state.masses)), int(np.argmin(state.masses))
+    speed = impact_speed(state)
+    return CompressionForecast(
+        impact_speed=speed,
+        heavy_mass=float(state.masses[heavy]),
+        light_mass=float(state.masses[light]),
+        light_radius=float(state.radii[light]),
+        k_in=float(k_in),
+        overlap=speed * math.sqrt(2.0 * float(state.masses[heavy]) / k_in),
+    )
+
+
+def choose_stiffness(state: State, max_compression: float = DEFAULT_MAX_COMPRESSION) -> float:
+    """k_in for ``k_in = "auto"``: the softest spring whose predicted deepest overlap (eq. 12,
+    :func:`predict_compression`) stays within ``max_compression`` of the smallest radius,
+    rounded up to three significant digits [dyne/cm]."""
+    if not 0 < max_compression <= 1:
+        raise ValueError(f"max_compression must be in (0, 1] (fraction of the smallest radius); got {max_compression!r}")
+    probe = predict_compression(state, 1.0)  # the overlap scales as 1/sqrt(k_in)
+    if not probe.overlap > 0:
+        raise ValueError("the particles do not move (impact speed 0), so no spring constant follows from eq. 12")
+    return _round_sig((probe.overlap / (max_compression * probe.light_radius)) ** 2, up=True)
+
+
+def choose_time_step(state: State, k_in: float) -> float:
+    """dt for ``dt = "auto"``: eq. 17 with the required margin, sqrt(m_min / k_in) / 10,
+    rounded down to three significant digits [s]."""
+    return _round_sig(math.sqrt(float(state.masses.min()) / k_in) / MIN_TIME_STEP_MARGIN, up=False)
+
+
+def _round_sig(value: float, up: bool, digits: int = 3) -> float:
+    scale = 10.0 ** (math.floor(math.log10(value)) - digits + 1)
+    rounded = (math.ceil if up else math.floor)(value / scale * (1 - 1e-12 if up else 1 + 1e-12)) * scale
+    return float(f"{rounded:.{digits}g}")

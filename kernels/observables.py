@@ -26,9 +26,13 @@ def pair_observables(
     elastic_out: wp.array(dtype=wp.float64),
     contacts_out: wp.array(dtype=wp.int32),
     max_overlap_out: wp.array(dtype=wp.float64),
+    overlap_depth_out: wp.array(dtype=wp.float64),
+    overlap_partner_out: wp.array(dtype=wp.int32),
 ):
     """Half of i's pair energies (so that summing over particles counts each pair once),
-    its number of contacts and its largest overlap (its "stress", physics.md)."""
+    its number of contacts, its largest overlap (its "stress", docs/model.md), and its
+    deepest contact as a fraction of the smaller radius of the pair, with that partner
+    (-1 without contacts)."""
     i = wp.tid()
     position_i = position_in[i]
     velocity_i = velocity_in[i]
@@ -38,6 +42,8 @@ def pair_observables(
     elastic = wp.float64(0.0)
     contacts = int(0)
     max_overlap = wp.float64(0.0)
+    depth = wp.float64(0.0)
+    partner = int(-1)
     for j in range(count):
         r_ij = position_i - position_in[j]
         d2 = wp.dot(r_ij, r_ij)
@@ -51,7 +57,14 @@ def pair_observables(
                 elastic += wp.float64(0.5) * wp.float64(0.5) * normal_force_magnitude(delta, k) * delta
                 contacts += 1
                 max_overlap = wp.max(max_overlap, delta)
+                # Depth relative to the smaller sphere: past 1 a centre lies inside the other sphere.
+                fraction = delta / wp.min(radius_i, radius_in[j])
+                if fraction > depth:
+                    depth = fraction
+                    partner = j
     potential_out[i] = potential
     elastic_out[i] = elastic
     contacts_out[i] = wp.int32(contacts)
     max_overlap_out[i] = max_overlap
+    overlap_depth_out[i] = depth
+    overlap_partner_out[i] = wp.int32(partner)

@@ -94,7 +94,9 @@ def test_analyze_writes_analysis_and_figures_that_show_its_data(sweep):
 def test_analyze_of_a_set_of_runs_makes_the_cross_run_table_and_figures(sweep):
     out, _ = sweep
     rows = (out / "summary.csv").read_text().splitlines()
-    assert rows[0].startswith("run,eta,theta_deg,mass_ratio") and len(rows) == 3
+    columns = rows[0].split(",")
+    assert columns[0] == "run" and len(rows) == 3
+    assert {"n_particles", "eta", "speed", "theta_deg", "mass_ratio", "largest_mass_ratio", "deepest_overlap", "ledger_closure"} <= set(columns)
     for name in ("largest_fragment", "particle_size_change"):
         assert (out / "figures" / f"{name}.png").stat().st_size > 1000
     summaries = json.loads((out / "summaries.json").read_text())

@@ -66,6 +66,7 @@ def test_trajectory_follows_h5md_and_round_trips(finished):
             "kinetic_translational", "kinetic_rotational", "potential", "elastic", "total_energy",
             "dissipated_sliding", "dissipated_rolling", "dissipated_hysteresis", "integration_error",
             "momentum", "angular_momentum", "number_of_contacts", "max_overlap", "stress_share",
+            "deepest_overlap", "deepest_overlap_pair",
         }
         assert set(f["observables"]) == expected
         assert f["observables/stress_share/value"].shape == (7, 3)

@@ -12,9 +12,11 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from ..diagnostics import energy_scale, ledger_closure
 from ..io import read_trajectory
 from ..state import State
 from .clusters import find_clusters
+from .scaling import largest_mass_ratio as ls12_largest_mass_ratio
 
 ENERGY_SERIES = (
     "kinetic_translational",
@@ -102,6 +104,9 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None) -
     final = result
 
     obs = data["observables"]
+    # Trajectories written before decco-warp 0.2 have no deepest_overlap series.
+    depth = obs.get("deepest_overlap", np.full(len(data["time"]), np.nan))
+    deepest_frame = int(np.nanargmax(depth)) if np.isfinite(depth).any() else 0
     first = snapshot_state(data, 0)
     p_scale = float(np.linalg.norm(first.masses[:, None] * first.velocities, axis=1).sum())
     orbital = first.masses[:, None] * np.cross(first.positions, first.velocities)
@@ -120,7 +125,12 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None) -
             "angular_momentum_drift": np.linalg.norm(obs["angular_momentum"] - obs["angular_momentum"][0], axis=1) / l_scale,
         },
         "stress_share": {"time": data["time"], "value": obs["stress_share"]},
-        "energy": {"time": data["time"], **{name: obs[name] for name in ENERGY_SERIES}},
+        "energy": {
+            "time": data["time"],
+            **{name: obs[name] for name in ENERGY_SERIES},
+            "ledger_closure": ledger_closure(obs, obs["total_energy"][0], energy_scale(_start_energies(obs))),
+        },
+        "overlap": {"time": data["time"], "deepest": depth},
         "final": {
             "step": int(data["step"][-1]),
             "time": float(data["time"][-1]),
@@ -138,25 +148,49 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None) -
         },
     }
     collision = data["parameters"].get("collision", {})
+    params = spec.get("params", {})
     summary = {
         "run": run_dir.name,
+        "n_particles": int(static["radius"].shape[0]),
         "eta": collision.get("eta"),
+        "speed": collision.get("speed"),
         "theta_deg": collision.get("theta_deg"),
         "mass_ratio": (collision.get("projectile_mass", np.nan) / collision.get("target_mass", np.nan)) if collision else None,
         "target_mass": target_mass,
+        "k_in": params.get("k_in"),
+        "dt": params.get("dt"),
+        "steps": int(data["step"][-1]),
         "final_time": float(data["time"][-1]),
         "largest_mass_ratio": float(ratio[-1]),
+        "ls12_largest_mass_ratio": _ls12(collision, G),
         "particle_size_change": float(size_change[-1]),
         "clusters": int(n_clusters[-1]),
+        "deepest_overlap": float(depth[deepest_frame]),
+        "deepest_overlap_time": float(data["time"][deepest_frame]),
+        "predicted_overlap": data["parameters"].get("stability", {}).get("predicted_overlap"),
         "momentum_drift": float(analysis["conservation"]["momentum_drift"].max()),
         "angular_momentum_drift": float(analysis["conservation"]["angular_momentum_drift"].max()),
+        "ledger_closure": float(np.abs(analysis["energy"]["ledger_closure"]).max()),
         "min_members": int(min_members),
+        "analyse_every": int(every),
     }
     summary = {k: (float(v) if isinstance(v, np.floating) else v) for k, v in summary.items()}
     analysis["summary"] = summary
     write_analysis(run_dir / "analysis.h5", analysis)
     (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return analysis
+
+
+def _ls12(collision: dict, G) -> float | None:
+    """The Leinhardt & Stewart (2012) m_lf/m_t for the run's set-up (None without its metadata)."""
+    needed = ("target_mass", "projectile_mass", "target_radius", "projectile_radius", "theta_deg", "kinetic_energy")
+    if not all(key in collision for key in needed):
+        return None
+    return float(ls12_largest_mass_ratio(collision, **({} if G is None else {"G": G})))
+
+
+def _start_energies(observables: dict) -> dict:
+    return {name: float(observables[name][0]) for name in ("potential", "total_energy")}
 
 
 def write_analysis(path: Path, analysis: dict) -> None:
