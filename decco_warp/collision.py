@@ -1,4 +1,4 @@
-"""Collision set-up (paper sect. 3.1 and 4.2, physics.md).
+"""Collision set-up (paper sect. 3.1 and 4.2, docs/model.md).
 
 The target (the more massive pile) sits ahead of the projectile along +x; the
 projectile's centre is offset by the impact parameter b = (R_p + R_t) sin(theta)
@@ -28,7 +28,7 @@ SPIN_AXES = {
 
 
 def pile_radius(state: State) -> float:
-    """Largest |x_k - x_cm| + R_k over the pile's particles [cm] (physics.md)."""
+    """Largest |x_k - x_cm| + R_k over the pile's particles [cm] (docs/model.md)."""
     return float((np.linalg.norm(state.positions - state.centre_of_mass, axis=1) + state.radii).max())
 
 

@@ -1,4 +1,4 @@
-"""Material and run constants of the DECCO model (paper Table 1, physics.md)."""
+"""Material and run constants of the DECCO model (paper Table 1, docs/model.md)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass, fields
 #: Gravitational constant [cm^3 g^-1 s^-2] (CODATA 2018).
 G_CGS = 6.67430e-8
 
-#: Rolling-friction forms (physics.md): "couple" opposes relative rolling and is
+#: Rolling-friction forms (docs/model.md): "couple" opposes relative rolling and is
 #: the default; "paper" is the force printed as the paper's eq. 9, for comparison.
 ROLLING_FRICTION_FORMS = ("couple", "paper")
 

@@ -1,4 +1,4 @@
-"""Rubble-pile formation (paper sect. 2.6, physics.md).
+"""Rubble-pile formation (paper sect. 2.6, docs/model.md).
 
 Seed spheres of three sizes (equal total mass per size) uniformly in a sphere
 without overlaps, then let the cloud collapse under its own gravity until its
@@ -22,7 +22,7 @@ from .state import State
 #: The paper's particle radii [cm] (Table 1) and density [g/cm^3].
 PAPER_RADII = (0.75e6, 1.5e6, 2.25e6)
 PAPER_DENSITY = 2.7
-#: Placement attempts per particle before the seeding sphere grows (physics.md).
+#: Placement attempts per particle before the seeding sphere grows (docs/model.md).
 SEED_TRIES = 200
 #: Formation stops once kinetic energy < KE_THRESHOLD |U| (paper: 1e-5).
 KE_THRESHOLD = 1e-5

@@ -1,4 +1,4 @@
-"""Kick-drift-kick velocity Verlet (paper eq. 1, physics.md "Integration").
+"""Kick-drift-kick velocity Verlet (paper eq. 1, docs/model.md "Integration").
 
 One step is ``kick_drift`` (half kick with the forces of the previous evaluation,
 then a full drift), the force evaluation at the new positions with the half-step

@@ -1,4 +1,4 @@
-"""The physics of one pair of spheres, as small Warp functions (physics.md).
+"""The physics of one pair of spheres, as small Warp functions (docs/model.md).
 
 Every function here is pure: it takes the state of spheres i and j and returns
 what i receives from j.  The kernels in :mod:`decco_warp.kernels.forces` only
@@ -6,7 +6,7 @@ gather pairs and sum.  Everything in contact is float64: the overlap of two
 ~1e6 cm spheres is ~1e2 cm, and its velocity-dependent terms (the k_in/k_out
 switch, the slip) need the same resolution.
 
-Sign conventions (physics.md, "Pair geometry"):
+Sign conventions (docs/model.md, "Pair geometry"):
     r_ij = x_i - x_j,  d = |r_ij|,  n = r_ij / d  (unit vector from j to i)
     overlap delta = R_i + R_j - d   (in contact when > 0)
     lever arms to the contact point c = (R_j x_i + R_i x_j) / (R_i + R_j):
@@ -94,7 +94,7 @@ def normal_force_magnitude(delta: wp.float64, k: wp.float64) -> wp.float64:
     return f64(0.5) * k * delta
 
 
-# --- sliding friction (paper eqs. 6-8, signs of physics.md) --------------------
+# --- sliding friction (paper eqs. 6-8, signs of docs/model.md) --------------------
 
 
 @wp.func
@@ -135,7 +135,7 @@ def rolling_couple(
 ) -> wp.vec3d:
     """Torque on i, -mu_r |F_N| R* W/|W| with W the relative rotation without twist.
 
-    A pure couple (physics.md default): it opposes relative rolling and moves no
+    A pure couple (docs/model.md default): it opposes relative rolling and moves no
     momentum or angular momentum between the spheres.
     """
     relative = omega_i - omega_j
@@ -160,7 +160,7 @@ def rolling_force_printed(
     The printed expression is symmetric in i <-> j, so taken literally both spheres
     would get the same force.  The paper says j gets the opposite one; we apply it
     to the lower-index sphere of the pair and its negative to the other, so that
-    momentum is conserved.  Kept for comparison only (physics.md).
+    momentum is conserved.  Kept for comparison only (docs/model.md).
     """
     direction = wp.cross(omega_i - omega_j, r_ij)
     size = wp.length(direction)

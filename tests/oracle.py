@@ -1,6 +1,6 @@
-"""An independent float64 NumPy implementation of physics.md, the yardstick for the kernels.
+"""An independent float64 NumPy implementation of docs/model.md, the yardstick for the kernels.
 
-Written from physics.md directly, one pair at a time, sharing no code with the
+Written from docs/model.md directly, one pair at a time, sharing no code with the
 kernels.  Slow (a Python loop over contacts) but plain.
 """
 
@@ -69,7 +69,7 @@ def pair_loop_forces(x, v, w, radii, masses, k_in, restitution, mu_k, mu_r, G, r
 
 
 def energies(x, v, w, radii, masses, k_in, restitution, G):
-    """Kinetic, rotational, potential and elastic energy in float64 (physics.md conventions)."""
+    """Kinetic, rotational, potential and elastic energy in float64 (docs/model.md conventions)."""
     inertia = 0.4 * masses * radii**2
     kinetic = 0.5 * (masses * (v * v).sum(axis=1)).sum()
     rotational = 0.5 * (inertia * (w * w).sum(axis=1)).sum()

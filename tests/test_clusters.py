@@ -1,4 +1,4 @@
-"""The cluster finder (paper sect. 2.7, physics.md) on snapshots with known answers."""
+"""The cluster finder (paper sect. 2.7, docs/model.md) on snapshots with known answers."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""Collision set-up: eta, impact parameter, gap, spin, centre-of-mass frame (physics.md)."""
+"""Collision set-up: eta, impact parameter, gap, spin, centre-of-mass frame (docs/model.md)."""
 
 import math
 

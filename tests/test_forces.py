@@ -1,4 +1,4 @@
-"""Force and torque kernels against the float64 NumPy oracle of physics.md."""
+"""Force and torque kernels against the float64 NumPy oracle of docs/model.md."""
 
 import numpy as np
 import pytest

@@ -15,7 +15,7 @@ SETTLED_OVERLAP_FRACTION = 0.01
 
 def test_size_class_counts_give_equal_mass_per_class():
     counts = size_class_counts(5000)
-    assert counts.tolist() == [4303, 538, 159]  # physics.md
+    assert counts.tolist() == [4303, 538, 159]  # docs/model.md
     radii = np.array([0.75e6, 1.5e6, 2.25e6])
     mass = counts * radii**3
     assert np.ptp(mass) / mass.mean() < 0.01

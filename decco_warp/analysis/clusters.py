@@ -1,4 +1,4 @@
-"""The cluster finder of paper sect. 2.7, exactly as physics.md states it.
+"""The cluster finder of paper sect. 2.7, exactly as docs/model.md states it.
 
 1. Smooth the mass with a Gaussian of standard deviation 10 R_k around each
    particle k; the seed is the particle where the smoothed density is highest.
