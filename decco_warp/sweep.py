@@ -6,12 +6,16 @@ A sweep specification is a run specification plus a ``[sweep]`` table:
     name = "fig3-reduced"          # the sweep folder under out
     out = "runs/out"
     min_members = 50               # for the analysis of each run
+    analyse_every = 1              # analyse every Nth frame of a run (the last one always)
+    keep_trajectory = true         # false: delete trajectory.h5 once the run is analysed
     [sweep.grid]                   # the cartesian product of these lists
     "collision.eta" = [0.5, 1.0, 2.0]
     "collision.theta_deg" = [0.0, 22.0]
 
-Every combination is checked as a run specification before anything runs.  A
-run already complete is skipped (so an interrupted sweep resumes), a run
+Every combination is checked as a run specification before anything runs.  The
+runs go to Dask workers (one per GPU); each finished run is analysed on this
+machine's cores while the workers go on with the next runs.  A run already
+complete and analysed is skipped (so an interrupted sweep resumes), a run
 stopped part-way is resumed, and a run that fails is recorded with its reason
 without stopping the others.
 """
@@ -20,17 +24,28 @@ from __future__ import annotations
 
 import csv
 import itertools
+import json
+import multiprocessing
 import os
+import platform
 import time
+from concurrent.futures import Future, ProcessPoolExecutor
+from datetime import datetime, timezone
 from pathlib import Path
 
 from . import spec as specs
+from ._version import __version__
 
-SWEEP_KEYS = {"name", "out", "min_members", "grid"}
+SWEEP_KEYS = {"name", "out", "min_members", "analyse_every", "keep_trajectory", "grid"}
 SUMMARY_FIELDS = [
-    "run", "status", "reason", "eta", "speed", "theta_deg", "mass_ratio", "largest_mass_ratio",
-    "particle_size_change", "clusters", "momentum_drift", "angular_momentum_drift", "wall_seconds", "device",
+    "run", "status", "reason", "n_particles", "mass_ratio", "theta_deg", "eta", "speed", "k_in", "dt", "steps",
+    "largest_mass_ratio", "ls12_largest_mass_ratio", "particle_size_change", "clusters", "deepest_overlap", "predicted_overlap",
+    "momentum_drift", "angular_momentum_drift", "ledger_closure", "wall_seconds", "analysis_seconds",
+    "device", "device_name",
 ]  # fmt: skip
+SUMMARY_FILE = "summary.json"
+TRAJECTORY_FILE = "trajectory.h5"
+CHECKPOINT_FILE = "checkpoint.h5"
 
 
 def load_sweep(path) -> tuple[dict, list[dict]]:
@@ -49,9 +64,15 @@ def load_sweep(path) -> tuple[dict, list[dict]]:
         "name": name,
         "out": str(sweep.get("out", "runs/out")),
         "min_members": sweep.get("min_members", 50),
+        "analyse_every": sweep.get("analyse_every", 1),
+        "keep_trajectory": sweep.get("keep_trajectory", True),
     }
-    if isinstance(settings["min_members"], bool) or not isinstance(settings["min_members"], int) or settings["min_members"] < 1:
-        raise specs.SpecError(f"[sweep] min_members = {settings['min_members']!r}: must be an integer >= 1")
+    for key in ("min_members", "analyse_every"):
+        value = settings[key]
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise specs.SpecError(f"[sweep] {key} = {value!r}: must be an integer >= 1")
+    if not isinstance(settings["keep_trajectory"], bool):
+        raise specs.SpecError(f"[sweep] keep_trajectory = {settings['keep_trajectory']!r}: must be true or false")
     grid = sweep.get("grid", {})
     if not isinstance(grid, dict) or not grid:
         raise specs.SpecError("[sweep.grid] must list at least one \"table.key\" = [values]")
@@ -89,35 +110,78 @@ def _slug(value) -> str:
     return "".join(c if c.isalnum() or c in ".-" else "_" for c in text)
 
 
-def run_one(spec: dict, min_members: int) -> dict:
-    """Run (or resume, or skip) one run of a sweep and analyse it; never raises."""
-    from .analysis.runs import analyse_run
-    from .io import read_checkpoint
-    from .run import RUN_FAILURES, prepare_resume, prepare_start, run_dir_of, execute
+# --- one run: simulated on a worker, analysed here ----------------------------------------
 
-    started = time.perf_counter()
+
+def simulate_one(spec: dict) -> dict:
+    """Run (or resume, or skip) one run of a sweep on a Dask worker; never raises.
+
+    Returns a row with ``status`` (ok, skipped (complete) or failed, with ``reason``),
+    the run folder, the device, and the run's own wall time over all its sessions.
+    """
+    from .io import read_checkpoint
+    from .run import RUN_FAILURES, execute, prepare_resume, prepare_start, run_dir_of
+
     run_dir = run_dir_of(spec)
     device = _worker_device()
-    row = {"run": spec["run"]["name"], "device": device or "auto"}
+    row = {"run": spec["run"]["name"], "run_dir": str(run_dir), "device": device or "auto"}
     try:
-        checkpoint = run_dir / "checkpoint.h5"
-        done = checkpoint.is_file() and read_checkpoint(checkpoint)[0]["step"] >= spec["run"]["steps"]
-        if not done:
+        checkpoint = run_dir / CHECKPOINT_FILE
+        if checkpoint.is_file() and _run_complete(run_dir):
+            row["status"] = "skipped (complete)"
+        else:
             prepared = prepare_resume(run_dir, device=device) if checkpoint.is_file() else prepare_start(spec, overwrite=True, device=device)
+            row["device"] = prepared.sim.device
             execute(prepared)
             row["status"] = "ok"
-        else:
-            row["status"] = "skipped (complete)"
-        summary = analyse_run(run_dir, min_members=min_members)
-        row.update({key: summary["summary"].get(key) for key in SUMMARY_FIELDS if key in summary["summary"]})
+        row["wall_seconds"] = round(float(read_checkpoint(checkpoint)[2]["wall_seconds"]), 3)
     except RUN_FAILURES as error:
         row.update(status="failed", reason=" ".join(str(error).split()))
-    row["run"] = spec["run"]["name"]
-    row["wall_seconds"] = round(time.perf_counter() - started, 3)
-    row["eta"] = row.get("eta", spec["collision"].get("eta"))
-    row["speed"] = spec["collision"].get("speed")
-    row["theta_deg"] = spec["collision"]["theta_deg"]
+    row["device_name"] = _device_name(row["device"])
     return row
+
+
+def _run_complete(run_dir: Path) -> bool:
+    """True when the run folder's checkpoint has reached the steps of its own spec.toml."""
+    from .io import read_checkpoint
+
+    spec = specs.resolve_spec(specs.load_spec_file(run_dir / "spec.toml"))
+    return int(read_checkpoint(run_dir / CHECKPOINT_FILE)[0]["step"]) >= spec["run"]["steps"]
+
+
+def _device_name(device: str) -> str:
+    try:
+        import warp as wp
+
+        return str(wp.get_device(device).name) if device != "auto" else ""
+    except Exception:  # the name is a label for the table, never a reason to fail
+        return ""
+
+
+def analyse_one(run_dir: str, min_members: int, analyse_every: int, keep_trajectory: bool) -> dict:
+    """Analyse a finished run (unless its summary.json is current), draw its figures, and
+    drop its trajectory if asked; returns its summary.  Runs in a process of this machine."""
+    from .analysis.figures import draw_run
+    from .analysis.runs import analyse_run
+
+    started = time.perf_counter()
+    run_dir = Path(run_dir)
+    summary_path = run_dir / SUMMARY_FILE
+    trajectory = run_dir / TRAJECTORY_FILE
+    settings = {"min_members": min_members, "analyse_every": analyse_every}
+    previous = json.loads(summary_path.read_text()) if summary_path.is_file() else None
+    current = previous is not None and all(previous.get(k) == v for k, v in settings.items())
+    if trajectory.is_file() and not (current and summary_path.stat().st_mtime >= trajectory.stat().st_mtime):
+        analysis = analyse_run(run_dir, min_members=min_members, every=analyse_every)
+        draw_run(analysis, run_dir)
+        summary = analysis["summary"]
+    elif previous is not None:
+        summary = previous  # analysed before (its trajectory may be gone)
+    else:
+        raise FileNotFoundError(f"{run_dir} has neither a trajectory nor a summary to report")
+    if not keep_trajectory and trajectory.is_file():
+        trajectory.unlink()  # analysis.h5, summary.json, figures/ and the checkpoint stay
+    return {**summary, "analysis_seconds": round(time.perf_counter() - started, 3)}
 
 
 def _worker_device() -> str | None:
@@ -142,8 +206,18 @@ def _worker_device() -> str | None:
     return f"cuda:{index % gpus}" if gpus > 0 else "cpu"
 
 
-def run_sweep(settings: dict, runs: list[dict], scheduler: str | None = None, workers: int | None = None, on_result=None) -> list[dict]:
-    """Execute every run with Dask; returns one summary row per run (in grid order)."""
+# --- the whole grid ------------------------------------------------------------------------
+
+
+def run_sweep(
+    settings: dict,
+    runs: list[dict],
+    scheduler: str | None = None,
+    workers: int | None = None,
+    on_result=None,
+    analysis_workers: int | None = None,
+) -> list[dict]:
+    """Simulate every run with Dask and analyse each here as it finishes; one row per run, in grid order."""
     from distributed import Client, LocalCluster, as_completed
 
     from .device import cuda_device_count
@@ -152,22 +226,49 @@ def run_sweep(settings: dict, runs: list[dict], scheduler: str | None = None, wo
     if scheduler:
         client = Client(scheduler)
         cluster = None
+        simulating = 1
     else:
-        n = workers or (gpus if gpus > 0 else min(2, os.cpu_count() or 1))
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
+        simulating = workers or (gpus if gpus > 0 else min(2, os.cpu_count() or 1))
+        cluster = LocalCluster(n_workers=simulating, threads_per_worker=1, processes=True, dashboard_address=None)
         client = Client(cluster)
+    # Analysis (cluster finding) is CPU work: it runs here, beside the workers, in fresh processes.
+    analysers = analysis_workers or max(1, (os.cpu_count() or 1) - (0 if gpus > 0 else simulating))
+    pool = ProcessPoolExecutor(max_workers=analysers, mp_context=multiprocessing.get_context("spawn"))
+    rows: list[dict | None] = [None] * len(runs)
+    pending: dict[Future, tuple[int, dict]] = {}
+
+    def finish(k: int, row: dict) -> None:
+        rows[k] = row
+        if on_result is not None:
+            on_result(row)
+
+    def collect(block: bool) -> None:
+        for future in [f for f in pending if block or f.done()]:
+            k, row = pending.pop(future)
+            try:
+                summary = future.result()
+                finish(k, {**row, **{key: summary.get(key) for key in SUMMARY_FIELDS if key in summary}, "run": row["run"]})
+            except Exception as error:  # a damaged trajectory, a full disk: this run only
+                finish(k, {**row, "status": "failed", "reason": f"analysis: {' '.join(str(error).split())}"})
+
     try:
-        futures = {client.submit(run_one, spec, settings["min_members"], pure=False): k for k, spec in enumerate(runs)}
-        rows: list[dict | None] = [None] * len(runs)
+        futures = {client.submit(simulate_one, spec, pure=False): k for k, spec in enumerate(runs)}
         for future in as_completed(futures):
             k = futures[future]
             try:
-                rows[k] = future.result()
+                row = future.result()
             except Exception as error:  # a worker that died: record it, go on
-                rows[k] = {"run": runs[k]["run"]["name"], "status": "failed", "reason": f"worker lost: {error}"}
-            if on_result is not None:
-                on_result(rows[k])
+                row = {"run": runs[k]["run"]["name"], "status": "failed", "reason": f"worker lost: {error}"}
+            row.update(eta=runs[k]["collision"].get("eta"), speed=runs[k]["collision"].get("speed"), theta_deg=runs[k]["collision"]["theta_deg"])
+            if row["status"] == "failed":
+                finish(k, row)
+            else:
+                args = (row["run_dir"], settings["min_members"], settings["analyse_every"], settings["keep_trajectory"])
+                pending[pool.submit(analyse_one, *args)] = (k, row)
+            collect(block=False)
+        collect(block=True)
     finally:
+        pool.shutdown(wait=True, cancel_futures=True)
         client.close()
         if cluster is not None:
             cluster.close()
@@ -181,4 +282,28 @@ def write_summary(folder: Path, rows: list[dict]) -> Path:
         writer = csv.DictWriter(f, fieldnames=SUMMARY_FIELDS, extrasaction="ignore")
         writer.writeheader()
         writer.writerows(rows)
+    return path
+
+
+def write_record(folder: Path, settings: dict, rows: list[dict], wall_seconds: float) -> Path:
+    """sweep.json: what ran where, with which versions, and how long it took."""
+    import warp as wp
+
+    devices = sorted({(r.get("device"), r.get("device_name")) for r in rows if r.get("device")})
+    record = {
+        "sweep": settings["name"],
+        "finished": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "wall_seconds": round(wall_seconds, 1),
+        "run_seconds": round(sum(float(r.get("wall_seconds") or 0) for r in rows if r.get("status") == "ok"), 1),
+        "runs": {status: sum(1 for r in rows if r.get("status") == status) for status in sorted({r.get("status") for r in rows})},
+        "devices": [{"device": d, "name": n} for d, n in devices],
+        "host": platform.node(),
+        "cpu_count": os.cpu_count(),
+        "python": platform.python_version(),
+        "decco_warp": __version__,
+        "warp": wp.config.version,
+        "settings": settings,
+    }
+    path = folder / "sweep.json"
+    path.write_text(json.dumps(record, indent=2) + "\n")
     return path

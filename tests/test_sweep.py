@@ -1,10 +1,13 @@
 """Sweeps: a reduced grid on a local Dask cluster of two workers, resumed, with a failing run."""
 
 import csv
+import json
+from pathlib import Path
 
 import pytest
 from helpers import cli
 
+import decco_warp as dw
 from decco_warp import spec as specs
 from decco_warp.sweep import load_sweep
 
@@ -15,6 +18,8 @@ SWEEP = """
 name = "grid"
 out = "{out}"
 min_members = 20
+keep_trajectory = false
+analyse_every = 2
 [sweep.grid]
 "collision.eta" = [0.5, 1.0]
 "params.dt" = [0.04, 5.0]
@@ -59,6 +64,16 @@ def test_sweep_runs_on_two_workers_reports_failures_and_resumes(tmp_path):
     assert {float(r["eta"]) for r in failed} == {0.5, 1.0}
     assert all(float(r["largest_mass_ratio"]) > 0 for r in good)
     assert (tmp_path / "grid" / "figures" / "largest_fragment.png").stat().st_size > 1000
+    # Analysed, then the trajectory dropped: the analysis, the figures and the final checkpoint stay.
+    for row in good:
+        run_dir = tmp_path / "grid" / row["run"]
+        assert not (run_dir / "trajectory.h5").exists()
+        assert {"spec.toml", "run.log", "checkpoint.h5", "analysis.h5", "summary.json", "figures"} <= {p.name for p in run_dir.iterdir()}
+        summary = json.loads((run_dir / "summary.json").read_text())
+        assert summary["analyse_every"] == 2 and summary["largest_mass_ratio"] == pytest.approx(float(row["largest_mass_ratio"]))
+        assert float(row["deepest_overlap"]) > 0 and float(row["ledger_closure"]) < 1e-9 and int(row["n_particles"]) == 450
+    record = json.loads((tmp_path / "grid" / "sweep.json").read_text())
+    assert record["runs"] == {"failed": 2, "ok": 2} and record["decco_warp"] == dw.__version__
     # Again: the finished runs are skipped, the failed ones tried again (and fail the same way).
     again = cli("sweep", str(path), "--workers", "2")
     assert again.returncode == 0, again.stderr
@@ -73,15 +88,19 @@ def test_bad_sweep_files_are_exit_2(tmp_path):
     assert result.returncode == 2 and "non-empty list" in result.stderr
 
 
-@pytest.mark.parametrize("name", ["fig3_validation", "fig3_reduced", "fig8_stress", "fig8_reduced", "fig9_spin", "fig9_reduced"])
+@pytest.mark.parametrize(
+    "name", ["fig3_validation", "fig3_headon", "fig3_reduced", "fig8_stress", "fig8_reduced", "fig9_spin", "fig9_reduced"]
+)
 def test_shipped_paper_sweeps_are_valid(name):
-    from pathlib import Path
-
     settings, runs = load_sweep(Path(__file__).parent.parent / "runs" / "paper" / f"{name}.toml")
     assert runs and len({r["run"]["name"] for r in runs}) == len(runs)
-    expected = {"fig3_validation": 63, "fig8_stress": 3, "fig9_spin": 12}
+    expected = {"fig3_validation": 63, "fig3_headon": 21, "fig8_stress": 3, "fig9_spin": 12}
     if name in expected:
         assert len(runs) == expected[name]
+    for run in runs:  # the paper's piles are shipped
+        for which in ("target", "projectile"):
+            reference = run["piles"][which]
+            assert reference.startswith("builtin:") or (Path(__file__).parent.parent / reference).is_file(), reference
 
 
 def test_piles_from_a_toml_list_are_built_once(tmp_path):

@@ -129,15 +129,28 @@ RUN_FIGURES = {
 }
 
 
+def draw_run(analysis: dict, run_dir: Path) -> list[Path]:
+    """Every figure of RUN_FIGURES for one analysed run, into ``run_dir``/figures."""
+    paths = []
+    for name, plot in RUN_FIGURES.items():
+        paths += save(plot(analysis), Path(run_dir) / "figures", name)
+    return paths
+
+
 def plot_runs(summaries: list[dict], metric: str, ylabel: str):
-    """Cross-run figure (Fig. 3 / Fig. 6 style): ``metric`` vs eta, one panel per mass ratio, a line per angle."""
+    """Cross-run figure (Fig. 3 / Fig. 6 style): ``metric`` vs eta, one panel per mass ratio, a line per angle;
+    for m_lf/m_t, dashed, the Leinhardt & Stewart (2012) universal law at the same set-ups."""
     ratios = sorted({round(s["mass_ratio"], 3) for s in summaries})
     fig, axes = plt.subplots(1, len(ratios), figsize=(4.0 * len(ratios), 3.6), squeeze=False, sharey=True)
     for ax, ratio in zip(axes[0], ratios):
         mine = [s for s in summaries if round(s["mass_ratio"], 3) == ratio]
-        for angle in sorted({s["theta_deg"] for s in mine}):
+        for k, angle in enumerate(sorted({s["theta_deg"] for s in mine})):
             runs = sorted((s for s in mine if s["theta_deg"] == angle), key=lambda s: s["eta"])
-            ax.plot([s["eta"] for s in runs], [s[metric] for s in runs], marker="o", label=f"{angle:g} deg")
+            colour = plt.get_cmap("tab10")(k)
+            ax.plot([s["eta"] for s in runs], [s[metric] for s in runs], marker="o", color=colour, label=f"{angle:g} deg")
+            law = [(s["eta"], s.get(f"ls12_{metric}")) for s in runs]
+            if metric == "largest_mass_ratio" and all(v is not None for _, v in law):
+                ax.plot(*zip(*law), linestyle="--", color=colour, label=f"{angle:g} deg, LS12 law")
         ax.set_title(f"m_p / m_t = {ratio:g}")
         ax.set_xlabel("eta = KE / |U|")
         ax.legend(fontsize=8)
