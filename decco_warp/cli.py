@@ -123,22 +123,28 @@ def _floats(text: str, what: str) -> tuple[float, ...]:
     return values
 
 
+#: Defaults of ``decco-warp pile``, also those of the entries of ``decco-warp piles``.
+PILE_DEFAULTS = {"particles": 5000, "seed": 1, "radii": "0.75e6,1.5e6,2.25e6", "density": 2.7, "ke_threshold": 1e-5,
+                 "fill": 0.3, "max_steps": 5_000_000, "k_in": 1e18, "restitution": 0.9, "mu_k": 0.3, "mu_r": 1e-3,
+                 "dt": 0.04, "precision": "mixed"}  # fmt: skip
+
+
 @app.command()
 def pile(
     out: Path = typer.Option(..., "--out", "-o", help="Pile file to write (HDF5)."),
-    particles: int = typer.Option(5000, "--particles", "-n", help="Number of particles."),
-    seed: int = typer.Option(1, "--seed", help="Random seed: the same seed gives the same pile."),
-    radii: str = typer.Option("0.75e6,1.5e6,2.25e6", "--radii", help="Particle radii of the size classes [cm]."),
-    density: float = typer.Option(2.7, "--density", help="Particle density [g/cm^3]."),
-    ke_threshold: float = typer.Option(1e-5, "--ke-threshold", help="Stop when kinetic energy < this x |U|."),
-    fill: float = typer.Option(0.3, "--fill", help="Volume fraction of the seeding sphere."),
-    max_steps: int = typer.Option(5_000_000, "--max-steps", help="Give up after this many steps."),
-    k_in: float = typer.Option(1e18, "--k-in", help="Spring constant while approaching [dyne/cm]."),
-    restitution: float = typer.Option(0.9, "--restitution", help="Coefficient of restitution."),
-    mu_k: float = typer.Option(0.3, "--mu-k", help="Sliding friction coefficient."),
-    mu_r: float = typer.Option(1e-3, "--mu-r", help="Rolling friction coefficient."),
-    dt: float = typer.Option(0.04, "--dt", help="Time step [s]."),
-    precision: str = typer.Option("mixed", "--precision", help="mixed or float64."),
+    particles: int = typer.Option(PILE_DEFAULTS["particles"], "--particles", "-n", help="Number of particles."),
+    seed: int = typer.Option(PILE_DEFAULTS["seed"], "--seed", help="Random seed: the same seed gives the same pile."),
+    radii: str = typer.Option(PILE_DEFAULTS["radii"], "--radii", help="Particle radii of the size classes [cm]."),
+    density: float = typer.Option(PILE_DEFAULTS["density"], "--density", help="Particle density [g/cm^3]."),
+    ke_threshold: float = typer.Option(PILE_DEFAULTS["ke_threshold"], "--ke-threshold", help="Stop when kinetic energy < this x |U|."),
+    fill: float = typer.Option(PILE_DEFAULTS["fill"], "--fill", help="Volume fraction of the seeding sphere."),
+    max_steps: int = typer.Option(PILE_DEFAULTS["max_steps"], "--max-steps", help="Give up after this many steps."),
+    k_in: float = typer.Option(PILE_DEFAULTS["k_in"], "--k-in", help="Spring constant while approaching [dyne/cm]."),
+    restitution: float = typer.Option(PILE_DEFAULTS["restitution"], "--restitution", help="Coefficient of restitution."),
+    mu_k: float = typer.Option(PILE_DEFAULTS["mu_k"], "--mu-k", help="Sliding friction coefficient."),
+    mu_r: float = typer.Option(PILE_DEFAULTS["mu_r"], "--mu-r", help="Rolling friction coefficient."),
+    dt: float = typer.Option(PILE_DEFAULTS["dt"], "--dt", help="Time step [s]."),
+    precision: str = typer.Option(PILE_DEFAULTS["precision"], "--precision", help="mixed or float64."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing pile file."),
     device: Optional[str] = DeviceOption,
 ) -> None:
@@ -607,6 +613,7 @@ def sweep(
     ),
 ) -> None:
     """Run a grid of collisions with Dask (skipping finished runs), analysing each as it finishes."""
+    import signal
     import time
 
     from .analysis.figures import write_cross_run
@@ -629,6 +636,7 @@ def sweep(
 
         def report(row):
             finished.append(row)
+            write_summary(folder, finished)  # as runs finish, so that a stopped sweep keeps its table
             outcome = row["status"] if row["status"] != "failed" else f"FAILED: {row.get('reason', '')}"
             ratio = row.get("largest_mass_ratio")
             detail = f", m_lf/m_t {ratio:.4g}" if isinstance(ratio, float) else ""
@@ -637,10 +645,22 @@ def sweep(
             bar.console.print(f"{row['run']}: {outcome}{detail} ({row.get('wall_seconds') or 0:.1f} s on {row.get('device')})")
             bar.update(task, completed=len(finished), runs=f"{len(finished)}/{len(runs)} runs")
 
-        rows = run_sweep(settings, runs, scheduler, workers, on_result=report, analysis_workers=analysis_workers)
+        previous = signal.signal(signal.SIGTERM, signal.default_int_handler)  # a batch scheduler's stop, as Ctrl-C
+        try:
+            rows = run_sweep(settings, runs, scheduler, workers, on_result=report, analysis_workers=analysis_workers)
+        except KeyboardInterrupt:
+            rows = None
+        finally:
+            signal.signal(signal.SIGTERM, previous)
+    write_record(folder, settings, rows or finished, time.perf_counter() - started)
+    if rows is None:
+        fail(
+            f"sweep stopped after {len(finished)} of {len(runs)} runs (summary.csv holds them); run it again to "
+            "continue: finished runs are skipped, the stopped one resumes from its checkpoint",
+            code=EXIT_STOPPED,
+        )
     summary = write_summary(folder, rows)
     write_cross_run(folder, [r for r in rows if r.get("status") != "failed"])
-    write_record(folder, settings, rows, time.perf_counter() - started)
     failed = [r for r in rows if r.get("status") == "failed"]
     typer.echo(f"summary: {summary}, sweep.json; figures in {folder / 'figures'}; {len(failed)} failed")
 
@@ -658,9 +678,6 @@ def piles(
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Build every pile a TOML file lists (the paper's: runs/paper/piles.toml), skipping those already built."""
-    import subprocess
-    import sys
-
     from .spec import SpecError, load_spec_file
 
     try:
@@ -684,15 +701,7 @@ def piles(
         if out.exists() and not overwrite:
             typer.echo(f"{out}: exists, skipped")
             continue
-        args = ["pile", "--out", str(out), "--overwrite"]
-        for key, value in entry.items():
-            if key == "out":
-                continue
-            flag = "--" + key.replace("_", "-")
-            args += [flag, ",".join(str(v) for v in value) if isinstance(value, list) else str(value)]
-        if device:
-            args += ["--device", device]
-        # Each pile in its own process, with its own progress bar and messages.
-        done = subprocess.run([sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", *args])
-        if done.returncode != 0:
-            fail(f"building {out} failed (exit code {done.returncode})", code=done.returncode)
+        options = {**PILE_DEFAULTS, **{k: v for k, v in entry.items() if k != "out"}}
+        if isinstance(options["radii"], list):
+            options["radii"] = ",".join(str(v) for v in options["radii"])
+        pile(out=out, overwrite=True, device=device, **options)  # its errors exit as `decco-warp pile`'s would

@@ -242,8 +242,8 @@ def run_sweep(
         if on_result is not None:
             on_result(row)
 
-    def collect(block: bool) -> None:
-        for future in [f for f in pending if block or f.done()]:
+    def collect() -> None:
+        for future in [f for f in list(pending) if f.done()]:
             k, row = pending.pop(future)
             try:
                 summary = future.result()
@@ -253,26 +253,33 @@ def run_sweep(
 
     try:
         futures = {client.submit(simulate_one, spec, pure=False): k for k, spec in enumerate(runs)}
-        for future in as_completed(futures):
-            k = futures[future]
-            try:
-                row = future.result()
-            except Exception as error:  # a worker that died: record it, go on
-                row = {"run": runs[k]["run"]["name"], "status": "failed", "reason": f"worker lost: {error}"}
-            row.update(eta=runs[k]["collision"].get("eta"), speed=runs[k]["collision"].get("speed"), theta_deg=runs[k]["collision"]["theta_deg"])
-            if row["status"] == "failed":
-                finish(k, row)
-            else:
-                args = (row["run_dir"], settings["min_members"], settings["analyse_every"], settings["keep_trajectory"])
-                pending[pool.submit(analyse_one, *args)] = (k, row)
-            collect(block=False)
-        collect(block=True)
+        simulations = as_completed(futures)
+        while not simulations.is_empty() or pending:
+            # Poll both kinds of work, so that each run is reported as soon as its analysis ends.
+            for future in simulations.next_batch(block=False):
+                k = futures[future]
+                try:
+                    row = future.result()
+                except Exception as error:  # a worker that died: record it, go on
+                    row = {"run": runs[k]["run"]["name"], "status": "failed", "reason": f"worker lost: {error}"}
+                row.update(eta=runs[k]["collision"].get("eta"), speed=runs[k]["collision"].get("speed"), theta_deg=runs[k]["collision"]["theta_deg"])
+                if row["status"] == "failed":
+                    finish(k, row)
+                else:
+                    args = (row["run_dir"], settings["min_members"], settings["analyse_every"], settings["keep_trajectory"])
+                    pending[pool.submit(analyse_one, *args)] = (k, row)
+            collect()
+            time.sleep(POLL_SECONDS)
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
         client.close()
         if cluster is not None:
             cluster.close()
     return rows
+
+
+#: How often the sweep looks for finished simulations and analyses [s].
+POLL_SECONDS = 0.2
 
 
 def write_summary(folder: Path, rows: list[dict]) -> Path:

@@ -128,3 +128,33 @@ def test_shipped_pile_list_is_valid():
 
     entries = load_spec_file(Path(__file__).parent.parent / "runs" / "paper" / "piles.toml")["pile"]
     assert [e["particles"] for e in entries] == [5000, 5000, 1250, 500]
+
+
+def test_a_stopped_sweep_keeps_its_table_and_continues(tmp_path):
+    """SIGTERM (a batch scheduler's stop) after the first run: exit 3 with that run in summary.csv;
+    run again, the sweep skips it and finishes the others."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    path = tmp_path / "s.toml"
+    path.write_text(SWEEP.format(out=tmp_path).replace('"params.dt" = [0.04, 5.0]', '"collision.theta_deg" = [0.0, 22.0, 44.0]'))
+    process = subprocess.Popen(
+        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", "sweep", str(path), "--workers", "1"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    table = tmp_path / "grid" / "summary.csv"
+    deadline = time.time() + 120
+    while time.time() < deadline and not (table.exists() and len(_rows(table)) >= 1):
+        time.sleep(0.1)
+    process.send_signal(signal.SIGTERM)
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 3, stderr
+    assert "sweep stopped after" in stderr and "run it again" in stderr
+    done = _rows(table)
+    assert 1 <= len(done) < 6 and all(r["status"] == "ok" for r in done.values())
+    again = cli("sweep", str(path), "--workers", "1")
+    assert again.returncode == 0, again.stderr
+    rows = _rows(table)
+    assert len(rows) == 6 and all(rows[name]["status"] == "skipped (complete)" for name in done)

@@ -53,9 +53,13 @@ def plot_clusters(analysis: dict):
         share = final["mass"][k] / analysis["summary"]["target_mass"]
         handles.append(Line2D([], [], marker="o", linestyle="", color=colours(k % 10), label=f"{k + 1}: {share:.3g} m_t"))
     ax.set_aspect("equal")
-    margin = diameter.max()
-    ax.set_xlim(x[:, 0].min() - margin, x[:, 0].max() + margin)
-    ax.set_ylim(x[:, 1].min() - margin, x[:, 1].max() + margin)
+    # As the paper's Fig. 2: the area where the clusters are (all particles if there are none),
+    # since the unbound debris of a fast collision spreads over thousands of km.
+    shown = x[label >= 0] if (label >= 0).any() else x
+    low, high = shown[:, :2].min(axis=0), shown[:, :2].max(axis=0)
+    margin = max(diameter.max(), 0.1 * float((high - low).max()))
+    ax.set_xlim(low[0] - margin, high[0] + margin)
+    ax.set_ylim(low[1] - margin, high[1] + margin)
     ax.set_xlabel("x [km]")
     ax.set_ylabel("y [km]")
     ax.set_title(f"clusters at t = {final['time'] / HOUR:.3g} h")
