@@ -135,7 +135,7 @@ class CompressionForecast:
     which its pile holds in place: eq. 12 with i the heavier sphere and m_j -> infinity,
     so that its whole kinetic energy 1/2 m_H v^2 goes into the contact spring,
     (k_in / 4) delta^2 (two springs in series).  Hence delta = v sqrt(2 m_H / k_in).
-    It is an upper estimate: collisions of the shipped piles reach 0.25 to 0.4 of it
+    It is an upper estimate: the collisions measured so far reach 0.24 to 0.43 of it
     (docs/model.md); a free light sphere (eq. 12 as printed, in the pair's frame)
     would give v sqrt(2 mu / k_in), about 5 times less at the paper's sizes.
     """

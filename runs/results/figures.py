@@ -1,0 +1,152 @@
+"""Draw docs/validation.md's figures from the committed paper runs (runs/results/fig*/).
+
+    python runs/results/figures.py          # from the repository root; writes docs/figures/validation-*.png
+
+Reads only what the sweeps kept (summary.json and analysis.h5 of each run) and the paper's piles.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+import decco_warp as dw  # noqa: E402
+from decco_warp.analysis import scaling  # noqa: E402
+from decco_warp.analysis.figures import SIZE_LABELS, save  # noqa: E402
+from decco_warp.analysis.runs import read_analysis  # noqa: E402
+from decco_warp.collision import pile_radius  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+RESULTS = ROOT / "runs" / "results"
+OUT = ROOT / "docs" / "figures"
+PILES = ROOT / "runs" / "paper" / "piles"
+PROJECTILES = {0.1: "proj500", 0.25: "proj1250", 1.0: "equal5000"}
+MINUTE = 60.0
+
+
+def runs(sweep: str) -> list[dict]:
+    """Each run of a committed sweep: its summary, and its analysis (read lazily)."""
+    found = []
+    for path in sorted((RESULTS / sweep).glob("*/summary.json")):
+        summary = json.loads(path.read_text())
+        found.append({"summary": summary, "dir": path.parent})
+    return sorted(found, key=lambda r: r["summary"]["eta"])
+
+
+def ls12_curve(summary: dict, etas: np.ndarray) -> np.ndarray:
+    """The LS12 law's m_lf/m_t along eta for the piles and angle of one run (KE scales with eta)."""
+    target = dw.load_pile(PILES / "target5000.h5")
+    ratio = round(summary["mass_ratio"], 2)
+    projectile = dw.load_pile(PILES / f"{PROJECTILES[ratio]}.h5")
+    m_t, m_p = target.total_mass, projectile.total_mass
+    reduced = m_t * m_p / (m_t + m_p)
+    kinetic_per_eta = 0.5 * reduced * summary["speed"] ** 2 / summary["eta"]
+    collision = {"target_mass": m_t, "projectile_mass": m_p, "target_radius": pile_radius(target),
+                 "projectile_radius": pile_radius(projectile), "theta_deg": summary["theta_deg"]}  # fmt: skip
+    return np.array([scaling.largest_mass_ratio({**collision, "kinetic_energy": kinetic_per_eta * e}) for e in etas])
+
+
+def panels(sets: list[tuple[str, str]]):
+    return plt.subplots(1, len(sets), figsize=(4.4 * len(sets), 3.8), squeeze=False)
+
+
+def largest_fragment(sets):
+    fig, axes = panels(sets)
+    etas = np.geomspace(0.3, 15, 200)
+    for ax, (sweep, title) in zip(axes[0], sets):
+        found = runs(sweep)
+        s = [r["summary"] for r in found]
+        ax.plot([x["eta"] for x in s], [x["largest_mass_ratio"] for x in s], "o", color="C0", label="decco-warp")
+        ax.plot(etas, ls12_curve(s[0], etas), "--", color="C1", label="LS12 universal law (small bodies)")
+        ax.axhline(1.0, color="0.6", linewidth=0.6)
+        ax.set_xscale("log")
+        ax.set_xlabel("eta = KE / |U|")
+        ax.set_title(title)
+        ax.legend(fontsize=8)
+    axes[0][0].set_ylabel("m_lf / m_t")
+    return fig
+
+
+def size_change(sets):
+    fig, axes = panels(sets)
+    for ax, (sweep, title) in zip(axes[0], sets):
+        s = [r["summary"] for r in runs(sweep)]
+        colours = ["C0" if x["largest_mass_ratio"] > 1 else "C1" for x in s]
+        ax.scatter([x["eta"] for x in s], [x["particle_size_change"] for x in s], c=colours)
+        ax.axhline(0.0, color="0.6", linewidth=0.6)
+        ax.set_xscale("log")
+        ax.set_xlabel("eta = KE / |U|")
+        ax.set_title(f"{title}\n(blue: constructive, orange: destructive)")
+    axes[0][0].set_ylabel("mean particle mass change of the largest fragment [%]")
+    return fig
+
+
+def stress_shares():
+    found = runs("fig8")
+    fig, axes = plt.subplots(1, len(found), figsize=(4.4 * len(found), 3.8), squeeze=False, sharey=True)
+    for ax, run in zip(axes[0], found):
+        share = read_analysis(run["dir"] / "analysis.h5")["stress_share"]
+        t = share["time"] / MINUTE
+        for k in range(share["value"].shape[1]):
+            ax.plot(t[1:], share["value"][1:, k], color=f"C{k}", linewidth=0.8, label=SIZE_LABELS[k])
+            ax.axhline(share["value"][0, k], color=f"C{k}", linestyle="--", linewidth=0.8)
+        ax.set_xscale("log")
+        ax.set_xlabel("time since the start [min]")
+        ax.set_title(f"eta = {run['summary']['eta']:.3g}")
+    axes[0][0].set_ylabel("100 N_top / N  (top 1 % by stress)")
+    axes[0][0].legend(fontsize=8)
+    return fig
+
+
+def conservation():
+    run = runs("fig8")[-1]  # the fastest: eta = 12
+    c = read_analysis(run["dir"] / "analysis.h5")["conservation"]
+    fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    ax.plot(c["time"] / 3600, c["momentum_drift"], label="momentum")
+    ax.plot(c["time"] / 3600, c["angular_momentum_drift"], label="angular momentum (orbital + spin)")
+    ax.set_yscale("log")
+    ax.set_xlabel("time [h]")
+    ax.set_ylabel("drift / scale")
+    ax.set_title(f"eta = {run['summary']['eta']:.3g}, theta = 22 deg, 1250 onto 5000 particles")
+    ax.legend(fontsize=8)
+    return fig
+
+
+def overlaps():
+    fig, ax = plt.subplots(figsize=(5.0, 4.0))
+    for sweep, marker in (("fig8", "o"), ("fig3", "s")):
+        s = [r["summary"] for r in runs(sweep)]
+        ax.plot([x["predicted_overlap"] for x in s], [x["deepest_overlap"] for x in s], marker, label=sweep)
+    line = np.array([0.1, 4.0])
+    ax.plot(line, line, color="0.5", linewidth=0.8, label="measured = predicted")
+    ax.plot(line, 0.25 * line, color="0.5", linestyle=":", linewidth=0.8, label="1/4 of predicted")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("predicted deepest overlap (fraction of the smallest radius)")
+    ax.set_ylabel("deepest overlap seen at the frames")
+    ax.legend(fontsize=8)
+    return fig
+
+
+def main() -> None:
+    sets = [("fig3", "m_p/m_t = 1/4, head-on"), ("fig8", "m_p/m_t = 1/4, 22 deg")]
+    for name, fig in [
+        ("validation-largest-fragment", largest_fragment(sets)),
+        ("validation-size-change", size_change(sets)),
+        ("validation-stress-shares", stress_shares()),
+        ("validation-conservation", conservation()),
+        ("validation-overlaps", overlaps()),
+    ]:
+        path = save(fig, OUT, name)[0]
+        path.with_suffix(".pdf").unlink()
+        print(f"wrote {path.relative_to(ROOT)}")
+
+
+if __name__ == "__main__":
+    main()
