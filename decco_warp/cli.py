@@ -149,17 +149,21 @@ def pile(
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Build a rubble pile: seed spheres without overlaps, collapse under gravity until settled."""
+    from .checks import InputError, check_destination
     from .device import DeviceError, resolve_device
     from .io import save_pile
     from .params import Params
-    from .pile import FormationError, form_pile
+    from .pile import FormationError, check_formation_inputs, form_pile
 
     if out.exists() and not overwrite:
         fail(f"{out} already exists; use --overwrite to replace it")
     try:
+        check_destination(out, "pile file")
         chosen = resolve_device(device)
         params = Params(k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt)
-    except (DeviceError, ValueError) as error:
+        size_radii = _floats(radii, "--radii")
+        check_formation_inputs(particles, size_radii, density, ke_threshold, fill, max_steps=max_steps)
+    except (DeviceError, InputError, ValueError) as error:
         fail(str(error))
     typer.echo(f"forming a {particles}-particle pile on {chosen} (seed {seed})", err=True)
     bar = _progress_bar("forming", "step", "ratio")
@@ -175,12 +179,13 @@ def pile(
                 description="settling" if p.peak_ke_over_u >= 1e-3 else "collapsing",
             )
 
+        failed = None  # reported after the bar's last line
         try:
             formed = form_pile(
                 n_particles=particles,
                 seed=seed,
                 device=chosen,
-                radii=_floats(radii, "--radii"),
+                radii=size_radii,
                 density=density,
                 params=params,
                 ke_threshold=ke_threshold,
@@ -190,9 +195,11 @@ def pile(
                 progress=show,
             )
         except ValueError as error:
-            fail(str(error))
+            failed = (str(error), EXIT_INPUT)
         except FormationError as error:
-            fail(str(error), code=1)
+            failed = (str(error), 1)
+    if failed:
+        fail(*failed)
     save_pile(formed, out)
     from .collision import pile_radius
 
@@ -258,6 +265,7 @@ def _rerun_observer(prepared, mode_text: str | None, every: int | None):
 def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: int | None = None, **kwargs):
     """Prepare a run (every input problem exits with code 2, nothing written), then run it with a progress bar."""
     from .device import DeviceError
+    from .checks import InputError
     from .io import FileFormatError
     from .run import BlowUp, OutputError, RunError, RunStopped, execute
     from .spec import SpecError
@@ -291,7 +299,7 @@ def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: in
             # The run's outcome is reported after the bar's last line, so that it ends the output.
             try:
                 return execute(prepared, progress=show, observers=observers)
-            except (RunError, FileFormatError) as error:
+            except (RunError, FileFormatError, InputError) as error:  # InputError: the folder's lock was taken
                 stopped_by = (str(error), EXIT_INPUT)
             except RunStopped as stopped:
                 stopped_by = (str(stopped), EXIT_STOPPED)
@@ -456,12 +464,15 @@ def bench(
     import warp as wp
 
     from . import bench as benchmarks
+    from .checks import InputError, check_destination
     from .device import DeviceError, resolve_device
     from .engine import PRECISIONS, Layout
 
     try:
         chosen = resolve_device(device)
-    except DeviceError as error:
+        if json_out is not None:
+            check_destination(json_out, "benchmark table")
+    except (DeviceError, InputError) as error:
         fail(str(error))
     if precision not in PRECISIONS:
         fail(f"--precision must be one of {', '.join(PRECISIONS)}; got {precision!r}")
@@ -521,7 +532,9 @@ def analyze(
 
     from .analysis.figures import draw_run, write_cross_run
     from .analysis.runs import analyse_run
+    from .checks import InputError, check_destination
     from .io import FileFormatError
+    from .lock import RunFolderLock, ensure_free
 
     if min_members < 1 or every < 1:
         fail("--min-members and --every must be >= 1")
@@ -533,21 +546,30 @@ def analyze(
             fail(f"{path} holds no trajectory.h5 and no run folders with one")
     else:
         fail(f"{path} is not a run folder")
+    try:  # every destination, and no run still being written, before the first analysis
+        for run_dir in runs:
+            check_destination(run_dir, "run folder", folder=True)
+            ensure_free(run_dir)
+        if len(runs) > 1:
+            check_destination(path / "summary.csv", "cross-run table")
+    except InputError as error:
+        fail(str(error))
     summaries = []
     bar = _progress_bar("analysing", "frames")
     with bar:
         for run_dir in runs:
             task = bar.add_task(run_dir.name, total=None, frames="")
             try:
-                analysis = analyse_run(
-                    run_dir,
-                    min_members=min_members,
-                    every=every,
-                    progress=lambda done, total, task=task: bar.update(task, total=total, completed=done, frames=f"{done}/{total} frames"),
-                )
-            except FileFormatError as error:
+                with RunFolderLock(run_dir):
+                    analysis = analyse_run(
+                        run_dir,
+                        min_members=min_members,
+                        every=every,
+                        progress=lambda done, total, task=task: bar.update(task, total=total, completed=done, frames=f"{done}/{total} frames"),
+                    )
+                    draw_run(analysis, run_dir)
+            except (FileFormatError, InputError) as error:
                 fail(str(error))
-            draw_run(analysis, run_dir)
             summaries.append(analysis["summary"])
     for run_dir, summary in zip(runs, summaries):
         typer.echo(
@@ -575,16 +597,20 @@ def view(
     mode: str = typer.Option("spawn", "--mode", help="Without --save: spawn, connect[=ADDR] or serve."),
 ) -> None:
     """Replay a run into rerun: a local viewer, a recording (.rrd), or a viewer elsewhere."""
+    import contextlib
+
+    from .checks import check_destination
     from .io import FileFormatError
     from .viz import RerunUnavailable, parse_mode, replay
 
     trajectory = path / "trajectory.h5" if path.is_dir() else path
     if not trajectory.is_file():
         fail(f"{path} is neither a run folder nor a trajectory file")
+    existed = save_to is not None and save_to.exists()
     try:
         chosen, address = ("save", None) if save_to is not None else parse_mode(mode)
-        if chosen == "save" and save_to is None:
-            save_to = trajectory.parent / "recording.rrd"
+        if save_to is not None:
+            check_destination(save_to, "recording")
         bar = _progress_bar("replaying", "frames")
         with bar:
             task = bar.add_task(trajectory.parent.name, total=None, frames="")
@@ -592,8 +618,11 @@ def view(
                 trajectory, chosen, address, save_to=save_to,
                 progress=lambda done, total: bar.update(task, total=total, completed=done, frames=f"{done}/{total}"),
             )  # fmt: skip
-    except (ValueError, RerunUnavailable, FileFormatError) as error:
-        fail(str(error))
+    except (ValueError, RerunUnavailable, FileFormatError, OSError) as error:
+        if save_to is not None and not existed:
+            with contextlib.suppress(OSError):
+                save_to.unlink(missing_ok=True)  # no half-written recording left behind
+        fail(" ".join(str(error).split()))
     if save_to is not None:
         typer.echo(f"wrote {save_to} (view it with: rerun {save_to})")
     elif logger.url:
@@ -617,6 +646,8 @@ def sweep(
     import time
 
     from .analysis.figures import write_cross_run
+    from .checks import InputError, check_destination
+    from .lock import RunFolderLock
     from .spec import SpecError
     from .sweep import load_sweep, run_sweep, write_record, write_summary
 
@@ -628,6 +659,12 @@ def sweep(
         fail("--workers and --analysis-workers must be >= 1")
     started = time.perf_counter()
     folder = Path(settings["out"]) / settings["name"]
+    try:
+        check_destination(folder, "sweep folder", folder=True)
+        folder.mkdir(parents=True, exist_ok=True)
+        lock = RunFolderLock(folder).acquire()  # one sweep per folder: a second one started is refused
+    except InputError as error:
+        fail(str(error).replace("run folder", "sweep folder"))
     typer.echo(f"sweep {settings['name']}: {len(runs)} runs into {folder}")
     bar = _progress_bar("sweep", "runs")
     finished = []
@@ -653,6 +690,7 @@ def sweep(
         finally:
             signal.signal(signal.SIGTERM, previous)
     write_record(folder, settings, rows or finished, time.perf_counter() - started)
+    lock.release()
     if rows is None:
         fail(
             f"sweep stopped after {len(finished)} of {len(runs)} runs (summary.csv holds them); run it again to "
@@ -678,6 +716,7 @@ def piles(
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Build every pile a TOML file lists (the paper's: runs/paper/piles.toml), skipping those already built."""
+    from .checks import InputError, check_destination
     from .spec import SpecError, load_spec_file
 
     try:
@@ -694,10 +733,13 @@ def piles(
                     raise SpecError(f"[[pile]] {k + 1}: {key} = {value!r} must be {kind.__name__}")
             if "out" not in entry or "particles" not in entry:
                 raise SpecError(f"[[pile]] {k + 1}: out and particles are required")
-    except SpecError as error:
+        outs = [Path(entry["out"]) if Path(entry["out"]).is_absolute() else Path.cwd() / entry["out"] for entry in entries]
+        for out in outs:  # every destination, before the first pile is built
+            if overwrite or not out.exists():
+                check_destination(out, "pile file")
+    except (SpecError, InputError) as error:
         fail(str(error))
-    for entry in entries:
-        out = Path(entry["out"]) if Path(entry["out"]).is_absolute() else Path.cwd() / entry["out"]
+    for entry, out in zip(entries, outs):
         if out.exists() and not overwrite:
             typer.echo(f"{out}: exists, skipped")
             continue

@@ -11,6 +11,9 @@ Nothing here imports Warp: these functions read and write NumPy snapshots.
   mode and flushed after every frame, so it can be read while the run goes on
   (open it with ``swmr=True``) and stays readable if the run is killed.
 * A checkpoint is replaced atomically (temporary file, fsync, rename).
+
+Piles and checkpoints are checked as they are read (decco_warp.checks): values that make
+sense in cgs and, for a pile at rest, no two spheres pressed deep into each other.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import h5py
 import numpy as np
 
 from ._version import __version__
+from .checks import InputError, check_particles, check_pile
 from .state import State
 
 PILE_FORMAT = "decco-warp pile"
@@ -164,7 +168,7 @@ def load_pile(path) -> State:
         arrays = {name: group[name][()] for name in _STATE_ARRAYS}
         metadata = read_dict(group["formation"]) if "formation" in group else {}
     try:
-        return State.from_arrays(
+        pile = State.from_arrays(
             arrays["positions"],
             arrays["velocities"],
             arrays["omegas"],
@@ -175,6 +179,11 @@ def load_pile(path) -> State:
         )
     except ValueError as error:
         raise FileFormatError(f"pile file {path}: {error}") from None
+    try:
+        check_pile(pile, f"pile file {path}")
+    except InputError as error:
+        raise FileFormatError(str(error)) from None
+    return pile
 
 
 # --- trajectories (H5MD) -----------------------------------------------------------
@@ -461,6 +470,7 @@ def read_checkpoint(path) -> tuple[dict, State, dict]:
             pile_id=static["pile_id"],
             size_class=static["size_class"],
         )
+        check_particles(state, f"checkpoint {path}")
     except (KeyError, ValueError) as error:
-        raise FileFormatError(f"checkpoint {path}: {error}") from None
+        raise FileFormatError(f"checkpoint {path}: {error}" if not isinstance(error, InputError) else str(error)) from None
     return snapshot, state, extra

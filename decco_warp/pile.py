@@ -17,6 +17,7 @@ import numpy as np
 
 from .params import Params
 from .simulation import Simulation
+from .checks import DENSITY_RANGE, RADIUS_RANGE
 from .state import State
 
 #: The paper's particle radii [cm] (Table 1) and density [g/cm^3].
@@ -146,7 +147,7 @@ def form_pile(
     """
     params = params or Params()
     radii = np.asarray(radii, dtype=float)
-    _check_formation_inputs(n_particles, radii, density, ke_threshold, fill, check_every, max_steps)
+    check_formation_inputs(n_particles, radii, density, ke_threshold, fill, check_every, max_steps)
     rng = np.random.default_rng(seed)
     counts = size_class_counts(n_particles, radii)
     size_class = np.repeat(np.arange(radii.size, dtype=np.int32), counts)
@@ -209,13 +210,17 @@ def _kinetic_over_potential(sim: Simulation, state: State) -> float:
     return kinetic / abs(d["potential"])
 
 
-def _check_formation_inputs(n_particles, radii, density, ke_threshold, fill, check_every, max_steps) -> None:
+def check_formation_inputs(n_particles, radii, density, ke_threshold, fill, check_every=250, max_steps=1) -> None:
+    """Raise ValueError naming the first input of :func:`form_pile` that cannot make a pile."""
+    radii = np.asarray(radii, dtype=float)
     if isinstance(n_particles, bool) or not isinstance(n_particles, (int, np.integer)) or n_particles < 2:
         raise ValueError(f"n_particles must be an integer >= 2; got {n_particles!r}")
-    if radii.ndim != 1 or radii.size == 0 or not np.all(np.isfinite(radii)) or np.any(radii <= 0):
-        raise ValueError(f"radii must be positive sizes in cm; got {radii.tolist()}")
-    if not (math.isfinite(density) and density > 0):
-        raise ValueError(f"density must be > 0 g/cm^3; got {density!r}")
+    low, high = RADIUS_RANGE
+    if radii.ndim != 1 or radii.size == 0 or not np.all(np.isfinite(radii)) or np.any(radii < low) or np.any(radii > high):
+        raise ValueError(f"radii must be sizes from {low:g} to {high:g} cm; got {radii.tolist()}")
+    low, high = DENSITY_RANGE
+    if not (math.isfinite(density) and low <= density <= high):
+        raise ValueError(f"density must be from {low:g} to {high:g} g/cm^3; got {density!r}")
     if not (0 < ke_threshold < COLLAPSE_PEAK):
         raise ValueError(f"ke_threshold must be in (0, {COLLAPSE_PEAK:g}); got {ke_threshold!r}")
     if not (0 < fill < 0.5):

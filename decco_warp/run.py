@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import os
 import signal
 import threading
 import time as _time
@@ -22,11 +21,13 @@ from typing import Callable
 import numpy as np
 
 from . import spec as specs
+from .checks import MAX_REST_OVERLAP, InputError, check_destination, deepest_rest_overlap
 from .collision import setup_collision
 from .diagnostics import energy_ledger, energy_scale, ledger_closure, stress_shares
 from .io import FileFormatError, Trajectory, load_pile, pause_point, read_checkpoint, read_frame, write_checkpoint
+from .lock import RunFolderLock
 from .simulation import Simulation
-from .stability import CompressionForecast, StabilityReport, check_stability, predict_compression
+from .stability import MIN_TIME_STEP_MARGIN, CompressionForecast, StabilityReport, check_stability, predict_compression
 from .state import State
 
 SPEC_FILE = "spec.toml"
@@ -86,11 +87,10 @@ def pile_path(reference: str) -> Path:
 
 def check_writable(run_dir: Path) -> None:
     """Refuse early an output folder that cannot be created or written (nothing is left behind)."""
-    existing = run_dir
-    while not existing.exists():
-        existing = existing.parent
-    if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
-        raise RunError(f"cannot write the run folder {run_dir}: {existing} is not a writable folder")
+    try:
+        check_destination(run_dir, "run folder", folder=True)
+    except InputError as error:
+        raise RunError(str(error)) from None
 
 
 def run_dir_of(spec: dict) -> Path:
@@ -200,6 +200,8 @@ class PreparedRun:
     resume: bool
     plan: Plan | None = None
     """A new run's set-up (None when resuming)."""
+    lock: RunFolderLock | None = None
+    """The run folder's lock, once taken (execute takes it for a new folder and releases it at the end)."""
 
 
 @dataclass
@@ -246,18 +248,31 @@ def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None
     if run_dir.exists() and (not run_dir.is_dir() or any(run_dir.iterdir())) and not overwrite:
         raise RunError(f"run folder {run_dir} already exists; use --overwrite to replace it or resume to continue it")
     check_writable(run_dir)
-    plan = plan_start(spec, device)
-    spec = plan.spec
-    sim = Simulation(
-        plan.state,
-        specs.params_of(spec),
-        device=_device(spec, device),
-        precision=spec["run"]["precision"],
-        allow_unstable=spec["run"]["allow_unstable"],
-        ledger=True,
-    )
-    extra = {"size_classes": int(plan.state.size_class.max()) + 1, "wall_seconds": 0.0}
-    return PreparedRun(sim, spec, run_dir, extra, resume=False, plan=plan)
+    # An existing folder (to be overwritten) is locked before anything else: no one else may write there.
+    lock = RunFolderLock(run_dir).acquire() if run_dir.is_dir() else None
+    try:
+        plan = plan_start(spec, device)
+        spec = plan.spec
+        sim = Simulation(
+            plan.state,
+            specs.params_of(spec),
+            device=_device(spec, device),
+            precision=spec["run"]["precision"],
+            allow_unstable=spec["run"]["allow_unstable"],
+            ledger=True,
+        )
+    except BaseException:
+        if lock is not None:
+            lock.release()
+        raise
+    depth, i, j = deepest_rest_overlap(plan.state)
+    extra = {
+        "size_classes": int(plan.state.size_class.max()) + 1,
+        "wall_seconds": 0.0,
+        "start_overlap": depth,
+        "start_overlap_pair": np.array([i, j], dtype=np.int64),
+    }
+    return PreparedRun(sim, spec, run_dir, extra, resume=False, plan=plan, lock=lock)
 
 
 def prepare_resume(run_dir, steps: int | None = None, device: str | None = None) -> PreparedRun:
@@ -267,6 +282,16 @@ def prepare_resume(run_dir, steps: int | None = None, device: str | None = None)
     for path in (spec_path, checkpoint_path, trajectory_path):
         if not path.is_file():
             raise RunError(f"{run_dir} is not a run folder: {path.name} is missing")
+    check_writable(run_dir)
+    lock = RunFolderLock(run_dir).acquire()
+    try:
+        return _prepare_resume(run_dir, spec_path, checkpoint_path, trajectory_path, steps, device, lock)
+    except BaseException:
+        lock.release()
+        raise
+
+
+def _prepare_resume(run_dir, spec_path, checkpoint_path, trajectory_path, steps, device, lock) -> PreparedRun:
     spec = specs.resolve_spec(specs.load_spec_file(spec_path))
     try:
         snapshot, static, extra = read_checkpoint(checkpoint_path)
@@ -286,7 +311,7 @@ def prepare_resume(run_dir, steps: int | None = None, device: str | None = None)
     sim = Simulation.from_snapshot(
         static, specs.params_of(spec), snapshot, device=_device(spec, device), precision=spec["run"]["precision"]
     )
-    return PreparedRun(sim, spec, run_dir, extra, resume=True)
+    return PreparedRun(sim, spec, run_dir, extra, resume=True, lock=lock)
 
 
 #: Something that watches frames as a run makes them: (every how many steps, callback(step, time, particles, observables)).
@@ -296,7 +321,18 @@ Observer = tuple[int, Callable[[int, float, dict, dict], None]]
 def execute(
     run: PreparedRun, progress: Callable[[RunProgress], None] | None = None, observers: list[Observer] | None = None
 ) -> RunResult:
-    """Write the run folder (or continue it) and step the run to its end."""
+    """Write the run folder (or continue it) and step the run to its end, holding its lock."""
+    if not run.resume:
+        run.run_dir.mkdir(parents=True, exist_ok=True)
+    run.lock = run.lock or RunFolderLock(run.run_dir)
+    try:
+        run.lock.acquire()  # a new folder: before anything in it is touched
+        return _execute(run, progress, observers)
+    finally:
+        run.lock.release()
+
+
+def _execute(run: PreparedRun, progress, observers) -> RunResult:
     observers = observers or []
     sim, spec, run_dir, extra = run.sim, run.spec, run.run_dir, run.extra
     spec_text = specs.dumps(spec, header=f"decco-warp run specification, resolved {datetime.now(timezone.utc):%Y-%m-%d %H:%M UTC}")
@@ -312,7 +348,6 @@ def execute(
         trajectory = Trajectory.reopen(run_dir / TRAJECTORY_FILE, keep_through_step=sim.step_count)
         return _advance(sim, trajectory, spec, run_dir, log, extra, progress, observers)
 
-    run_dir.mkdir(parents=True, exist_ok=True)
     for name in (TRAJECTORY_FILE, CHECKPOINT_FILE, LOG_FILE):
         (run_dir / name).unlink(missing_ok=True)
     (run_dir / SPEC_FILE).write_text(spec_text)
@@ -392,8 +427,11 @@ def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, pro
                 warning = None
                 if step % output_every == 0 or step == total:
                     frame = particles, observables = record(sim, size_classes)
-                    check_sanity(step, particles)
-                    check_energy(step, observables["total_energy"], start_energy, scale)
+                    try:
+                        check_sanity(step, particles)
+                        check_energy(step, observables["total_energy"], start_energy, scale)
+                    except BlowUp as error:
+                        raise BlowUp(f"{error}; likely cause: {likely_cause(sim.stability, overlaps, extra)}") from None
                     warning = overlaps.see(step, observables)
                     trajectory.append(step, sim.time, particles, observables)
                     log(
@@ -458,10 +496,33 @@ def check_sanity(step: int, particles: dict) -> None:
     for name in ("position", "velocity", "omega"):
         bad = np.flatnonzero(~np.isfinite(particles[name]).all(axis=1))
         if bad.size:
-            raise BlowUp(
-                f"step {step}: particle {bad[0]} has a non-finite {name}; the time step is probably "
-                "too long for k_in (see the eq. 17 margin in run.log)"
-            )
+            raise BlowUp(f"step {step}: particle {bad[0]} has a non-finite {name}")
+
+
+def likely_cause(stability: StabilityReport, overlaps: "OverlapWatch", extra: dict) -> str:
+    """What most probably broke a run, from what it saw: coincident particles at the start, a time
+    step too long for the spring (eq. 17), or contacts deeper than a centre (a spring too soft)."""
+    depth = float(extra.get("start_overlap", 0.0))
+    if depth > MAX_REST_OVERLAP:
+        i, j = (int(k) for k in extra["start_overlap_pair"])
+        return (
+            f"particles {i} and {j} started {depth:.3g} of the smaller radius into each other: coincident or "
+            "nearly coincident particles in the input"
+        )
+    if stability.time_step_margin < MIN_TIME_STEP_MARGIN:
+        return (
+            f"dt = {stability.dt:.3g} s is too long for k_in = {stability.k_in:.3g} dyne/cm (eq. 17 margin "
+            f"{stability.time_step_margin:.3g}, need >= {MIN_TIME_STEP_MARGIN:g}); use dt <= {stability.safe_dt:.3g} s"
+        )
+    if overlaps.deepest > 1.0:
+        return (
+            f"contacts went past a sphere's centre ({overlaps.summary()}): k_in = {stability.k_in:.3g} dyne/cm is "
+            'too soft for the impact speed; k_in = "auto" chooses one stiff enough'
+        )
+    return (
+        f"no cause stands out: dt = {stability.dt:.3g} s may still be too long for k_in (eq. 17 margin "
+        f"{stability.time_step_margin:.3g}); halving dt tells"
+    )
 
 
 #: Depths (fractions of the smaller radius of a pair) past which a run warns, once each, and why.
@@ -536,8 +597,7 @@ def check_energy(step: int, total_energy: float, start_energy: float, scale: flo
     if not np.isfinite(total_energy) or gain > BLOW_UP_ENERGY_GAIN * scale:
         raise BlowUp(
             f"step {step}: the total energy grew by {gain:.3g} erg ({gain / scale:.2g} of |U| + KE at the start), "
-            "which friction and restitution cannot do; the time step is probably too long for k_in "
-            "(see the eq. 17 margin in run.log)"
+            "which friction and restitution cannot do"
         )
 
 

@@ -161,11 +161,18 @@ def _device_name(device: str) -> str:
 def analyse_one(run_dir: str, min_members: int, analyse_every: int, keep_trajectory: bool) -> dict:
     """Analyse a finished run (unless its summary.json is current), draw its figures, and
     drop its trajectory if asked; returns its summary.  Runs in a process of this machine."""
+    from .lock import RunFolderLock
+
+    started = time.perf_counter()
+    with RunFolderLock(run_dir):  # the run has finished: no one else should be writing there
+        summary = _analyse(Path(run_dir), min_members, analyse_every, keep_trajectory)
+    return {**summary, "analysis_seconds": round(time.perf_counter() - started, 3)}
+
+
+def _analyse(run_dir: Path, min_members: int, analyse_every: int, keep_trajectory: bool) -> dict:
     from .analysis.figures import draw_run
     from .analysis.runs import analyse_run
 
-    started = time.perf_counter()
-    run_dir = Path(run_dir)
     summary_path = run_dir / SUMMARY_FILE
     trajectory = run_dir / TRAJECTORY_FILE
     settings = {"min_members": min_members, "analyse_every": analyse_every}
@@ -181,7 +188,7 @@ def analyse_one(run_dir: str, min_members: int, analyse_every: int, keep_traject
         raise FileNotFoundError(f"{run_dir} has neither a trajectory nor a summary to report")
     if not keep_trajectory and trajectory.is_file():
         trajectory.unlink()  # analysis.h5, summary.json, figures/ and the checkpoint stay
-    return {**summary, "analysis_seconds": round(time.perf_counter() - started, 3)}
+    return summary
 
 
 def _worker_device() -> str | None:

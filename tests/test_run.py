@@ -231,7 +231,7 @@ def test_blow_up_stops_with_its_exit_code_and_keeps_the_checkpoint(tmp_path):
     config.write_text("[run]\nallow_unstable = true\nsteps = 3000\noutput_every = 50\ncheckpoint_every = 500\n[params]\ndt = 5.0\n")
     result = cli("simulate", str(config), "--out", str(tmp_path), "--name", "boom", "--device", "cpu")
     assert result.returncode == 4, result.stderr
-    assert "blew up: step 50" in result.stderr and "time step is probably too long" in result.stderr
+    assert "blew up: step 50" in result.stderr and "likely cause: dt = 5 s is too long for k_in" in result.stderr
     assert "Traceback" not in result.stderr
     snapshot, _, _ = read_checkpoint(tmp_path / "boom" / "checkpoint.h5")
     assert snapshot["step"] == 0 and np.isfinite(snapshot["positions"]).all()

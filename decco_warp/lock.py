@@ -1,0 +1,84 @@
+"""One writer per run folder: an OS lock held by the process that writes into it.
+
+The lock is ``flock`` on the folder itself, so the kernel releases it when its holder dies in
+any way (SIGKILL, power loss): nothing stale is left to clean.  While it holds the lock, the
+writer keeps its pid and host in ``.lock`` in the folder, so that a refused second writer can
+say who holds it.  (flock is local to a machine: on a network file system shared by several
+hosts, run a given folder from one host at a time.)
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import os
+import socket
+from pathlib import Path
+
+from .checks import InputError
+
+LOCK_FILE = ".lock"
+
+
+class RunFolderBusy(InputError):
+    """Another process writes into this run folder."""
+
+
+class RunFolderLock:
+    """The exclusive lock of one run folder; ``acquire`` raises RunFolderBusy if it is held."""
+
+    def __init__(self, run_dir):
+        self.run_dir = Path(run_dir)
+        self._fd: int | None = None
+        self._noted = False
+
+    @property
+    def held(self) -> bool:
+        return self._fd is not None
+
+    def acquire(self, note: bool = True) -> "RunFolderLock":
+        """Take the lock (``note``: and write this process's pid and host beside it)."""
+        if self.held:
+            return self
+        fd = os.open(self.run_dir, os.O_RDONLY)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            pid, host = holder(self.run_dir)
+            raise RunFolderBusy(f"run folder {self.run_dir} is in use by pid {pid} on {host}") from None
+        self._fd = fd
+        self._noted = note
+        if note:
+            (self.run_dir / LOCK_FILE).write_text(f"{os.getpid()} {socket.gethostname()}\n")
+        return self
+
+    def release(self) -> None:
+        if self._fd is None:
+            return
+        if self._noted:
+            with contextlib.suppress(OSError):
+                (self.run_dir / LOCK_FILE).unlink()
+        os.close(self._fd)
+        self._fd = None
+
+    def __enter__(self) -> "RunFolderLock":
+        return self.acquire()
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+def holder(run_dir) -> tuple[str, str]:
+    """(pid, host) written by the process holding the lock, or ("?", "?") when unreadable."""
+    try:
+        pid, host = (Path(run_dir) / LOCK_FILE).read_text().split()[:2]
+        return pid, host
+    except (OSError, ValueError):
+        return "?", "?"
+
+
+def ensure_free(run_dir) -> None:
+    """Raise RunFolderBusy if a process holds ``run_dir``'s lock (a folder that does not exist is free)."""
+    if Path(run_dir).is_dir():
+        RunFolderLock(run_dir).acquire(note=False).release()
