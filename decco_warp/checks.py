@@ -33,32 +33,33 @@ class InputError(ValueError):
 def check_particles(state, source: str) -> None:
     """Radii, densities, positions, speeds and spins that make sense in cgs (State is finite already)."""
     radii, masses = state.radii, state.masses
-    low, high = RADIUS_RANGE
-    bad = np.flatnonzero((radii < low) | (radii > high))
-    if bad.size:
-        k = int(bad[0])
+    k = _first_outside(radii, *RADIUS_RANGE)
+    if k is not None:
         raise InputError(
-            f"{source}: particle {k} has radius {radii[k]:.3g} cm, outside {low:g} cm to {high:g} cm "
-            "(radii are in cm, as every length)"
+            f"{source}: particle {k} has radius {radii[k]:.3g} cm, outside {RADIUS_RANGE[0]:g} cm to "
+            f"{RADIUS_RANGE[1]:g} cm (radii are in cm, as every length)"
         )
     density = masses / (4.0 / 3.0 * math.pi * radii**3)
-    low, high = DENSITY_RANGE
-    bad = np.flatnonzero((density < low) | (density > high))
-    if bad.size:
-        k = int(bad[0])
+    k = _first_outside(density, *DENSITY_RANGE)
+    if k is not None:
         raise InputError(
             f"{source}: particle {k} has mass {masses[k]:.3g} g for radius {radii[k]:.3g} cm, a density of "
-            f"{density[k]:.3g} g/cm^3, outside {low:g} to {high:g} (masses are in g, radii in cm)"
+            f"{density[k]:.3g} g/cm^3, outside {DENSITY_RANGE[0]:g} to {DENSITY_RANGE[1]:g} (masses are in g, radii in cm)"
         )
     for name, values, limit, unit in (
         ("position", np.abs(state.positions).max(axis=1), MAX_POSITION, "cm"),
         ("speed", np.linalg.norm(state.velocities, axis=1), MAX_SPEED, "cm/s"),
         ("spin surface speed", np.linalg.norm(state.omegas, axis=1) * radii, MAX_SPEED, "cm/s"),
     ):
-        bad = np.flatnonzero(values > limit)
-        if bad.size:
-            k = int(bad[0])
+        k = _first_outside(values, -math.inf, limit)
+        if k is not None:
             raise InputError(f"{source}: particle {k} has a {name} of {values[k]:.3g} {unit}, beyond {limit:.0e} {unit}")
+
+
+def _first_outside(values: np.ndarray, low: float, high: float) -> int | None:
+    """Index of the first value outside [low, high], or None."""
+    bad = np.flatnonzero((values < low) | (values > high))
+    return int(bad[0]) if bad.size else None
 
 
 def deepest_rest_overlap(state) -> tuple[float, int, int]:
