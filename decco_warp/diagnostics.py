@@ -11,7 +11,6 @@ import math
 
 import numpy as np
 
-from .engine import Engine
 from .params import Params
 from .state import State
 
@@ -33,6 +32,8 @@ def diagnostics(state: State, params: Params, device: str | None = None) -> dict
     contact as a fraction of the smaller radius of its pair; past 1 a centre lies inside
     the other sphere) and deepest_overlap_pair (its two particles, -1 -1 without contacts).
     """
+    from .engine import Engine  # here, so that the analysis can use this module without Warp
+
     pairs = Engine(state, params, device, force_kernel="reference").pair_observables()
     return state_diagnostics(state, pairs)
 
