@@ -206,6 +206,9 @@ class Trajectory:
     def __init__(self, file: h5py.File, path: Path):
         self.file = file
         self.path = path
+        # (step, time, value) datasets of each element, looked up once: h5py's lookups by
+        # name cost more than the writes themselves.
+        self._datasets: dict[tuple[str, str], tuple] = {}
 
     @classmethod
     def create(cls, path, state: State, observables: dict, parameters: dict) -> "Trajectory":
@@ -268,22 +271,29 @@ class Trajectory:
 
     def append(self, step: int, time: float, particles: dict, observables: dict) -> None:
         """One frame: particle arrays (position, velocity, omega, stress) and observable values."""
-        for name, value in particles.items():
-            self._append(self.file["particles/all"][name], step, time, value)
-        for name, value in observables.items():
-            self._append(self.file["observables"][name], step, time, value)
+        for group, values in (("particles/all", particles), ("observables", observables)):
+            for name, value in values.items():
+                self._append(self._element(group, name), step, time, value)
         self.file.flush()
 
+    def _element(self, group: str, name: str) -> tuple:
+        key = (group, name)
+        if key not in self._datasets:
+            element = self.file[group][name]
+            self._datasets[key] = (element["step"], element["time"], element["value"])
+        return self._datasets[key]
+
     @staticmethod
-    def _append(element: h5py.Group, step: int, time: float, value) -> None:
+    def _append(datasets: tuple, step: int, time: float, value) -> None:
         # The step is written last: a frame whose step is missing was cut short (see _complete_frames).
-        k = element["step"].shape[0]
-        for name in ("step", "time", "value"):
-            element[name].resize(k + 1, axis=0)
-        element["value"][k] = value
-        element["time"][k] = time
+        steps, times, values = datasets
+        k = steps.shape[0]
+        for dataset in datasets:
+            dataset.resize(k + 1, axis=0)
+        values[k] = value
+        times[k] = time
         pause_point("trajectory-write", step)
-        element["step"][k] = step
+        steps[k] = step
 
     def close(self) -> None:
         self.file.close()
