@@ -131,7 +131,8 @@ def bench_size(
     return BenchRow(
         n=n,
         device=device,
-        layout=f"{layout.block_dim} threads x {layout.particles_per_block} per block, {layout.contact_slots} slots"
+        layout=f"{layout.block_dim} threads x {layout.particles_per_block} per block, "
+        + ("contacts in their own pass" if layout.contact_pass else f"{layout.contact_slots} slots")
         + (f", <= {layout.max_registers} registers" if layout.max_registers else ""),
         force_seconds=force_seconds,
         force_pairs_per_s=pairs / force_seconds,

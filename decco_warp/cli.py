@@ -453,7 +453,7 @@ def bench(
     budget: float = typer.Option(1.0, "--seconds", help="Seconds of timing per measurement."),
     precision: str = typer.Option("mixed", "--precision", help="mixed or float64."),
     layouts: str = typer.Option(
-        "", "--layouts", help="Also time these layouts, BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]],... (e.g. 128:1,128:4,128:4:4:96)."
+        "", "--layouts", help="Also time these layouts, BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]][:split],... (e.g. 128:1,128:4:4:96,128:4:4:0:split; split: contacts in their own pass)."
     ),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the table as JSON here."),
     device: Optional[str] = DeviceOption,
@@ -483,12 +483,16 @@ def bench(
     extra_layouts = []
     for item in filter(None, (part.strip() for part in layouts.split(","))):
         try:
-            values = [int(v) for v in item.split(":")]
+            parts = item.split(":")
+            split = parts[-1] == "split"
+            values = [int(v) for v in parts[: len(parts) - split]]
             if len(values) not in (2, 3, 4) or (not chosen.startswith("cuda") and values[0] != 1):
                 raise ValueError
-            extra_layouts.append(Layout(*values))
+            extra_layouts.append(Layout(*values, contact_pass=split))
         except ValueError:
-            fail(f"--layouts entries must be BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]], BLOCK_DIM 1 on CPU; got {item!r}")
+            fail(
+                f"--layouts entries must be BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]][:split], BLOCK_DIM 1 on CPU; got {item!r}"
+            )
     limit, how = benchmarks.device_limit_pairs_per_s(chosen)
     d = wp.get_device(chosen)
     typer.echo(f"device: {chosen} ({d.name}), warp-lang {wp.config.version}, precision {precision}")

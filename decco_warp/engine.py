@@ -50,6 +50,9 @@ class Layout:
     contact_slots: int = 4
     max_registers: int = 0
     """Cap on registers per thread on CUDA (0: the compiler's choice)."""
+    contact_pass: bool = False
+    """Split the step's forces in two launches: a gravity-only sweep noting contact candidates,
+    then the contacts one thread per particle (kernels/forces.py).  ``contact_slots`` is unused."""
 
     def __post_init__(self):
         for name in ("block_dim", "particles_per_block", "contact_slots"):
@@ -58,6 +61,8 @@ class Layout:
                 raise ValueError(f"Layout.{name} must be a positive integer; got {value!r}")
         if not isinstance(self.max_registers, int) or self.max_registers < 0:
             raise ValueError(f"Layout.max_registers must be an integer >= 0; got {self.max_registers!r}")
+        if not isinstance(self.contact_pass, bool):
+            raise ValueError(f"Layout.contact_pass must be true or false; got {self.contact_pass!r}")
 
 
 def choose_layout(n: int, device: str) -> Layout:
@@ -139,9 +144,17 @@ class Engine:
         # The tiled sweep reads packed bodies (force_kernels.BODY_TYPES), refreshed before each sweep.
         tiled = force_kernel == "tiled"
         self.body = wp.zeros(self.count if tiled else 0, dtype=force_kernels.BODY_TYPES[precision], device=self.device)
-        if tiled:
-            if not self.device.startswith("cuda") and self.layout.block_dim != 1:
-                raise ValueError("on the CPU a layout's block_dim must be 1 (Warp runs one thread per block)")
+        split = tiled and self.layout.contact_pass
+        self.candidate_count = wp.zeros(self.count if split else 0, dtype=wp.int32, device=self.device)
+        self.candidates = wp.zeros((self.count if split else 0, force_kernels.CANDIDATES), dtype=wp.int32, device=self.device)
+        if tiled and not self.device.startswith("cuda") and self.layout.block_dim != 1:
+            raise ValueError("on the CPU a layout's block_dim must be 1 (Warp runs one thread per block)")
+        if split:
+            self._force_kernel = force_kernels.pair_gravity_tiled(
+                self.layout.block_dim, self.layout.particles_per_block, precision, self.layout.max_registers
+            )
+            self._contact_kernel = force_kernels.contact_pass(params.rolling_friction)
+        elif tiled:
             self._force_kernel = force_kernels.pair_forces_tiled(
                 self.layout.block_dim,
                 self.layout.particles_per_block,
@@ -158,31 +171,40 @@ class Engine:
 
     def eval_forces(self) -> None:
         """Force and torque on every particle at the current positions and velocities."""
-        inputs = [self.model, self.count, self.radius, self.mass, self.position, self.velocity, self.omega]
+        state = [self.model, self.count, self.radius, self.mass, self.position, self.velocity, self.omega]
         outputs = [self.force, self.torque, self.channels]
         if self.ledger:
             self.channels.zero_()
-        if self.force_kernel == "tiled":
-            wp.launch(
-                force_kernels.PACK_KERNELS[self.precision],
-                dim=self.count,
-                inputs=[wp.float64(self.params.G), self.radius, self.mass, self.position],
-                outputs=[self.body],
-                device=self.device,
-            )
-            inputs.append(self.body)
-        if self.force_kernel == "tiled":
-            per_block = self.layout.particles_per_block
-            wp.launch_tiled(
-                self._force_kernel,
-                dim=[(self.count + per_block - 1) // per_block],
-                inputs=inputs,
-                outputs=outputs,
-                block_dim=self.layout.block_dim,
-                device=self.device,
-            )
-        else:
-            wp.launch(self._force_kernel, dim=self.count, inputs=inputs, outputs=outputs, device=self.device)
+        if self.force_kernel == "reference":
+            wp.launch(self._force_kernel, dim=self.count, inputs=state, outputs=outputs, device=self.device)
+            return
+        wp.launch(
+            force_kernels.PACK_KERNELS[self.precision],
+            dim=self.count,
+            inputs=[wp.float64(self.params.G), self.radius, self.mass, self.position],
+            outputs=[self.body],
+            device=self.device,
+        )
+        blocks = [(self.count + self.layout.particles_per_block - 1) // self.layout.particles_per_block]
+        tiled = {"dim": blocks, "block_dim": self.layout.block_dim, "device": self.device}
+        if not self.layout.contact_pass:
+            wp.launch_tiled(self._force_kernel, inputs=[*state, self.body], outputs=outputs, **tiled)
+            return
+        # The split layout: a gravity sweep noting contact candidates, then the contacts.
+        self.candidate_count.zero_()
+        wp.launch_tiled(
+            self._force_kernel,
+            inputs=[self.count, self.mass, self.body],
+            outputs=[self.force, self.candidate_count, self.candidates],
+            **tiled,
+        )
+        wp.launch(
+            self._contact_kernel,
+            dim=self.count,
+            inputs=[self.model, self.count, self.radius, self.position, self.velocity, self.omega, self.candidate_count, self.candidates],
+            outputs=outputs,
+            device=self.device,
+        )
 
     def kick_drift(self) -> None:
         """Half kick with the current forces, then a full drift."""

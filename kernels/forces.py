@@ -11,6 +11,12 @@
   each particle's force and torque: no atomics, and the motion does not depend
   on scheduling.  (The energy ledger's contact channels are added with atomics;
   on a GPU their last bits may vary from run to run, the motion's never.)
+* ``pair_gravity_tiled`` + ``contact_pass`` -- the same work split in two launches
+  (``Layout(contact_pass=True)``, opt-in until measured on a GPU): the tiled sweep keeps only
+  gravity and notes each particle's contact candidates in a global list (atomics, any order);
+  then one thread per particle sorts its list and evaluates the contacts in float64.  The
+  sweep carries no contact code, so it needs fewer registers; the sort keeps the motion (and
+  here the ledger too) independent of scheduling.
 * ``pair_forces_reference`` -- one thread per particle, a plain loop over j.  It
   is the yardstick for tests and the baseline of ``decco-warp bench``.
 
@@ -303,6 +309,148 @@ def pair_forces_tiled(
                     torque_out[i] = wp.vec3d(wp.float64(row[6]), wp.float64(row[7]), wp.float64(row[8]))
 
     return pair_forces_tiled_kernel
+
+
+#: Contact candidates a particle may note for the contact pass; a particle with more (never seen
+#: in a pile: ~12 neighbours at most) has all j looked at again.
+CANDIDATES = 24
+
+
+@functools.cache
+def pair_gravity_tiled(block_dim: int, particles_per_block: int, precision: str = "mixed", max_registers: int = 0):
+    """Build the sweep of the split layout: gravity between every pair, and each particle's contact
+    candidates appended to ``candidates`` (counted in ``candidate_count``, zeroed by the caller).
+
+    Launch like :func:`pair_forces_tiled`; ``force_out`` receives gravity only, and
+    :func:`contact_pass` adds the contacts.
+    """
+    real, _ = _real_types(precision)
+    Body = BODY_TYPES[precision]
+    T, P = block_dim, particles_per_block
+    radius_at, g_mass_at = (6, 7) if precision == "mixed" else (3, 4)
+    candidate = real(CONTACT_CANDIDATE if precision == "mixed" else 1.0)
+    Bodies = wp.types.matrix(shape=(P, Body._length_), dtype=real)
+    Fields = wp.types.matrix(shape=(P, 3), dtype=real)
+
+    @wp.kernel(
+        module="unique",
+        enable_backward=False,
+        module_options={"fast_math": precision == "mixed"},
+        cuda_max_registers=max_registers or None,
+    )
+    def pair_gravity_tiled_kernel(
+        # Model:
+        count: int,
+        mass_in: wp.array(dtype=wp.float64),
+        # State in:
+        body_in: wp.array(dtype=Body),
+        # Out:
+        force_out: wp.array(dtype=wp.vec3d),
+        candidate_count: wp.array(dtype=wp.int32),
+        candidates: wp.array2d(dtype=wp.int32),
+    ):
+        block, lane = wp.tid()
+        first = block * wp.static(P)
+        bodies_i = Bodies()
+        for p in range(wp.static(P)):
+            bodies_i[p] = body_in[wp.min(first + p, count - 1)]
+
+        fields = Fields()
+        for start in range(0, count, wp.static(T)):
+            body_j = wp.untile(wp.tile_load(body_in, shape=wp.static(T), offset=start, storage="register"))
+            j = start + lane
+            if j < count:
+                for p in range(wp.static(P)):
+                    r = separation(bodies_i[p], body_j)
+                    d2 = wp.dot(r, r)
+                    if d2 > real(0.0):  # not the particle itself
+                        inv_d = real(1.0) / wp.sqrt(d2)
+                        fields[p] = fields[p] + (body_j[g_mass_at] * inv_d * inv_d * inv_d) * r
+                        reach = bodies_i[p][radius_at] + body_j[radius_at]
+                        # Rows past the end repeat the last particle: they note nothing.
+                        if d2 < reach * reach * candidate and first + p < count:
+                            slot = wp.atomic_add(candidate_count, first + p, 1)
+                            if slot < wp.static(CANDIDATES):
+                                candidates[first + p, slot] = j
+
+        total = wp.tile_sum(wp.tile(fields, preserve_type=True))[0]
+        if lane == 0:
+            for p in range(wp.static(P)):
+                i = first + p
+                if i < count:
+                    row = total[p]
+                    field_sum = wp.vec3d(wp.float64(row[0]), wp.float64(row[1]), wp.float64(row[2]))
+                    force_out[i] = -mass_in[i] * field_sum
+
+    return pair_gravity_tiled_kernel
+
+
+@functools.cache
+def contact_pass(rolling: str = "couple"):
+    """Build the second launch of the split layout, one thread per particle: its noted candidates
+    sorted by j, each evaluated in float64 and added to ``force_inout``; ``torque_out`` and the
+    ledger's ``channels_out`` (when it has rows) are written whole."""
+    contact_channels = contact_function(rolling)
+    Noted = wp.types.vector(length=CANDIDATES, dtype=wp.int32)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def contact_pass_kernel(
+        # Model:
+        model: ContactModel,
+        count: int,
+        radius_in: wp.array(dtype=wp.float64),
+        # State in:
+        position_in: wp.array(dtype=wp.vec3d),
+        velocity_in: wp.array(dtype=wp.vec3d),
+        omega_in: wp.array(dtype=wp.vec3d),
+        candidate_count: wp.array(dtype=wp.int32),
+        candidates: wp.array2d(dtype=wp.int32),
+        # Out:
+        force_inout: wp.array(dtype=wp.vec3d),
+        torque_out: wp.array(dtype=wp.vec3d),
+        channels_out: wp.array2d(dtype=wp.vec3d),
+    ):
+        i = wp.tid()
+        noted = candidate_count[i]
+        listed = noted <= wp.static(CANDIDATES)
+        # Sorted by j (insertion), so that the sum does not depend on the order the sweep noted them in.
+        js = Noted()
+        walk = count
+        if listed:
+            walk = noted
+            for s in range(noted):
+                j = candidates[i, s]
+                k = s
+                for _ in range(s):
+                    if k > 0:
+                        if js[k - 1] > j:
+                            js[k] = js[k - 1]
+                            k = k - 1
+                js[k] = j
+        spring = wp.vec3d()
+        sliding = wp.vec3d()
+        sliding_torque = wp.vec3d()
+        rolling_force = wp.vec3d()
+        rolling_torque = wp.vec3d()
+        for s in range(walk):  # the list, or every j after an overflow (each pair checked in float64)
+            j = s
+            if listed:
+                j = js[s]
+            c0, c1, c2, c3, c4 = contact_channels(model, i, j, radius_in, position_in, velocity_in, omega_in)
+            spring += c0
+            sliding += c1
+            sliding_torque += c2
+            rolling_force += c3
+            rolling_torque += c4
+        force_inout[i] = force_inout[i] + spring + sliding + rolling_force
+        torque_out[i] = sliding_torque + rolling_torque
+        if channels_out.shape[0] > 0:
+            channels_out[i, 0] = spring
+            channels_out[i, 1] = sliding
+            channels_out[i, 2] = sliding_torque
+            channels_out[i, 3] = rolling_force
+
+    return contact_pass_kernel
 
 
 @functools.cache

@@ -59,17 +59,22 @@ def test_default_precision_forces_match_oracle(scene, device):
 LAYOUTS = [
     ("cpu", dw.Layout(block_dim=1, particles_per_block=3, contact_slots=1)),
     ("cpu", dw.Layout(block_dim=1, particles_per_block=4, contact_slots=16)),
+    ("cpu", dw.Layout(block_dim=1, particles_per_block=3, contact_pass=True)),
 ] + [
     (device, layout)
     for device in DEVICES
     if device.startswith("cuda")
-    for layout in (dw.Layout(128, 4, 4), dw.Layout(32, 3, 1), dw.Layout(64, 1, 2))
+    for layout in (
+        dw.Layout(128, 4, 4), dw.Layout(32, 3, 1), dw.Layout(64, 1, 2),
+        dw.Layout(128, 4, contact_pass=True), dw.Layout(32, 3, contact_pass=True),
+    )  # fmt: skip
 ]
 
 
 def _layout_id(case):
     device, layout = case
-    return f"{device}-{layout.block_dim}x{layout.particles_per_block}-{layout.contact_slots}slots"
+    contacts = "contact-pass" if layout.contact_pass else f"{layout.contact_slots}slots"
+    return f"{device}-{layout.block_dim}x{layout.particles_per_block}-{contacts}"
 
 
 @pytest.mark.parametrize("case", LAYOUTS, ids=_layout_id)
@@ -126,3 +131,25 @@ def test_pair_forces_are_exactly_opposite(device):
     for precision in ("mixed", "float64"):
         force, _ = dw.compute_forces(state, dw.Params(), device=device, precision=precision)
         assert np.array_equal(force[0], -force[1])
+
+
+@pytest.mark.parametrize("case", [c for c in LAYOUTS if c[1].contact_pass], ids=_layout_id)
+def test_contact_pass_handles_more_candidates_than_its_list_holds(case):
+    """A 22.5 km sphere touched by 30 small ones: more candidates than the list holds, so the
+    contact pass looks at every j for it; forces still equal the plain loop's."""
+    from decco_warp.kernels.forces import CANDIDATES
+    from scenes import sphere_mass
+
+    device, layout = case
+    rng = np.random.default_rng(4)
+    direction = rng.normal(size=(30, 3))
+    direction /= np.linalg.norm(direction, axis=1)[:, None]
+    x = np.vstack([[0.0, 0.0, 0.0], direction * (2.25e6 + 0.75e6 - 500.0)]) + 1.5e7
+    radii = np.array([2.25e6] + [0.75e6] * 30)
+    state = dw.State.from_arrays(x, rng.normal(size=(31, 3)), rng.normal(size=(31, 3)) * 1e-4, radii, sphere_mass(radii))
+    assert 30 > CANDIDATES
+    params = dw.Params()
+    split = dw.compute_forces(state, params, device=device, precision="float64", layout=layout)
+    reference = dw.compute_forces(state, params, device=device, precision="float64", force_kernel="reference")
+    for got, want in zip(split, reference):
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
