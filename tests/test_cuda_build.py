@@ -1,0 +1,50 @@
+"""Every kernel of a step compiles for an H100 (sm_90), also on a machine without a GPU.
+
+Warp carries its own CUDA compiler (NVRTC), so ahead-of-time compilation needs no driver: this
+catches CUDA-only build errors (tile shapes, block widths, types) before a GPU ever runs the code.
+It runs in a fresh interpreter so that the CUDA block widths set here never touch the CPU modules
+the other tests use.
+"""
+
+import subprocess
+import sys
+import textwrap
+
+SCRIPT = textwrap.dedent(
+    """
+    import tempfile, warp as wp
+    import decco_warp
+    from decco_warp.kernels import forces, integrate, observables
+
+    kernels = []
+    for precision in forces.PRECISIONS:
+        for ledger in (False, True):
+            kernels += [(forces.pair_forces_tiled(128, 4, 4, precision, "couple", ledger, 128), 128),
+                        (forces.pair_forces_tiled(64, 4, 4, precision, "paper", ledger, 128), 64),
+                        (forces.pair_forces_reference(precision, "couple", ledger), 256)]
+        kernels.append((forces.pair_gravity_tiled(128, 4, precision, 0), 128))
+    kernels += [(forces.contact_pass(rolling), 256) for rolling in ("couple", "paper")]
+    kernels += [(forces.pack_bodies_mixed, 256), (integrate.kick, 256), (observables.pair_observables, 256)]
+    folder = tempfile.mkdtemp()
+    for kernel, block_dim in kernels:
+        kernel.module.options["block_dim"] = block_dim
+        try:
+            wp.compile_aot_module(kernel.module, arch=90, module_dir=folder)
+        except Exception as error:
+            text = str(error)
+            if "NVRTC" in text or "nvrtc" in text or "not available" in text:
+                print("SKIP", text.splitlines()[0]); raise SystemExit(0)
+            print("FAILED", kernel.key, text); raise SystemExit(1)
+    print("COMPILED", len(kernels))
+    """
+)
+
+
+def test_every_kernel_compiles_for_sm90():
+    import pytest
+
+    done = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, timeout=900)
+    output = done.stdout + done.stderr
+    if "SKIP" in done.stdout:
+        pytest.skip(f"Warp cannot compile for CUDA here: {done.stdout.strip()}")
+    assert done.returncode == 0 and "COMPILED" in done.stdout, output[-3000:]
