@@ -48,7 +48,7 @@ def check_particles(state, source: str) -> None:
         )
     for name, values, limit, unit in (
         ("position", np.abs(state.positions).max(axis=1), MAX_POSITION, "cm"),
-        ("speed", np.linalg.norm(state.velocities, axis=1), MAX_SPEED, "cm/s"),
+        ("speed", np.linalg.norm(state.velocities, axis=1), MAX_SPEED, "cm/s"),  # 1000 km/s
         ("spin surface speed", np.linalg.norm(state.omegas, axis=1) * radii, MAX_SPEED, "cm/s"),
     ):
         k = _first_outside(values, -math.inf, limit)

@@ -126,7 +126,7 @@ def _floats(text: str, what: str) -> tuple[float, ...]:
 #: Defaults of ``decco-warp pile``, also those of the entries of ``decco-warp piles``.
 PILE_DEFAULTS = {"particles": 5000, "seed": 1, "radii": "0.75e6,1.5e6,2.25e6", "density": 2.7, "ke_threshold": 1e-5,
                  "fill": 0.3, "max_steps": 5_000_000, "k_in": 1e18, "restitution": 0.9, "mu_k": 0.3, "mu_r": 1e-3,
-                 "dt": 0.04, "precision": "mixed"}  # fmt: skip
+                 "dt": 0.04, "precision": "mixed", "gravity": "all-pairs"}  # fmt: skip
 
 
 @app.command()
@@ -145,6 +145,7 @@ def pile(
     mu_r: float = typer.Option(PILE_DEFAULTS["mu_r"], "--mu-r", help="Rolling friction coefficient."),
     dt: float = typer.Option(PILE_DEFAULTS["dt"], "--dt", help="Time step [s]."),
     precision: str = typer.Option(PILE_DEFAULTS["precision"], "--precision", help="mixed or float64."),
+    gravity: str = typer.Option(PILE_DEFAULTS["gravity"], "--gravity", help="all-pairs, or tree for large piles."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing pile file."),
     device: Optional[str] = DeviceOption,
 ) -> None:
@@ -160,7 +161,7 @@ def pile(
     try:
         check_destination(out, "pile file")
         chosen = resolve_device(device)
-        params = Params(k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt)
+        params = Params(k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt, gravity=gravity)
         size_radii = _floats(radii, "--radii")
         check_formation_inputs(particles, size_radii, density, ke_threshold, fill, max_steps=max_steps)
     except (DeviceError, InputError, ValueError) as error:
@@ -346,6 +347,7 @@ def simulate(
     max_overlap: Optional[float] = typer.Option(
         None, "--max-overlap", help="Stop the run when a contact is deeper than this fraction of the smaller radius."
     ),
+    gravity: Optional[str] = typer.Option(None, "--gravity", help="all-pairs (exact) or tree (O(N log N), for large piles)."),
     check: bool = typer.Option(False, "--check", help="Set up the collision, print its margins and predicted deepest overlap, run nothing."),
     output_every: Optional[int] = typer.Option(None, "--output-every", help="Steps between trajectory frames."),
     checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Steps between checkpoints."),
@@ -379,7 +381,7 @@ def simulate(
             "run": run_overrides,
             "piles": {"target": target, "projectile": projectile},
             "collision": collision,
-            "params": {"dt": _number_or_auto(dt, "--dt"), "k_in": _number_or_auto(k_in, "--k-in")},
+            "params": {"dt": _number_or_auto(dt, "--dt"), "k_in": _number_or_auto(k_in, "--k-in"), "gravity": gravity},
         }
         spec = specs.resolve_spec(raw, overrides)
     except specs.SpecError as error:
@@ -456,6 +458,7 @@ def bench(
         "", "--layouts", help="Also time these layouts, BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]][:split],... (e.g. 128:1,128:4:4:96,128:4:4:0:split; split: contacts in their own pass)."
     ),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the table as JSON here."),
+    gravity: str = typer.Option("all-pairs", "--gravity", help="Gravity solvers to time, side by side: all-pairs, tree or all-pairs,tree."),
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Pairs/s of the force kernel and of the full step, beside a one-thread-per-particle baseline."""
@@ -467,6 +470,7 @@ def bench(
     from .checks import InputError, check_destination
     from .device import DeviceError, resolve_device
     from .engine import PRECISIONS, Layout
+    from .params import GRAVITY_SOLVERS
 
     try:
         chosen = resolve_device(device)
@@ -476,6 +480,9 @@ def bench(
         fail(str(error))
     if precision not in PRECISIONS:
         fail(f"--precision must be one of {', '.join(PRECISIONS)}; got {precision!r}")
+    solvers = [g.strip() for g in gravity.split(",") if g.strip()]
+    if not solvers or any(g not in GRAVITY_SOLVERS for g in solvers):
+        fail(f"--gravity must list {' and/or '.join(GRAVITY_SOLVERS)}; got {gravity!r}")
     default_sizes = "2048,10240,65536,131072" if chosen.startswith("cuda") else "256,1024"
     sizes = [int(v) for v in _floats(n or default_sizes, "--n")]
     if any(v < 2 for v in sizes) or steps < 1 or budget <= 0:
@@ -501,11 +508,14 @@ def bench(
     typer.echo(header)
     rows = []
     for size in sizes:
-        for layout in [None, *extra_layouts]:
-            row = benchmarks.bench_size(size, chosen, precision, layout, budget, steps, baseline=layout is None)
+        runs = [("all-pairs", layout) for layout in [None, *extra_layouts]] if "all-pairs" in solvers else []
+        runs += [("tree", None)] if "tree" in solvers else []
+        for solver, layout in runs:
+            first = (solver, layout) == runs[0]
+            row = benchmarks.bench_size(size, chosen, precision, layout, budget, steps, baseline=first, gravity=solver)
             rows.append(row)
             fraction = f"{100 * row.fraction_of_limit:8.1f}%" if row.fraction_of_limit is not None else f"{'n/a':>9}"
-            baseline_text = f"{row.baseline_pairs_per_s:17.3g} {row.speedup:8.1f}x" if layout is None else f"{'':>17} {'':>9}"
+            baseline_text = f"{row.baseline_pairs_per_s:17.3g} {row.speedup:8.1f}x" if first else f"{'':>17} {'':>9}"
             typer.echo(
                 f"{size:>8} {row.force_pairs_per_s:14.3g} {row.step_pairs_per_s:13.3g} {1e3 * row.step_seconds:9.3f} "
                 f"{fraction} {baseline_text}  {row.layout}"
@@ -710,7 +720,8 @@ def sweep(
 # --- piles (a list of piles from a TOML file) ------------------------------------------------
 
 PILE_KEYS = {"out": str, "particles": int, "seed": int, "radii": list, "density": float, "ke_threshold": float,
-             "fill": float, "dt": float, "k_in": float, "restitution": float, "mu_k": float, "mu_r": float}  # fmt: skip
+             "fill": float, "dt": float, "k_in": float, "restitution": float, "mu_k": float, "mu_r": float,
+             "gravity": str}  # fmt: skip
 
 
 @app.command()

@@ -1,7 +1,7 @@
 """Device arrays of one particle system and the kernel launches that act on them.
 
-This is the only module that touches Warp arrays and launches kernels; the
-public objects (:class:`~decco_warp.simulation.Simulation`,
+This module (with gravity_tree.py for the tree path) is the only one that touches Warp arrays
+and launches kernels; the public objects (:class:`~decco_warp.simulation.Simulation`,
 :func:`~decco_warp.simulation.compute_forces`, :func:`~decco_warp.diagnostics.diagnostics`)
 are built on it.
 """
@@ -14,6 +14,7 @@ import numpy as np
 import warp as wp
 
 from .device import resolve_device
+from .gravity_tree import GravityTree
 from .kernels import forces as force_kernels
 from .kernels import integrate, observables
 from .kernels.pair import ContactModel
@@ -144,12 +145,17 @@ class Engine:
         # The tiled sweep reads packed bodies (force_kernels.BODY_TYPES), refreshed before each sweep.
         tiled = force_kernel == "tiled"
         self.body = wp.zeros(self.count if tiled else 0, dtype=force_kernels.BODY_TYPES[precision], device=self.device)
-        split = tiled and self.layout.contact_pass
+        # The tree path: gravity from a radix tree, contacts from a hash grid, both into the contact pass.
+        self.tree = GravityTree(self.count, self.device) if params.gravity == "tree" else None
+        self.max_radius = float(state.radii.max())
+        split = self.tree is not None or tiled and self.layout.contact_pass
         self.candidate_count = wp.zeros(self.count if split else 0, dtype=wp.int32, device=self.device)
         self.candidates = wp.zeros((self.count if split else 0, force_kernels.CANDIDATES), dtype=wp.int32, device=self.device)
         if tiled and not self.device.startswith("cuda") and self.layout.block_dim != 1:
             raise ValueError("on the CPU a layout's block_dim must be 1 (Warp runs one thread per block)")
-        if split:
+        if self.tree is not None:
+            self._contact_kernel = force_kernels.contact_pass(params.rolling_friction)
+        elif split:
             self._force_kernel = force_kernels.pair_gravity_tiled(
                 self.layout.block_dim, self.layout.particles_per_block, precision, self.layout.max_registers
             )
@@ -175,6 +181,12 @@ class Engine:
         outputs = [self.force, self.torque, self.channels]
         if self.ledger:
             self.channels.zero_()
+        if self.tree is not None:
+            self.tree.build(self.position, self.mass)
+            self.tree.gravity(self.params.G, self.params.theta_open, self.position, self.mass, self.force)
+            self.tree.contact_candidates(self.position, self.radius, self.max_radius, self.candidate_count, self.candidates)
+            self._contacts(outputs)
+            return
         if self.force_kernel == "reference":
             wp.launch(self._force_kernel, dim=self.count, inputs=state, outputs=outputs, device=self.device)
             return
@@ -198,6 +210,10 @@ class Engine:
             outputs=[self.force, self.candidate_count, self.candidates],
             **tiled,
         )
+        self._contacts(outputs)
+
+    def _contacts(self, outputs: list) -> None:
+        """The contact pass over the candidates noted by the sweep or the hash grid."""
         wp.launch(
             self._contact_kernel,
             dim=self.count,

@@ -108,7 +108,7 @@ class Simulation:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise ValueError(f"step count must be a non-negative integer; got {n!r}")
         n = int(n)
-        if self.engine.device.startswith("cuda"):
+        if self.engine.device.startswith("cuda") and self.engine.tree is None:  # the tree's sort and grid are not captured
             while n >= GRAPH_STEPS:
                 wp.capture_launch(self._step_graph())
                 n -= GRAPH_STEPS

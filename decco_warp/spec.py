@@ -6,7 +6,7 @@ A specification has four tables, every key optional (defaults below):
                  allow_unstable, max_overlap
     [piles]      target, projectile          (pile files, or builtin:target / builtin:projectile)
     [collision]  eta | speed, theta_deg, gap, target_spin, target_spin_axis, projectile_spin, projectile_spin_axis
-    [params]     k_in, restitution, mu_k, mu_r, dt, G, rolling_friction, max_compression
+    [params]     k_in, restitution, mu_k, mu_r, dt, G, rolling_friction, gravity, theta_open, max_compression
 
 Every problem is a :class:`SpecError` naming the table, the key and what is allowed.
 The resolved form has every default filled in, ``steps`` rather than
@@ -27,7 +27,7 @@ from typing import Any, Callable
 
 from .collision import SPIN_AXES
 from .engine import PRECISIONS
-from .params import ROLLING_FRICTION_FORMS, Params
+from .params import GRAVITY_SOLVERS, ROLLING_FRICTION_FORMS, Params
 from .stability import DEFAULT_MAX_COMPRESSION, choose_stiffness, choose_time_step
 
 if sys.version_info >= (3, 11):
@@ -104,6 +104,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "dt": Key(float, _PARAMS_DEFAULT.dt, _positive, "> 0 (s) or \"auto\"", auto=True),
         "G": Key(float, _PARAMS_DEFAULT.G, _non_negative, ">= 0 (cm^3 g^-1 s^-2)"),
         "rolling_friction": Key(str, "couple", lambda v: v in ROLLING_FRICTION_FORMS, " or ".join(ROLLING_FRICTION_FORMS)),
+        "gravity": Key(str, _PARAMS_DEFAULT.gravity, lambda v: v in GRAVITY_SOLVERS, " or ".join(GRAVITY_SOLVERS)),
+        "theta_open": Key(float, _PARAMS_DEFAULT.theta_open, lambda v: 0 < v < 2, "in (0, 2) (tree opening angle)"),
         "max_compression": Key(
             float, DEFAULT_MAX_COMPRESSION, lambda v: 0 < v <= 1, "in (0, 1] (deepest overlap for k_in = \"auto\", fraction of the smallest radius)"
         ),

@@ -14,7 +14,7 @@ SCRIPT = textwrap.dedent(
     """
     import tempfile, warp as wp
     import decco_warp
-    from decco_warp.kernels import forces, integrate, observables
+    from decco_warp.kernels import forces, integrate, observables, tree
 
     kernels = []
     for precision in forces.PRECISIONS:
@@ -24,7 +24,8 @@ SCRIPT = textwrap.dedent(
                         (forces.pair_forces_reference(precision, "couple", ledger), 256)]
         kernels.append((forces.pair_gravity_tiled(128, 4, precision, 0), 128))
     kernels += [(forces.contact_pass(rolling), 256) for rolling in ("couple", "paper")]
-    kernels += [(forces.pack_bodies_mixed, 256), (integrate.kick, 256), (observables.pair_observables, 256)]
+    kernels += [(forces.pack_bodies_mixed, 256), (integrate.kick, 256), (observables.pair_observables, 256),
+                (tree.tree_gravity, 256)]
     folder = tempfile.mkdtemp()
     for kernel, block_dim in kernels:
         kernel.module.options["block_dim"] = block_dim

@@ -1,0 +1,82 @@
+"""The tree path's device arrays and launches: gravity from a radix tree, contact candidates from a
+hash grid (kernels/tree.py).  The engine owns one of these when ``Params.gravity == "tree"``."""
+
+from __future__ import annotations
+
+import warp as wp
+
+from .kernels import tree as kernels
+
+#: Hash grid cells per axis (the grid wraps: a bigger pile costs longer cell lists, not errors).
+GRID_CELLS = 128
+
+
+class GravityTree:
+    """Arrays for ``count`` particles on ``device``; rebuilt from the positions at every evaluation."""
+
+    def __init__(self, count: int, device: str):
+        self.count, self.device = count, device
+        nodes = max(2 * count - 1, 1)
+        internal = max(count - 1, 1)
+
+        def zeros(shape, dtype):
+            return wp.zeros(shape, dtype=dtype, device=device)
+
+        self.box = zeros(2, wp.vec3d)
+        self.keys = zeros(2 * count, wp.int32)  # radix_sort_pairs needs room for 2 n
+        self.order = zeros(2 * count, wp.int32)
+        self.child = zeros((internal, 2), wp.int32)
+        self.first = zeros(internal, wp.int32)
+        self.last = zeros(internal, wp.int32)
+        self.parent = zeros(nodes, wp.int32)
+        self.height = zeros(1, wp.int32)
+        self.node_mass = zeros(nodes, wp.float64)
+        self.node_centre = zeros(nodes, wp.vec3d)
+        self.node_quadrupole = zeros(nodes, wp.mat33d)
+        self.node_low = zeros(nodes, wp.vec3d)
+        self.node_high = zeros(nodes, wp.vec3d)
+        self.done = (zeros(nodes, wp.int32), zeros(nodes, wp.int32))
+        self.points = zeros(count, wp.vec3)
+        self.grid = wp.HashGrid(GRID_CELLS, GRID_CELLS, GRID_CELLS, device=device)
+        self.grid.reserve(count)
+
+    def _launch(self, kernel, dim: int, inputs: list) -> None:
+        wp.launch(kernel, dim=dim, inputs=inputs, device=self.device)
+
+    def build(self, position: wp.array, mass: wp.array) -> None:
+        """Sort the particles along a Morton curve, link the tree and sum every node's moments."""
+        n = self.count
+        self._launch(kernels.reset_box, 1, [self.box])
+        self._launch(kernels.bounds, n, [position, self.box])
+        self._launch(kernels.morton_codes, n, [position, self.box, self.keys, self.order])
+        wp.utils.radix_sort_pairs(self.keys, self.order, n)
+        levels = 0
+        if n > 1:
+            self._launch(kernels.build_nodes, n - 1, [self.keys, n, self.child, self.first, self.last, self.parent])
+            self.height.zero_()
+            self._launch(kernels.tree_height, n, [n, self.parent, self.height])
+            levels = int(self.height.numpy()[0])  # one small read: as many launches as the tree is high
+        moments = [self.node_mass, self.node_centre, self.node_quadrupole, self.node_low, self.node_high]
+        self._launch(kernels.leaf_moments, n, [position, mass, self.order, n, *moments, *self.done])
+        for level in range(levels):
+            before, after = self.done[level % 2], self.done[1 - level % 2]
+            self._launch(kernels.node_moments, n - 1, [self.child, before, *moments, after])
+
+    def gravity(self, G: float, theta_open: float, position: wp.array, mass: wp.array, force_out: wp.array) -> None:
+        """force_out = gravity on every particle (call :meth:`build` first)."""
+        self._launch(
+            kernels.tree_gravity,
+            self.count,
+            [wp.float64(G), wp.float64(theta_open), position, mass, self.order, self.count, self.child, self.first,
+             self.last, self.node_mass, self.node_centre, self.node_quadrupole, self.node_low, self.node_high, force_out],
+        )  # fmt: skip
+
+    def contact_candidates(self, position, radius, max_radius: float, candidate_count, candidates) -> None:
+        """Each particle's neighbours within R_i + R_max (plus a margin), from the hash grid."""
+        self._launch(kernels.float32_points, self.count, [position, self.box, self.points])
+        self.grid.build(self.points, 2.0 * max_radius * 1.0001)
+        self._launch(
+            kernels.grid_candidates,
+            self.count,
+            [self.grid.id, self.points, radius, wp.float64(max_radius), candidate_count, candidates],
+        )

@@ -1,0 +1,355 @@
+"""Gravity from an octree-like binary radix tree, and contact candidates from a hash grid.
+
+The tree (Karras 2012, "Maximizing parallelism in the construction of BVHs, octrees and k-d
+trees") is built every evaluation, all on the device:
+
+1. ``bounds``: the box of all centres (atomic min/max);
+2. ``morton_codes``: 10 bits per axis, interleaved into a 30-bit key, sorted with the particle
+   indices (``wp.utils.radix_sort_pairs``, stable);
+3. ``build_nodes``: internal node i of n - 1 finds its range of sorted particles and its split by
+   binary searches on the length of the keys' common prefix (ties broken by position in the sort);
+   leaves are nodes n - 1 .. 2n - 2;
+4. ``node_moments``: mass, centre of mass, traceless quadrupole and box of each internal node from
+   its two children, one launch per level (a node is summed once both children were summed by an
+   earlier launch), so that no thread reads what another writes in the same launch;
+5. ``tree_gravity``: each particle walks the tree from the root with a stack; a node is used
+   whole (monopole + quadrupole) when its size is below ``theta_open`` times its distance and the
+   particle is not one of its own, else it is opened; leaves are summed directly.
+
+Everything is float64 and deterministic: the sort is stable, each node's sum has a fixed order, and
+each particle's walk is sequential.  Contacts do not use the tree: ``grid_candidates`` lists each
+particle's neighbours within R_i + R_max from a ``wp.HashGrid``, and the contact pass of
+:mod:`.forces` evaluates them with the same pair functions as the all-pairs path.
+"""
+
+import warp as wp
+
+wp.set_module_options({"enable_backward": False})
+
+#: Morton key bits per axis (30-bit keys fit an int32).
+MORTON_BITS = 10
+#: Longest walk stack: two children are pushed per opened node, at most one level deeper each time.
+STACK = 128
+#: Upper bound on the tree's height: 30 key bits plus 31 bits of the index tie-break.
+MAX_LEVELS = 62
+
+Stack = wp.types.vector(length=STACK, dtype=wp.int32)
+
+
+@wp.kernel
+def reset_box(box: wp.array(dtype=wp.vec3d)):
+    big = wp.float64(1.0e300)
+    box[0] = wp.vec3d(big, big, big)
+    box[1] = wp.vec3d(-big, -big, -big)
+
+
+@wp.kernel
+def bounds(position_in: wp.array(dtype=wp.vec3d), box: wp.array(dtype=wp.vec3d)):
+    """box[0] = componentwise min, box[1] = max of the centres (box preset to +inf, -inf)."""
+    i = wp.tid()
+    wp.atomic_min(box, 0, position_in[i])
+    wp.atomic_max(box, 1, position_in[i])
+
+
+@wp.func
+def spread_bits(v: int) -> int:
+    """The 10 low bits of v, two zero bits after each (bit k moves to bit 3k)."""
+    x = v & 1023
+    x = (x | (x << 16)) & 50331903  # 0x030000FF
+    x = (x | (x << 8)) & 50393103  # 0x0300F00F
+    x = (x | (x << 4)) & 51130563  # 0x030C30C3
+    x = (x | (x << 2)) & 153391689  # 0x09249249
+    return x
+
+
+@wp.kernel
+def morton_codes(
+    position_in: wp.array(dtype=wp.vec3d),
+    box: wp.array(dtype=wp.vec3d),
+    keys: wp.array(dtype=wp.int32),
+    order: wp.array(dtype=wp.int32),
+):
+    """keys[i]: the 30-bit Morton code of centre i in the box; order[i] = i (sorted along with keys)."""
+    i = wp.tid()
+    low = box[0]
+    extent = box[1] - low
+    size = wp.max(wp.max(extent[0], extent[1]), extent[2])
+    scale = wp.float64(0.0)
+    if size > wp.float64(0.0):
+        scale = wp.float64(1023.999) / size  # one cube, so that cells stay cubes
+    q = (position_in[i] - low) * scale
+    code = (spread_bits(int(q[0])) << 2) | (spread_bits(int(q[1])) << 1) | spread_bits(int(q[2]))
+    keys[i] = wp.int32(code)
+    order[i] = wp.int32(i)
+
+
+@wp.func
+def highest_bit(x: int) -> int:
+    """Index of the highest set bit of 0 < x < 2^31."""
+    n = int(0)
+    if x >= 65536:
+        x = x >> 16
+        n += 16
+    if x >= 256:
+        x = x >> 8
+        n += 8
+    if x >= 16:
+        x = x >> 4
+        n += 4
+    if x >= 4:
+        x = x >> 2
+        n += 2
+    if x >= 2:
+        n += 1
+    return n
+
+
+@wp.func
+def common_prefix(keys: wp.array(dtype=wp.int32), count: int, i: int, j: int) -> int:
+    """delta(i, j) of Karras: bits shared by the keys of sorted positions i and j (30 key bits, then
+    31 bits of the positions themselves when the keys are equal); -1 outside the array."""
+    if j < 0 or j >= count:
+        return -1
+    a = int(keys[i])
+    b = int(keys[j])
+    if a != b:
+        return 29 - highest_bit(a ^ b)
+    return 30 + 30 - highest_bit(i ^ j)
+
+
+@wp.kernel
+def build_nodes(
+    keys: wp.array(dtype=wp.int32),
+    count: int,
+    child: wp.array2d(dtype=wp.int32),
+    first: wp.array(dtype=wp.int32),
+    last: wp.array(dtype=wp.int32),
+    parent: wp.array(dtype=wp.int32),
+):
+    """Internal node i (of count - 1): its range [first, last] of sorted positions, its two
+    children (node indices; leaves are count - 1 + position) and, for them, their parent."""
+    i = wp.tid()
+    direction = int(1)
+    if common_prefix(keys, count, i, i + 1) < common_prefix(keys, count, i, i - 1):
+        direction = -1
+    floor_prefix = common_prefix(keys, count, i, i - direction)
+    reach = int(2)
+    while common_prefix(keys, count, i, i + reach * direction) > floor_prefix:
+        reach = reach * 2
+    length = int(0)
+    step = reach // 2
+    while step >= 1:
+        if common_prefix(keys, count, i, i + (length + step) * direction) > floor_prefix:
+            length += step
+        step = step // 2
+    j = i + length * direction
+    node_prefix = common_prefix(keys, count, i, j)
+    split = int(0)
+    step = length
+    while step > 1:
+        step = (step + 1) // 2
+        if common_prefix(keys, count, i, i + (split + step) * direction) > node_prefix:
+            split += step
+    gamma = i + split * direction + wp.min(direction, 0)
+    low = wp.min(i, j)
+    high = wp.max(i, j)
+    left = gamma
+    if low == gamma:
+        left = count - 1 + gamma
+    right = gamma + 1
+    if high == gamma + 1:
+        right = count - 1 + gamma + 1
+    child[i, 0] = wp.int32(left)
+    child[i, 1] = wp.int32(right)
+    first[i] = wp.int32(low)
+    last[i] = wp.int32(high)
+    parent[left] = wp.int32(i)
+    parent[right] = wp.int32(i)
+    if i == 0:
+        parent[0] = wp.int32(-1)
+
+
+@wp.kernel
+def tree_height(count: int, parent: wp.array(dtype=wp.int32), height: wp.array(dtype=wp.int32)):
+    """height[0] = the most internal nodes above any leaf: the levels the moments need."""
+    k = wp.tid()
+    node = int(parent[count - 1 + k])
+    levels = int(0)
+    while node >= 0:
+        levels += 1
+        node = int(parent[node])
+    wp.atomic_max(height, 0, wp.int32(levels))
+
+
+@wp.kernel
+def leaf_moments(
+    position_in: wp.array(dtype=wp.vec3d),
+    mass_in: wp.array(dtype=wp.float64),
+    order: wp.array(dtype=wp.int32),
+    count: int,
+    node_mass: wp.array(dtype=wp.float64),
+    node_centre: wp.array(dtype=wp.vec3d),
+    node_quadrupole: wp.array(dtype=wp.mat33d),
+    node_low: wp.array(dtype=wp.vec3d),
+    node_high: wp.array(dtype=wp.vec3d),
+    done_a: wp.array(dtype=wp.int32),
+    done_b: wp.array(dtype=wp.int32),
+):
+    """Leaf count - 1 + k holds the particle at sorted position k, summed from the start; internal
+    node k starts unsummed (in both flag arrays, which the levels use in turn)."""
+    k = wp.tid()
+    leaf = count - 1 + k
+    x = position_in[order[k]]
+    node_mass[leaf] = mass_in[order[k]]
+    node_centre[leaf] = x
+    node_quadrupole[leaf] = wp.mat33d()
+    node_low[leaf] = x
+    node_high[leaf] = x
+    done_a[leaf] = 1
+    done_b[leaf] = 1
+    if k < count - 1:
+        done_a[k] = 0
+        done_b[k] = 0
+
+
+@wp.func
+def shifted_quadrupole(quadrupole: wp.mat33d, mass: wp.float64, offset: wp.vec3d) -> wp.mat33d:
+    """A traceless quadrupole about a point ``offset`` away from its centre of mass:
+    Q + m (3 d d^T - |d|^2 I)."""
+    d2 = wp.dot(offset, offset)
+    return quadrupole + mass * (wp.float64(3.0) * wp.outer(offset, offset) - d2 * wp.identity(n=3, dtype=wp.float64))
+
+
+@wp.kernel
+def node_moments(
+    child: wp.array2d(dtype=wp.int32),
+    done_before: wp.array(dtype=wp.int32),
+    node_mass: wp.array(dtype=wp.float64),
+    node_centre: wp.array(dtype=wp.vec3d),
+    node_quadrupole: wp.array(dtype=wp.mat33d),
+    node_low: wp.array(dtype=wp.vec3d),
+    node_high: wp.array(dtype=wp.vec3d),
+    done_after: wp.array(dtype=wp.int32),
+):
+    """One level: an internal node whose children were both summed before this launch sums them.
+    Flags are read from ``done_before`` and written to ``done_after`` only, so no thread reads
+    what another writes in the same launch."""
+    i = wp.tid()
+    if done_before[i] != 0:
+        done_after[i] = 1
+        return
+    a = int(child[i, 0])
+    b = int(child[i, 1])
+    if done_before[a] == 0 or done_before[b] == 0:
+        done_after[i] = 0
+        return
+    mass = node_mass[a] + node_mass[b]
+    centre = (node_mass[a] * node_centre[a] + node_mass[b] * node_centre[b]) / mass
+    node_mass[i] = mass
+    node_centre[i] = centre
+    node_quadrupole[i] = shifted_quadrupole(node_quadrupole[a], node_mass[a], node_centre[a] - centre) + shifted_quadrupole(
+        node_quadrupole[b], node_mass[b], node_centre[b] - centre
+    )
+    node_low[i] = wp.min(node_low[a], node_low[b])
+    node_high[i] = wp.max(node_high[a], node_high[b])
+    done_after[i] = 1
+
+
+@wp.func
+def multipole_field(r: wp.vec3d, mass: wp.float64, quadrupole: wp.mat33d) -> wp.vec3d:
+    """Acceleration / G at separation r from a node's centre: -M r/r^3 + Q r/r^5 - 5/2 (r.Q r) r/r^7."""
+    d2 = wp.dot(r, r)
+    inv_d = wp.float64(1.0) / wp.sqrt(d2)
+    inv_d2 = inv_d * inv_d
+    inv_d3 = inv_d * inv_d2
+    inv_d5 = inv_d3 * inv_d2
+    qr = quadrupole * r
+    return -mass * inv_d3 * r + inv_d5 * qr - wp.float64(2.5) * wp.dot(r, qr) * inv_d5 * inv_d2 * r
+
+
+@wp.kernel
+def tree_gravity(
+    G: wp.float64,
+    theta_open: wp.float64,
+    position_in: wp.array(dtype=wp.vec3d),
+    mass_in: wp.array(dtype=wp.float64),
+    order: wp.array(dtype=wp.int32),
+    count: int,
+    child: wp.array2d(dtype=wp.int32),
+    first: wp.array(dtype=wp.int32),
+    last: wp.array(dtype=wp.int32),
+    node_mass: wp.array(dtype=wp.float64),
+    node_centre: wp.array(dtype=wp.vec3d),
+    node_quadrupole: wp.array(dtype=wp.mat33d),
+    node_low: wp.array(dtype=wp.vec3d),
+    node_high: wp.array(dtype=wp.vec3d),
+    force_out: wp.array(dtype=wp.vec3d),
+):
+    """Gravity on the particle at sorted position k (neighbours in space walk alike)."""
+    k = wp.tid()
+    i = int(order[k])
+    x = position_in[i]
+    field = wp.vec3d()
+    stack = Stack()
+    top = int(0)
+    if count > 1:
+        stack[0] = wp.int32(0)
+        top = 1
+    while top > 0:
+        top -= 1
+        node = int(stack[top])
+        if node >= count - 1:  # a leaf: one particle, summed directly
+            j = int(order[node - (count - 1)])
+            if j != i:
+                r = x - position_in[j]
+                d2 = wp.dot(r, r)
+                if d2 > wp.float64(0.0):
+                    inv_d = wp.float64(1.0) / wp.sqrt(d2)
+                    field -= node_mass[node] * inv_d * inv_d * inv_d * r
+            continue
+        extent = node_high[node] - node_low[node]
+        size = wp.max(wp.max(extent[0], extent[1]), extent[2])
+        r = x - node_centre[node]
+        # Used whole only beyond size / theta_open plus the offset of its centre of mass from
+        # its box's centre (Barnes & Hut's guard against a lopsided node), never for its own members.
+        offset = wp.length(node_centre[node] - wp.float64(0.5) * (node_high[node] + node_low[node]))
+        reach = size / theta_open + offset
+        own = k >= int(first[node]) and k <= int(last[node])
+        if not own and reach * reach < wp.dot(r, r):
+            field += multipole_field(r, node_mass[node], node_quadrupole[node])
+        else:
+            stack[top] = child[node, 1]
+            stack[top + 1] = child[node, 0]
+            top += 2
+    force_out[i] = G * mass_in[i] * field
+
+
+@wp.kernel
+def grid_candidates(
+    grid: wp.uint64,
+    points: wp.array(dtype=wp.vec3),
+    radius_in: wp.array(dtype=wp.float64),
+    max_radius: wp.float64,
+    candidate_count: wp.array(dtype=wp.int32),
+    candidates: wp.array2d(dtype=wp.int32),
+):
+    """Each particle's neighbours closer than (R_i + R_max) (1 + 1e-4): a superset of its contacts,
+    confirmed in float64 by the contact pass.  The margin covers float32 positions to |x| ~ 1e9 cm."""
+    i = wp.tid()
+    reach = wp.float32((radius_in[i] + max_radius) * wp.float64(1.0001))
+    query = wp.hash_grid_query(grid, points[i], reach)
+    j = int(0)
+    noted = int(0)
+    while wp.hash_grid_query_next(query, j):
+        if j != i:
+            if noted < candidates.shape[1]:
+                candidates[i, noted] = wp.int32(j)
+            noted += 1
+    candidate_count[i] = wp.int32(noted)
+
+
+@wp.kernel
+def float32_points(position_in: wp.array(dtype=wp.vec3d), origin: wp.array(dtype=wp.vec3d), points: wp.array(dtype=wp.vec3)):
+    """Centres relative to the box corner, in float32, for the hash grid."""
+    i = wp.tid()
+    points[i] = wp.vec3(position_in[i] - origin[0])

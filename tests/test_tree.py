@@ -1,0 +1,102 @@
+"""The tree path (Params(gravity="tree")): gravity from a radix tree against all-pairs, contacts
+from a hash grid identical to all-pairs, conservation figures, and a collision on both paths."""
+
+import numpy as np
+import pytest
+from scenes import RADII, contact_cluster, overlapping_cloud, sphere_mass
+
+import decco_warp as dw
+from decco_warp.run import builtin_pile
+
+#: The default opening angle keeps the rms relative gravity error of a settled pile below this.
+SETTLED_RMS = 1e-3
+
+
+def _gravity(state, params, **options):
+    """Gravity alone: the forces with G, less the same forces without (contacts cancel exactly)."""
+    with_g = dw.compute_forces(state, params, precision="float64", **options)[0]
+    without = dw.compute_forces(state, dw.Params(**{**params.to_dict(), "G": 0.0}), precision="float64", **options)[0]
+    return with_g - without
+
+
+def _errors(state, theta_open, device):
+    exact = _gravity(state, dw.Params(), device=device, force_kernel="reference")
+    tree = _gravity(state, dw.Params(gravity="tree", theta_open=theta_open), device=device)
+    relative = np.linalg.norm(tree - exact, axis=1) / np.linalg.norm(exact, axis=1)
+    return float(np.sqrt((relative**2).mean())), float(relative.max())
+
+
+@pytest.mark.parametrize("pile", ["target", "projectile"])
+def test_tree_gravity_error_on_a_settled_pile_shrinks_with_theta_and_meets_the_default(pile, device):
+    state = dw.load_pile(builtin_pile(pile))
+    errors = {theta: _errors(state, theta, device) for theta in (0.2, 0.4, 0.7)}
+    rms = [errors[theta][0] for theta in (0.2, 0.4, 0.7)]
+    assert rms[0] < rms[1] < rms[2]  # a smaller angle opens more nodes
+    assert errors[dw.Params().theta_open][0] <= SETTLED_RMS
+    assert errors[0.2][1] < 2e-3 and errors[0.7][1] < 0.2  # the worst particle, near the centre where gravity cancels
+
+
+def test_tree_gravity_on_clouds_with_duplicate_morton_cells_and_tiny_counts(device):
+    """Two clumps 1000 radii apart share few Morton cells each (ties broken by index); 1 to 3 particles
+    make degenerate trees. With theta_open -> small every node is opened: the sums equal all-pairs."""
+    far = contact_cluster(60, seed=2)
+    near = contact_cluster(40, seed=3, offset=(2.0e7 + 1.0e9, -1.0e7, 5.0e6))
+    joined = dw.State.from_arrays(
+        np.vstack([far.positions, near.positions]), np.vstack([far.velocities, near.velocities]),
+        np.vstack([far.omegas, near.omegas]), np.concatenate([far.radii, near.radii]), np.concatenate([far.masses, near.masses]),
+    )  # fmt: skip
+    for state in (joined, contact_cluster(1, seed=0), contact_cluster(2, seed=1), contact_cluster(3, seed=1)):
+        exact = _gravity(state, dw.Params(), device=device, force_kernel="reference")
+        tree = _gravity(state, dw.Params(gravity="tree", theta_open=1e-6), device=device)
+        scale = np.abs(exact).max() or 1.0
+        np.testing.assert_allclose(tree, exact, rtol=0, atol=1e-12 * scale)
+
+
+def test_hash_grid_contacts_equal_all_pairs_contacts(device):
+    """Without gravity only contacts remain: the grid finds the same pairs, so forces and torques
+    are those of the all-pairs kernels to round-off of the summation order."""
+    state = overlapping_cloud(300, seed=8)
+    for rolling in ("couple", "paper"):
+        params = dw.Params(G=0.0, rolling_friction=rolling)
+        exact = dw.compute_forces(state, params, device=device, precision="float64", force_kernel="reference")
+        tree = dw.compute_forces(state, dw.Params(**{**params.to_dict(), "gravity": "tree"}), device=device, precision="float64")
+        for got, want in zip(tree, exact):
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
+
+
+def test_tree_momentum_figures_over_a_run(device):
+    """A tree does not pair forces exactly: the net force is not zero. Stated figure: over 200 steps of
+    the shipped target pile, the net gravity stays below 1e-3 of the summed |gravity|, and the
+    momentum drift below 1e-3 of (summed |gravity| x time); the energy ledger still closes."""
+    pile = dw.load_pile(builtin_pile("target"))
+    sim = dw.Simulation(pile, dw.Params(gravity="tree"), device=device, ledger=True)
+    gravity = _gravity(pile, dw.Params(gravity="tree"), device=device)
+    assert np.linalg.norm(gravity.sum(axis=0)) <= 1e-3 * np.linalg.norm(gravity, axis=1).sum()
+    p0 = (pile.masses[:, None] * pile.velocities).sum(axis=0)
+    sim.step(200)
+    drift = np.linalg.norm((pile.masses[:, None] * sim.state.velocities).sum(axis=0) - p0)
+    assert drift <= 1e-3 * np.linalg.norm(gravity, axis=1).sum() * sim.time
+    now = sim.diagnostics()
+    from decco_warp.diagnostics import energy_ledger
+
+    ledger = energy_ledger(now, sim.energy_start, sim.work())
+    assert abs(now["total_energy"] + sum(ledger.values()) - sim.energy_start["total_energy"]) <= 1e-10 * abs(now["potential"])
+
+
+def test_a_small_collision_ends_alike_on_both_paths(tmp_path):
+    """The shipped piles at eta 0.5, 22 deg, 10 000 steps (400 s, by when they have merged): the same
+    largest fragment within a few per cent."""
+    from decco_warp import spec as specs
+    from decco_warp.analysis.runs import analyse_run
+    from decco_warp.run import start_run
+
+    ratios = []
+    for gravity in ("all-pairs", "tree"):
+        spec = specs.resolve_spec(
+            {"run": {"name": gravity, "out": str(tmp_path), "device": "cpu", "steps": 10000, "output_every": 5000},
+             "params": {"gravity": gravity}}
+        )  # fmt: skip
+        start_run(spec)
+        ratios.append(analyse_run(tmp_path / gravity, min_members=20)["summary"]["largest_mass_ratio"])
+    assert ratios[0] > 1.0  # the piles merge
+    assert ratios[1] == pytest.approx(ratios[0], rel=0.03)
