@@ -171,7 +171,7 @@ class Engine:
                 self.layout.max_registers,
             )
         else:
-            self._force_kernel = force_kernels.pair_forces_reference(precision, params.rolling_friction, ledger)
+            self._force_kernel = force_kernels.pair_forces_reference(precision, params.rolling_friction)
 
     # -- stages of a step -----------------------------------------------------------
 

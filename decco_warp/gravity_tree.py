@@ -25,16 +25,17 @@ class GravityTree:
         self.box = zeros(2, wp.vec3d)
         self.keys = zeros(2 * count, wp.int32)  # radix_sort_pairs needs room for 2 n
         self.order = zeros(2 * count, wp.int32)
-        self.child = zeros((internal, 2), wp.int32)
-        self.first = zeros(internal, wp.int32)
-        self.last = zeros(internal, wp.int32)
+        self.nodes = kernels.TreeNodes()
+        self.nodes.child = zeros((internal, 2), wp.int32)
+        self.nodes.first = zeros(internal, wp.int32)
+        self.nodes.last = zeros(internal, wp.int32)
+        self.nodes.mass = zeros(nodes, wp.float64)
+        self.nodes.centre = zeros(nodes, wp.vec3d)
+        self.nodes.quadrupole = zeros(nodes, wp.mat33d)
+        self.nodes.low = zeros(nodes, wp.vec3d)
+        self.nodes.high = zeros(nodes, wp.vec3d)
         self.parent = zeros(nodes, wp.int32)
         self.height = zeros(1, wp.int32)
-        self.node_mass = zeros(nodes, wp.float64)
-        self.node_centre = zeros(nodes, wp.vec3d)
-        self.node_quadrupole = zeros(nodes, wp.mat33d)
-        self.node_low = zeros(nodes, wp.vec3d)
-        self.node_high = zeros(nodes, wp.vec3d)
         self.done = (zeros(nodes, wp.int32), zeros(nodes, wp.int32))
         self.points = zeros(count, wp.vec3)
         self.grid = wp.HashGrid(GRID_CELLS, GRID_CELLS, GRID_CELLS, device=device)
@@ -52,24 +53,22 @@ class GravityTree:
         wp.utils.radix_sort_pairs(self.keys, self.order, n)
         levels = 0
         if n > 1:
-            self._launch(kernels.build_nodes, n - 1, [self.keys, n, self.child, self.first, self.last, self.parent])
+            self._launch(kernels.build_nodes, n - 1, [self.keys, n, self.nodes, self.parent])
             self.height.zero_()
             self._launch(kernels.tree_height, n, [n, self.parent, self.height])
             levels = int(self.height.numpy()[0])  # one small read: as many launches as the tree is high
-        moments = [self.node_mass, self.node_centre, self.node_quadrupole, self.node_low, self.node_high]
-        self._launch(kernels.leaf_moments, n, [position, mass, self.order, n, *moments, *self.done])
+        self._launch(kernels.leaf_moments, n, [position, mass, self.order, n, self.nodes, *self.done])
         for level in range(levels):
             before, after = self.done[level % 2], self.done[1 - level % 2]
-            self._launch(kernels.node_moments, n - 1, [self.child, before, *moments, after])
+            self._launch(kernels.node_moments, n - 1, [self.nodes, before, after])
 
     def gravity(self, G: float, theta_open: float, position: wp.array, mass: wp.array, force_out: wp.array) -> None:
         """force_out = gravity on every particle (call :meth:`build` first)."""
         self._launch(
             kernels.tree_gravity,
             self.count,
-            [wp.float64(G), wp.float64(theta_open), position, mass, self.order, self.count, self.child, self.first,
-             self.last, self.node_mass, self.node_centre, self.node_quadrupole, self.node_low, self.node_high, force_out],
-        )  # fmt: skip
+            [wp.float64(G), wp.float64(theta_open), position, mass, self.order, self.count, self.nodes, force_out],
+        )
 
     def contact_candidates(self, position, radius, max_radius: float, candidate_count, candidates) -> None:
         """Each particle's neighbours within R_i + R_max (plus a margin), from the hash grid."""

@@ -160,6 +160,59 @@ def contact_function(rolling: str):
     return contact_channels
 
 
+@wp.struct
+class ContactSum:
+    """The contact channels on one particle, summed over its contacts."""
+
+    spring: wp.vec3d
+    sliding: wp.vec3d
+    sliding_torque: wp.vec3d
+    rolling: wp.vec3d
+    rolling_torque: wp.vec3d
+
+
+@functools.cache
+def contact_sum_function(rolling: str):
+    """The Warp function adding the contact channels on i from j (zero unless they touch) to a ContactSum."""
+    contact_channels = contact_function(rolling)
+
+    @wp.func
+    def add_contact(
+        model: ContactModel,
+        i: int,
+        j: int,
+        radius_in: wp.array(dtype=wp.float64),
+        position_in: wp.array(dtype=wp.vec3d),
+        velocity_in: wp.array(dtype=wp.vec3d),
+        omega_in: wp.array(dtype=wp.vec3d),
+        total: ContactSum,
+    ) -> ContactSum:
+        spring, sliding, sliding_torque, rolling_force, rolling_torque = contact_channels(
+            model, i, j, radius_in, position_in, velocity_in, omega_in
+        )
+        out = ContactSum()
+        out.spring = total.spring + spring
+        out.sliding = total.sliding + sliding
+        out.sliding_torque = total.sliding_torque + sliding_torque
+        out.rolling = total.rolling + rolling_force
+        out.rolling_torque = total.rolling_torque + rolling_torque
+        return out
+
+    return add_contact
+
+
+@wp.func
+def write_contacts(total: ContactSum, i: int, torque_out: wp.array(dtype=wp.vec3d), channels_out: wp.array2d(dtype=wp.vec3d)) -> wp.vec3d:
+    """Write i's contact torque and (when the ledger has rows) its channels; return its contact force."""
+    torque_out[i] = total.sliding_torque + total.rolling_torque
+    if channels_out.shape[0] > 0:
+        channels_out[i, 0] = total.spring
+        channels_out[i, 1] = total.sliding
+        channels_out[i, 2] = total.sliding_torque
+        channels_out[i, 3] = total.rolling
+    return total.spring + total.sliding + total.rolling
+
+
 @functools.cache
 def pair_forces_tiled(
     block_dim: int,
@@ -390,7 +443,7 @@ def contact_pass(rolling: str = "couple"):
     """Build the second launch of the split layout, one thread per particle: its noted candidates
     sorted by j, each evaluated in float64 and added to ``force_inout``; ``torque_out`` and the
     ledger's ``channels_out`` (when it has rows) are written whole."""
-    contact_channels = contact_function(rolling)
+    add_contact = contact_sum_function(rolling)
     Noted = wp.types.vector(length=CANDIDATES, dtype=wp.int32)
 
     @wp.kernel(module="unique", enable_backward=False)
@@ -427,41 +480,27 @@ def contact_pass(rolling: str = "couple"):
                             js[k] = js[k - 1]
                             k = k - 1
                 js[k] = j
-        spring = wp.vec3d()
-        sliding = wp.vec3d()
-        sliding_torque = wp.vec3d()
-        rolling_force = wp.vec3d()
-        rolling_torque = wp.vec3d()
+        total = ContactSum()
         for s in range(walk):  # the list, or every j after an overflow (each pair checked in float64)
             j = s
             if listed:
                 j = js[s]
-            c0, c1, c2, c3, c4 = contact_channels(model, i, j, radius_in, position_in, velocity_in, omega_in)
-            spring += c0
-            sliding += c1
-            sliding_torque += c2
-            rolling_force += c3
-            rolling_torque += c4
-        force_inout[i] = force_inout[i] + spring + sliding + rolling_force
-        torque_out[i] = sliding_torque + rolling_torque
-        if channels_out.shape[0] > 0:
-            channels_out[i, 0] = spring
-            channels_out[i, 1] = sliding
-            channels_out[i, 2] = sliding_torque
-            channels_out[i, 3] = rolling_force
+            total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, total)
+        force_inout[i] = force_inout[i] + write_contacts(total, i, torque_out, channels_out)
 
     return contact_pass_kernel
 
 
 @functools.cache
-def pair_forces_reference(precision: str = "mixed", rolling: str = "couple", ledger: bool = False):
+def pair_forces_reference(precision: str = "mixed", rolling: str = "couple"):
     """Build the one-thread-per-particle kernel of the same physics; launch with ``dim=N``.
 
     Gravity pair by pair in the precision's arithmetic on the float64 separation,
-    contacts with the same function as the tiled kernel.
+    contacts with the same function as the tiled kernel; the ledger's channels are written
+    when ``channels_out`` has rows.
     """
     real, vec_real = _real_types(precision)
-    contact_channels = contact_function(rolling)
+    add_contact = contact_sum_function(rolling)
 
     @wp.kernel(module="unique", enable_backward=False)
     def pair_forces_reference_kernel(
@@ -483,29 +522,15 @@ def pair_forces_reference(precision: str = "mixed", rolling: str = "couple", led
         position_i = position_in[i]
         g_mass_i = model.G * mass_in[i]
         gravity_sum = vec_real()
-        spring = wp.vec3d()
-        sliding = wp.vec3d()
-        sliding_torque = wp.vec3d()
-        rolling = wp.vec3d()
-        rolling_torque = wp.vec3d()
+        total = ContactSum()
         for j in range(count):
             r_ij = position_i - position_in[j]
             d2 = wp.dot(r_ij, r_ij)
             if d2 > wp.float64(0.0):
                 gravity_sum += gravity(vec_real(r_ij), real(g_mass_i * mass_in[j]))
                 if in_contact(d2, radius_in[i], radius_in[j]):
-                    c0, c1, c2, c3, c4 = contact_channels(model, i, j, radius_in, position_in, velocity_in, omega_in)
-                    spring += c0
-                    sliding += c1
-                    sliding_torque += c2
-                    rolling += c3
-                    rolling_torque += c4
-        force_out[i] = wp.vec3d(gravity_sum) + spring + sliding + rolling
-        torque_out[i] = sliding_torque + rolling_torque
-        if wp.static(ledger):
-            channels_out[i, 0] = spring
-            channels_out[i, 1] = sliding
-            channels_out[i, 2] = sliding_torque
-            channels_out[i, 3] = rolling
+                    total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, total)
+        contact_force = write_contacts(total, i, torque_out, channels_out)
+        force_out[i] = wp.vec3d(gravity_sum) + contact_force
 
     return pair_forces_reference_kernel

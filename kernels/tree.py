@@ -36,6 +36,20 @@ MAX_LEVELS = 62
 Stack = wp.types.vector(length=STACK, dtype=wp.int32)
 
 
+@wp.struct
+class TreeNodes:
+    """The tree: internal nodes 0 .. n - 2 (links and ranges), all 2n - 1 nodes' moments and boxes."""
+
+    child: wp.array2d(dtype=wp.int32)  # internal node -> its two nodes
+    first: wp.array(dtype=wp.int32)  # internal node -> first sorted position it holds
+    last: wp.array(dtype=wp.int32)  # ... and last
+    mass: wp.array(dtype=wp.float64)
+    centre: wp.array(dtype=wp.vec3d)  # centre of mass
+    quadrupole: wp.array(dtype=wp.mat33d)  # traceless, about the centre of mass
+    low: wp.array(dtype=wp.vec3d)  # box of the centres it holds
+    high: wp.array(dtype=wp.vec3d)
+
+
 @wp.kernel
 def reset_box(box: wp.array(dtype=wp.vec3d)):
     big = wp.float64(1.0e300)
@@ -118,14 +132,7 @@ def common_prefix(keys: wp.array(dtype=wp.int32), count: int, i: int, j: int) ->
 
 
 @wp.kernel
-def build_nodes(
-    keys: wp.array(dtype=wp.int32),
-    count: int,
-    child: wp.array2d(dtype=wp.int32),
-    first: wp.array(dtype=wp.int32),
-    last: wp.array(dtype=wp.int32),
-    parent: wp.array(dtype=wp.int32),
-):
+def build_nodes(keys: wp.array(dtype=wp.int32), count: int, nodes: TreeNodes, parent: wp.array(dtype=wp.int32)):
     """Internal node i (of count - 1): its range [first, last] of sorted positions, its two
     children (node indices; leaves are count - 1 + position) and, for them, their parent."""
     i = wp.tid()
@@ -159,10 +166,10 @@ def build_nodes(
     right = gamma + 1
     if high == gamma + 1:
         right = count - 1 + gamma + 1
-    child[i, 0] = wp.int32(left)
-    child[i, 1] = wp.int32(right)
-    first[i] = wp.int32(low)
-    last[i] = wp.int32(high)
+    nodes.child[i, 0] = wp.int32(left)
+    nodes.child[i, 1] = wp.int32(right)
+    nodes.first[i] = wp.int32(low)
+    nodes.last[i] = wp.int32(high)
     parent[left] = wp.int32(i)
     parent[right] = wp.int32(i)
     if i == 0:
@@ -187,11 +194,7 @@ def leaf_moments(
     mass_in: wp.array(dtype=wp.float64),
     order: wp.array(dtype=wp.int32),
     count: int,
-    node_mass: wp.array(dtype=wp.float64),
-    node_centre: wp.array(dtype=wp.vec3d),
-    node_quadrupole: wp.array(dtype=wp.mat33d),
-    node_low: wp.array(dtype=wp.vec3d),
-    node_high: wp.array(dtype=wp.vec3d),
+    nodes: TreeNodes,
     done_a: wp.array(dtype=wp.int32),
     done_b: wp.array(dtype=wp.int32),
 ):
@@ -200,11 +203,11 @@ def leaf_moments(
     k = wp.tid()
     leaf = count - 1 + k
     x = position_in[order[k]]
-    node_mass[leaf] = mass_in[order[k]]
-    node_centre[leaf] = x
-    node_quadrupole[leaf] = wp.mat33d()
-    node_low[leaf] = x
-    node_high[leaf] = x
+    nodes.mass[leaf] = mass_in[order[k]]
+    nodes.centre[leaf] = x
+    nodes.quadrupole[leaf] = wp.mat33d()
+    nodes.low[leaf] = x
+    nodes.high[leaf] = x
     done_a[leaf] = 1
     done_b[leaf] = 1
     if k < count - 1:
@@ -221,16 +224,7 @@ def shifted_quadrupole(quadrupole: wp.mat33d, mass: wp.float64, offset: wp.vec3d
 
 
 @wp.kernel
-def node_moments(
-    child: wp.array2d(dtype=wp.int32),
-    done_before: wp.array(dtype=wp.int32),
-    node_mass: wp.array(dtype=wp.float64),
-    node_centre: wp.array(dtype=wp.vec3d),
-    node_quadrupole: wp.array(dtype=wp.mat33d),
-    node_low: wp.array(dtype=wp.vec3d),
-    node_high: wp.array(dtype=wp.vec3d),
-    done_after: wp.array(dtype=wp.int32),
-):
+def node_moments(nodes: TreeNodes, done_before: wp.array(dtype=wp.int32), done_after: wp.array(dtype=wp.int32)):
     """One level: an internal node whose children were both summed before this launch sums them.
     Flags are read from ``done_before`` and written to ``done_after`` only, so no thread reads
     what another writes in the same launch."""
@@ -238,20 +232,20 @@ def node_moments(
     if done_before[i] != 0:
         done_after[i] = 1
         return
-    a = int(child[i, 0])
-    b = int(child[i, 1])
+    a = int(nodes.child[i, 0])
+    b = int(nodes.child[i, 1])
     if done_before[a] == 0 or done_before[b] == 0:
         done_after[i] = 0
         return
-    mass = node_mass[a] + node_mass[b]
-    centre = (node_mass[a] * node_centre[a] + node_mass[b] * node_centre[b]) / mass
-    node_mass[i] = mass
-    node_centre[i] = centre
-    node_quadrupole[i] = shifted_quadrupole(node_quadrupole[a], node_mass[a], node_centre[a] - centre) + shifted_quadrupole(
-        node_quadrupole[b], node_mass[b], node_centre[b] - centre
+    mass = nodes.mass[a] + nodes.mass[b]
+    centre = (nodes.mass[a] * nodes.centre[a] + nodes.mass[b] * nodes.centre[b]) / mass
+    nodes.mass[i] = mass
+    nodes.centre[i] = centre
+    nodes.quadrupole[i] = shifted_quadrupole(nodes.quadrupole[a], nodes.mass[a], nodes.centre[a] - centre) + shifted_quadrupole(
+        nodes.quadrupole[b], nodes.mass[b], nodes.centre[b] - centre
     )
-    node_low[i] = wp.min(node_low[a], node_low[b])
-    node_high[i] = wp.max(node_high[a], node_high[b])
+    nodes.low[i] = wp.min(nodes.low[a], nodes.low[b])
+    nodes.high[i] = wp.max(nodes.high[a], nodes.high[b])
     done_after[i] = 1
 
 
@@ -275,14 +269,7 @@ def tree_gravity(
     mass_in: wp.array(dtype=wp.float64),
     order: wp.array(dtype=wp.int32),
     count: int,
-    child: wp.array2d(dtype=wp.int32),
-    first: wp.array(dtype=wp.int32),
-    last: wp.array(dtype=wp.int32),
-    node_mass: wp.array(dtype=wp.float64),
-    node_centre: wp.array(dtype=wp.vec3d),
-    node_quadrupole: wp.array(dtype=wp.mat33d),
-    node_low: wp.array(dtype=wp.vec3d),
-    node_high: wp.array(dtype=wp.vec3d),
+    nodes: TreeNodes,
     force_out: wp.array(dtype=wp.vec3d),
 ):
     """Gravity on the particle at sorted position k (neighbours in space walk alike)."""
@@ -305,21 +292,21 @@ def tree_gravity(
                 d2 = wp.dot(r, r)
                 if d2 > wp.float64(0.0):
                     inv_d = wp.float64(1.0) / wp.sqrt(d2)
-                    field -= node_mass[node] * inv_d * inv_d * inv_d * r
+                    field -= nodes.mass[node] * inv_d * inv_d * inv_d * r
             continue
-        extent = node_high[node] - node_low[node]
+        extent = nodes.high[node] - nodes.low[node]
         size = wp.max(wp.max(extent[0], extent[1]), extent[2])
-        r = x - node_centre[node]
+        r = x - nodes.centre[node]
         # Used whole only beyond size / theta_open plus the offset of its centre of mass from
         # its box's centre (Barnes & Hut's guard against a lopsided node), never for its own members.
-        offset = wp.length(node_centre[node] - wp.float64(0.5) * (node_high[node] + node_low[node]))
+        offset = wp.length(nodes.centre[node] - wp.float64(0.5) * (nodes.high[node] + nodes.low[node]))
         reach = size / theta_open + offset
-        own = k >= int(first[node]) and k <= int(last[node])
+        own = k >= int(nodes.first[node]) and k <= int(nodes.last[node])
         if not own and reach * reach < wp.dot(r, r):
-            field += multipole_field(r, node_mass[node], node_quadrupole[node])
+            field += multipole_field(r, nodes.mass[node], nodes.quadrupole[node])
         else:
-            stack[top] = child[node, 1]
-            stack[top + 1] = child[node, 0]
+            stack[top] = nodes.child[node, 1]
+            stack[top + 1] = nodes.child[node, 0]
             top += 2
     force_out[i] = G * mass_in[i] * field
 
