@@ -248,8 +248,9 @@ class Trajectory:
         return cls(f, path)
 
     @classmethod
-    def reopen(cls, path, keep_through_step: int) -> "Trajectory":
-        """Open an existing trajectory to continue it, dropping frames after ``keep_through_step``."""
+    def reopen(cls, path, keep_through_step: int, observables: dict | None = None) -> "Trajectory":
+        """Open an existing trajectory to continue it, dropping frames after ``keep_through_step``;
+        ``observables`` (a sample frame) adds the series an older version did not write."""
         path = Path(path)
         clear_write_flags(path)  # left set by a writer that was killed
         try:
@@ -261,6 +262,8 @@ class Trajectory:
             keep = _complete_frames(element, keep_through_step)
             for name in ("step", "time", "value"):
                 element[name].resize(keep, axis=0)
+        if observables:
+            trajectory._add_missing(observables)  # before SWMR mode, which allows no new datasets
         f.swmr_mode = True
         return trajectory
 
@@ -282,6 +285,24 @@ class Trajectory:
             element = self.file[group][name]
             self._datasets[key] = (element["step"], element["time"], element["value"])
         return self._datasets[key]
+
+    def _add_missing(self, observables: dict) -> None:
+        """Series of ``observables`` that a trajectory written by an older version lacks, with its
+        earlier frames filled with NaN (-1 for integers), so that every series keeps a value per frame."""
+        frames = self.file["particles/all/position"]
+        for name, value in observables.items():
+            if name in self.file["observables"]:
+                continue
+            value = np.asarray(value)
+            dtype = np.int64 if np.issubdtype(value.dtype, np.integer) else np.float64
+            _time_series(self.file["observables"], name, value.shape, dtype)
+            element = self.file["observables"][name]
+            count = frames["step"].shape[0]
+            for dataset in ("step", "time", "value"):
+                element[dataset].resize(count, axis=0)
+            element["value"][...] = -1 if dtype == np.int64 else np.nan
+            element["time"][...] = frames["time"][()]
+            element["step"][...] = frames["step"][()]
 
     @staticmethod
     def _append(datasets: tuple, step: int, time: float, value) -> None:

@@ -346,7 +346,8 @@ def _execute(run: PreparedRun, progress, observers) -> RunResult:
             stale.unlink()
             log(f"resume: removed the unfinished {stale.name}")
         log(f"resume: from step {sim.step_count} of {spec['run']['steps']} on {sim.device}")
-        trajectory = Trajectory.reopen(run_dir / TRAJECTORY_FILE, keep_through_step=sim.step_count)
+        sample = record(sim, int(extra["size_classes"]))[1]
+        trajectory = Trajectory.reopen(run_dir / TRAJECTORY_FILE, keep_through_step=sim.step_count, observables=sample)
         return _advance(sim, trajectory, spec, run_dir, log, extra, progress, observers)
 
     for name in (TRAJECTORY_FILE, CHECKPOINT_FILE, LOG_FILE):

@@ -251,3 +251,18 @@ def test_signal_stops_cleanly_and_resume_equals_an_uninterrupted_run(signal_numb
     result = cli("resume", str(tmp_path / "stopped"), "--device", "cpu")
     assert result.returncode == 0, result.stderr
     assert_same_run(_frames(straight.run_dir), _frames(tmp_path / "stopped"))
+
+
+def test_a_run_written_before_the_deepest_overlap_series_resumes_and_gains_them(tmp_path):
+    """Trajectories of decco-warp 0.1 lack deepest_overlap: resume adds the series, with NaN (and -1 -1)
+    for the frames written before, so every series keeps one value per frame."""
+    start_run(_spec(tmp_path, "old", steps=200))
+    with h5py.File(tmp_path / "old" / "trajectory.h5", "r+") as f:
+        del f["observables/deepest_overlap"], f["observables/deepest_overlap_pair"]
+    resume_run(tmp_path / "old", steps=400)
+    data = dw.read_trajectory(tmp_path / "old" / "trajectory.h5")
+    depth, pairs = data["observables"]["deepest_overlap"], data["observables"]["deepest_overlap_pair"]
+    assert data["observable_step"]["deepest_overlap"].tolist() == data["step"].tolist()
+    written_before = data["step"] <= 200
+    assert np.isnan(depth[written_before]).all() and (pairs[written_before] == -1).all()
+    assert (depth[~written_before] > 0).all() and (pairs[~written_before] >= 0).all()
