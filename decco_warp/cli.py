@@ -395,8 +395,10 @@ def simulate(
 
 def _number_or_auto(text: Optional[str], option: str):
     """An option that takes a number or "auto"; None when not given."""
-    if text is None or text.strip() == "auto":
-        return None if text is None else "auto"
+    if text is None:
+        return None
+    if text.strip() == "auto":
+        return "auto"
     try:
         return float(text)
     except ValueError:
@@ -426,7 +428,7 @@ def _check(spec: dict) -> None:
     if depth > 1:
         verdict += "; contacts may pass a centre into the other sphere, outside the model's validity (k_in = \"auto\" keeps them shallow)"
     elif depth > 0.5:
-        verdict += "; contacts deeper than half the smaller radius are likely, and would be warned about"
+        verdict += "; contacts deeper than half the smaller radius are possible (the prediction is an upper estimate) and would be warned about"
     typer.echo(f"verdict: {verdict}")
 
 
@@ -620,9 +622,12 @@ def view(
     trajectory = path / "trajectory.h5" if path.is_dir() else path
     if not trajectory.is_file():
         fail(f"{path} is neither a run folder nor a trajectory file")
-    existed = save_to is not None and save_to.exists()
+    existed = True  # until a recording of ours is started: never delete what was there before
     try:
         chosen, address = ("save", None) if save_to is not None else parse_mode(mode)
+        if chosen == "save" and save_to is None:
+            save_to = trajectory.parent / "recording.rrd"
+        existed = save_to is not None and save_to.exists()
         if save_to is not None:
             check_destination(save_to, "recording")
         bar = _progress_bar("replaying", "frames")

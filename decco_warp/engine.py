@@ -146,7 +146,8 @@ class Engine:
         tiled = force_kernel == "tiled"
         self.body = wp.zeros(self.count if tiled else 0, dtype=force_kernels.BODY_TYPES[precision], device=self.device)
         # The tree path: gravity from a radix tree, contacts from a hash grid, both into the contact pass.
-        self.tree = GravityTree(self.count, self.device) if params.gravity == "tree" else None
+        # (A "reference" engine is the all-pairs yardstick, also for diagnostics: it never builds a tree.)
+        self.tree = GravityTree(self.count, self.device) if params.gravity == "tree" and tiled else None
         self.max_radius = float(state.radii.max())
         split = self.tree is not None or tiled and self.layout.contact_pass
         self.candidate_count = wp.zeros(self.count if split else 0, dtype=wp.int32, device=self.device)

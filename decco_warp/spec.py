@@ -187,11 +187,6 @@ def steps_of(duration: float, dt: float) -> int:
     return max(1, math.ceil(duration / dt - 1e-9))
 
 
-def is_settled(spec: dict) -> bool:
-    """True when no value waits for the set-up (no "auto", steps known)."""
-    return AUTO not in (spec["params"]["k_in"], spec["params"]["dt"]) and "steps" in spec["run"]
-
-
 def settle_auto(spec: dict, state) -> tuple[dict, list[str]]:
     """A copy of ``spec`` with "auto" k_in and dt chosen for the collision ``state`` (paper eqs. 12
     and 17, docs/model.md) and a duration turned into steps; plus one line per choice made."""

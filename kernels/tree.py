@@ -26,12 +26,8 @@ import warp as wp
 
 wp.set_module_options({"enable_backward": False})
 
-#: Morton key bits per axis (30-bit keys fit an int32).
-MORTON_BITS = 10
 #: Longest walk stack: two children are pushed per opened node, at most one level deeper each time.
 STACK = 128
-#: Upper bound on the tree's height: 30 key bits plus 31 bits of the index tie-break.
-MAX_LEVELS = 62
 
 Stack = wp.types.vector(length=STACK, dtype=wp.int32)
 

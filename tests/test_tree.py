@@ -3,7 +3,7 @@ from a hash grid identical to all-pairs, conservation figures, and a collision o
 
 import numpy as np
 import pytest
-from scenes import RADII, contact_cluster, overlapping_cloud, sphere_mass
+from scenes import contact_cluster, overlapping_cloud
 
 import decco_warp as dw
 from decco_warp.run import builtin_pile

@@ -111,3 +111,17 @@ def test_missing_rerun_is_one_line_telling_how_to_install(tmp_path):
     assert "pip install" in result.stderr and len(result.stderr.strip().splitlines()) == 1
     bad = cli("simulate", *STEPS, "--rerun", "tv", "--out", str(tmp_path / "out2"), "--device", "cpu")
     assert bad.returncode == 2 and "spawn, save, connect[=ADDR], serve" in bad.stderr
+
+
+def test_view_mode_save_writes_the_recording_into_the_run_folder(recorded, tmp_path):
+    """`view RUN --mode save` (no --save path) writes RUN/recording.rrd, as the live `--rerun save` does."""
+    import shutil
+
+    run_dir = tmp_path / "run"
+    shutil.copytree(recorded[0], run_dir)
+    (run_dir / "recording.rrd").unlink()
+    result = cli("view", str(run_dir), "--mode", "save")
+    assert result.returncode == 0, result.stderr
+    again, _ = read_recording(run_dir / "recording.rrd")
+    live, _ = read_recording(recorded[0] / "recording.rrd")
+    assert set(again) == set(live)

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..diagnostics import energy_scale, ledger_closure
 from ..io import read_trajectory
+from ..params import G_CGS
 from ..state import State
 from .clusters import find_clusters
 from .scaling import largest_mass_ratio as ls12_largest_mass_ratio
@@ -186,7 +187,7 @@ def _ls12(collision: dict, G) -> float | None:
     needed = ("target_mass", "projectile_mass", "target_radius", "projectile_radius", "theta_deg", "kinetic_energy")
     if not all(key in collision for key in needed):
         return None
-    return float(ls12_largest_mass_ratio(collision, **({} if G is None else {"G": G})))
+    return float(ls12_largest_mass_ratio(collision, G_CGS if G is None else G))
 
 
 def _start_energies(observables: dict) -> dict:
