@@ -30,13 +30,21 @@ PROJECTILES = {0.1: "proj500", 0.25: "proj1250", 1.0: "equal5000"}
 MINUTE = 60.0
 
 
-def runs(sweep: str) -> list[dict]:
-    """Each run of a committed sweep: its summary, and its analysis (read lazily)."""
+def runs(sweep: str, ratio: float | None = None) -> list[dict]:
+    """Each run of a committed sweep (of one mass ratio if given): its summary and folder."""
     found = []
     for path in sorted((RESULTS / sweep).glob("*/summary.json")):
         summary = json.loads(path.read_text())
-        found.append({"summary": summary, "dir": path.parent})
+        if ratio is None or round(summary["mass_ratio"], 2) == ratio:
+            found.append({"summary": summary, "dir": path.parent})
     return sorted(found, key=lambda r: r["summary"]["eta"])
+
+
+def panel_sets() -> list[tuple[str, float, str]]:
+    """One panel per sweep and mass ratio that has runs: the head-on grid first, then 22 deg."""
+    sets = [("fig3", ratio, f"m_p/m_t = {label}, head-on") for ratio, label in ((0.1, "1/10"), (0.25, "1/4"), (1.0, "1"))]
+    sets.append(("fig8", 0.25, "m_p/m_t = 1/4, 22 deg"))
+    return [entry for entry in sets if runs(entry[0], entry[1])]
 
 
 def ls12_curve(summary: dict, etas: np.ndarray) -> np.ndarray:
@@ -52,16 +60,15 @@ def ls12_curve(summary: dict, etas: np.ndarray) -> np.ndarray:
     return np.array([scaling.largest_mass_ratio({**collision, "kinetic_energy": kinetic_per_eta * e}) for e in etas])
 
 
-def panels(sets: list[tuple[str, str]]):
+def panels(sets: list[tuple[str, float, str]]):
     return plt.subplots(1, len(sets), figsize=(4.4 * len(sets), 3.8), squeeze=False)
 
 
 def largest_fragment(sets):
     fig, axes = panels(sets)
     etas = np.geomspace(0.3, 15, 200)
-    for ax, (sweep, title) in zip(axes[0], sets):
-        found = runs(sweep)
-        s = [r["summary"] for r in found]
+    for ax, (sweep, ratio, title) in zip(axes[0], sets):
+        s = [r["summary"] for r in runs(sweep, ratio)]
         ax.plot([x["eta"] for x in s], [x["largest_mass_ratio"] for x in s], "o", color="C0", label="decco-warp")
         ax.plot(etas, ls12_curve(s[0], etas), "--", color="C1", label="LS12 universal law (small bodies)")
         ax.axhline(1.0, color="0.6", linewidth=0.6)
@@ -75,8 +82,8 @@ def largest_fragment(sets):
 
 def size_change(sets):
     fig, axes = panels(sets)
-    for ax, (sweep, title) in zip(axes[0], sets):
-        s = [r["summary"] for r in runs(sweep)]
+    for ax, (sweep, ratio, title) in zip(axes[0], sets):
+        s = [r["summary"] for r in runs(sweep, ratio)]
         colours = ["C0" if x["largest_mass_ratio"] > 1 else "C1" for x in s]
         ax.scatter([x["eta"] for x in s], [x["particle_size_change"] for x in s], c=colours)
         ax.axhline(0.0, color="0.6", linewidth=0.6)
@@ -120,12 +127,13 @@ def conservation():
 
 def overlaps():
     fig, ax = plt.subplots(figsize=(5.0, 4.0))
-    for sweep, marker in (("fig8", "o"), ("fig3", "s")):
-        s = [r["summary"] for r in runs(sweep)]
-        ax.plot([x["predicted_overlap"] for x in s], [x["deepest_overlap"] for x in s], marker, label=sweep)
+    for sweep, ratio, title in panel_sets():
+        s = [r["summary"] for r in runs(sweep, ratio)]
+        marker = "o" if sweep == "fig8" else "s"
+        ax.plot([x["predicted_overlap"] for x in s], [x["deepest_overlap"] for x in s], marker, label=title)
     line = np.array([0.1, 4.0])
     ax.plot(line, line, color="0.5", linewidth=0.8, label="measured = predicted")
-    ax.plot(line, 0.25 * line, color="0.5", linestyle=":", linewidth=0.8, label="1/4 of predicted")
+    ax.plot(line, 0.1 * line, color="0.5", linestyle=":", linewidth=0.8, label="1/10 of predicted")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("predicted deepest overlap (fraction of the smallest radius)")
@@ -135,7 +143,7 @@ def overlaps():
 
 
 def main() -> None:
-    sets = [("fig3", "m_p/m_t = 1/4, head-on"), ("fig8", "m_p/m_t = 1/4, 22 deg")]
+    sets = panel_sets()
     for name, fig in [
         ("validation-largest-fragment", largest_fragment(sets)),
         ("validation-size-change", size_change(sets)),
