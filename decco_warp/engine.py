@@ -141,6 +141,9 @@ class Engine:
         channel_count = len(force_kernels.LEDGER_CHANNELS)
         self.channels = wp.zeros((ledger_rows, channel_count), dtype=wp.vec3d, device=self.device)
         self.work = wp.zeros(ledger_rows, dtype=wp.vec4d, device=self.device)
+        # Each particle's deepest contact met by any force evaluation since the host last took it
+        # (kernels/forces.py note_depth): frames report the peak between them, not a sample.
+        self.deepest_contact = wp.zeros(self.count, dtype=wp.int64, device=self.device)
 
         # The tiled sweep reads packed bodies (force_kernels.BODY_TYPES), refreshed before each sweep.
         tiled = force_kernel == "tiled"
@@ -179,7 +182,7 @@ class Engine:
     def eval_forces(self) -> None:
         """Force and torque on every particle at the current positions and velocities."""
         state = [self.model, self.count, self.radius, self.mass, self.position, self.velocity, self.omega]
-        outputs = [self.force, self.torque, self.channels]
+        outputs = [self.force, self.torque, self.channels, self.deepest_contact]
         if self.ledger:
             self.channels.zero_()
         if self.tree is not None:
@@ -264,6 +267,17 @@ class Engine:
         )
         return {name: array.numpy() for name, array in outputs.items()}
 
+    def take_deepest_contact(self) -> dict:
+        """The deepest contact any force evaluation met since the last call (or the start), as
+        ``deepest_overlap`` (a fraction of the smaller radius of the pair, to 6e-8) and
+        ``deepest_overlap_pair`` (lower index first; -1 -1 when nothing touched); starts a new record."""
+        records = self.deepest_contact.numpy().copy()  # on the CPU numpy() is a view of the array zeroed next
+        self.deepest_contact.zero_()
+        i = int(np.argmax(records))
+        depth, j = force_kernels.unpack_depth(int(records[i]))
+        pair = np.array(sorted((i, j)) if records[i] > 0 else (-1, -1), dtype=np.int64)
+        return {"deepest_overlap": depth, "deepest_overlap_pair": pair}
+
     def read(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Positions, velocities and angular velocities copied to the host."""
         return self.position.numpy().copy(), self.velocity.numpy().copy(), self.omega.numpy().copy()
@@ -288,6 +302,7 @@ class Engine:
             "torque": torque,
             "channels": self.channels.numpy().copy(),
             "work": self.work.numpy().copy(),
+            "deepest_contact": self.deepest_contact.numpy().copy(),
         }
 
     def restore(self, snapshot: dict[str, np.ndarray]) -> None:
@@ -305,3 +320,8 @@ class Engine:
             if values.shape != target.numpy().shape:
                 raise ValueError(f"snapshot {name} has shape {values.shape}; expected {target.numpy().shape}")
             target.assign(wp.array(values, dtype=target.dtype, device=self.device))
+        # The record since the last frame (checkpoints of decco-warp 0.2 have none: it starts afresh).
+        records = np.asarray(snapshot.get("deepest_contact", np.zeros(self.count)), dtype=np.int64)
+        if records.shape != (self.count,):
+            raise ValueError(f"snapshot deepest_contact has shape {records.shape}; expected {(self.count,)}")
+        self.deepest_contact.assign(wp.array(records, dtype=wp.int64, device=self.device))

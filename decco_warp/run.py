@@ -361,6 +361,7 @@ def _execute(run: PreparedRun, progress, observers) -> RunResult:
     for line in plan.lines():
         log(line)
     particles, observables = record(sim, extra["size_classes"])
+    observables.update(deepest_since(observables, sim.take_deepest_contact()))
     parameters = {
         "spec": spec,
         "collision": state.metadata,
@@ -409,6 +410,9 @@ def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, pro
     # Dissipation only lowers the total energy; a gain of a fraction of this means the integration broke down.
     scale = energy_scale(sim.energy_start)
     overlaps = OverlapWatch(extra, spec["run"].get("max_overlap"), log)
+    # A frame's deepest overlap is the deepest since the previous frame, which a resumed run may
+    # have written before it stopped (checkpoints of decco-warp 0.2 do not say: then its start).
+    last_frame = int(extra.get("last_frame_step", first_step))
     stop = _StopRequests()
 
     def checkpoint(step: int) -> None:
@@ -429,12 +433,14 @@ def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, pro
                 warning = None
                 if step % output_every == 0 or step == total:
                     frame = particles, observables = record(sim, size_classes)
+                    observables.update(deepest_since(observables, sim.take_deepest_contact()))
                     try:
                         check_sanity(step, particles)
                         check_energy(step, observables["total_energy"], start_energy, scale)
                     except BlowUp as error:
                         raise BlowUp(f"{error}; likely cause: {likely_cause(sim.stability, overlaps, extra)}") from None
-                    warning = overlaps.see(step, observables)
+                    warning = overlaps.see(step, observables, since=last_frame)
+                    last_frame = extra["last_frame_step"] = step
                     trajectory.append(step, sim.time, particles, observables)
                     log(
                         f"frame: step {step}, t {sim.time:.6g} s, E {observables['total_energy']:.9g} erg, "
@@ -534,6 +540,15 @@ OVERLAP_WARNINGS = {
 }
 
 
+def deepest_since(observables: dict, since_last: dict) -> dict:
+    """A frame's deepest overlap: the deepest contact of any step since the previous frame
+    (Simulation.take_deepest_contact), or of the frame's own state if that is deeper (the same
+    contact, seen without the record's 6e-8 quantisation)."""
+    if since_last["deepest_overlap"] > observables["deepest_overlap"]:
+        return since_last
+    return {key: observables[key] for key in since_last}
+
+
 class OverlapWatch:
     """The deepest contact of a run, frame by frame: warned about past each of OVERLAP_WARNINGS
     (once, in run.log and on the progress line), and a stop past ``[run] max_overlap`` if set.
@@ -547,21 +562,27 @@ class OverlapWatch:
         extra.setdefault("deepest_overlap", 0.0)
         extra.setdefault("deepest_overlap_step", -1)
         extra.setdefault("deepest_overlap_pair", np.array([-1, -1], dtype=np.int64))
+        extra.setdefault("deepest_overlap_since", -1)
         extra.setdefault("overlap_warned", 0.0)
 
     @property
     def deepest(self) -> float:
         return float(self.extra["deepest_overlap"])
 
-    def see(self, step: int, observables: dict) -> str | None:
-        """Note a frame's deepest contact; returns a warning when it first passes a level."""
+    def see(self, step: int, observables: dict, since: int | None = None) -> str | None:
+        """Note a frame's deepest contact, met at a step after ``since`` (the previous frame) and up
+        to ``step``; returns a warning when it first passes a level."""
         depth = float(observables["deepest_overlap"])
         i, j = (int(k) for k in observables["deepest_overlap_pair"])
+        since = step - 1 if since is None else since
         if depth > self.deepest:
-            self.extra.update(deepest_overlap=depth, deepest_overlap_step=step, deepest_overlap_pair=np.array([i, j]))
+            self.extra.update(
+                deepest_overlap=depth, deepest_overlap_step=step, deepest_overlap_since=since, deepest_overlap_pair=np.array([i, j])
+            )
+        when = _steps(since, step)
         if self.limit is not None and depth > self.limit:
             raise BlowUp(
-                f"step {step}: particles {i} and {j} overlap by {depth:.3g} of the smaller radius, past "
+                f"{when}: particles {i} and {j} overlap by {depth:.3g} of the smaller radius, past "
                 f"[run] max_overlap = {self.limit:g}; k_in is too soft for the impact speed (see the predicted "
                 "deepest overlap in run.log, or set k_in = \"auto\")"
             )
@@ -570,7 +591,7 @@ class OverlapWatch:
             if depth > level > float(self.extra["overlap_warned"]):
                 self.extra["overlap_warned"] = level
                 warning = (
-                    f"warning: step {step}: particles {i} and {j} overlap by {depth:.3g} of the smaller radius "
+                    f"warning: {when}: particles {i} and {j} overlap by {depth:.3g} of the smaller radius "
                     f"({meaning}); the run goes on"
                 )
         if warning:
@@ -581,10 +602,14 @@ class OverlapWatch:
         if self.extra["deepest_overlap_step"] < 0:
             return "no contacts seen at the frames"
         i, j = (int(k) for k in self.extra["deepest_overlap_pair"])
-        return (
-            f"deepest overlap {self.deepest:.3g} of the smaller radius at step {int(self.extra['deepest_overlap_step'])} "
-            f"(particles {i} and {j})"
-        )
+        step, since = int(self.extra["deepest_overlap_step"]), int(self.extra["deepest_overlap_since"])
+        when = _steps(since if since >= 0 else step - 1, step)  # runs of decco-warp 0.2 kept no `since`
+        return f"deepest overlap {self.deepest:.3g} of the smaller radius at {when} (particles {i} and {j})"
+
+
+def _steps(since: int, step: int) -> str:
+    """The steps after ``since`` up to ``step``, in words."""
+    return f"step {step}" if since >= step - 1 else f"steps {since + 1} to {step}"
 
 
 #: What can go wrong with one run (its input, its numerics, its output), as a sweep records it.

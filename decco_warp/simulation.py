@@ -152,6 +152,11 @@ class Simulation:
         pairs = self.pair_observables() if pairs is None else pairs
         return state_diagnostics(state, pairs)
 
+    def take_deepest_contact(self) -> dict:
+        """The deepest contact any step met since the last call (or since this simulation was made or
+        restored): ``deepest_overlap`` (fraction of the smaller radius) and ``deepest_overlap_pair``."""
+        return self.engine.take_deepest_contact()
+
     def work(self) -> np.ndarray:
         """Work of (gravity, spring, sliding, rolling) on each particle since the ledger began [erg], (N, 4)."""
         return self.engine.read_work()

@@ -37,7 +37,7 @@ import functools
 
 import warp as wp
 
-from .pair import CONTACT_FUNCTIONS, ContactModel, gravity, in_contact
+from .pair import CONTACT_FUNCTIONS, ContactModel, gravity, in_contact, overlap
 
 wp.set_module_options({"enable_backward": False})
 
@@ -119,12 +119,36 @@ def _real_types(precision: str):
     return (wp.float32, wp.vec3f) if precision == "mixed" else (wp.float64, wp.vec3d)
 
 
+# The deepest contact of each particle since the host last read it, as one int64 so that a
+# single atomic max keeps depth and partner together: the depth (a fraction of the smaller
+# radius) in units of 2^-DEPTH_BITS above PARTNER_BITS bits of the partner's index.
+DEPTH_BITS = 24
+PARTNER_BITS = 31
+MAX_DEPTH = 63.0  # keeps the packed value below 2^62 (depths past 2 cannot occur: 4 with radii 1:3)
+DEPTH_UNIT = float(2**DEPTH_BITS)
+
+
+@wp.func
+def note_depth(deepest_out: wp.array(dtype=wp.int64), i: int, j: int, d2: wp.float64, radius_i: wp.float64, radius_j: wp.float64):
+    """Raise i's record of its deepest contact to this one (with j) if deeper; no-op without a record."""
+    if deepest_out.shape[0] > 0:
+        depth = overlap(wp.sqrt(d2), radius_i, radius_j) / wp.min(radius_i, radius_j)
+        units = wp.int64(wp.min(depth, wp.float64(MAX_DEPTH)) * wp.float64(DEPTH_UNIT))
+        wp.atomic_max(deepest_out, i, (units << wp.int64(PARTNER_BITS)) | wp.int64(j))
+
+
+def unpack_depth(record: int) -> tuple[float, int]:
+    """A record written by :func:`note_depth`: (depth as a fraction of the smaller radius, partner)."""
+    return (record >> PARTNER_BITS) / DEPTH_UNIT, record & ((1 << PARTNER_BITS) - 1)
+
+
 @functools.cache
 def contact_function(rolling: str):
     """The Warp function giving the contact channels on i from j if they touch, in float64 from the state arrays.
 
     Returns (spring force, sliding force, sliding torque, rolling force, rolling
-    torque), all zero for a pair that does not touch.
+    torque), all zero for a pair that does not touch; notes the contact's depth in
+    ``deepest_out`` (see :func:`note_depth`).
     """
     contact = CONTACT_FUNCTIONS[rolling]
 
@@ -137,12 +161,14 @@ def contact_function(rolling: str):
         position_in: wp.array(dtype=wp.vec3d),
         velocity_in: wp.array(dtype=wp.vec3d),
         omega_in: wp.array(dtype=wp.vec3d),
+        deepest_out: wp.array(dtype=wp.int64),
     ):
         # The separation is taken in float64: positions are ~1e7 cm, overlaps ~1e2 cm.
         r_ij = position_in[i] - position_in[j]
         d2 = wp.dot(r_ij, r_ij)
         # d2 == 0: the particle itself, or a coincident one, which has no direction.
         if d2 > wp.float64(0.0) and in_contact(d2, radius_in[i], radius_in[j]):
+            note_depth(deepest_out, i, j, d2, radius_in[i], radius_in[j])
             return wp.static(contact)(
                 model,
                 r_ij,
@@ -185,10 +211,11 @@ def contact_sum_function(rolling: str):
         position_in: wp.array(dtype=wp.vec3d),
         velocity_in: wp.array(dtype=wp.vec3d),
         omega_in: wp.array(dtype=wp.vec3d),
+        deepest_out: wp.array(dtype=wp.int64),
         total: ContactSum,
     ) -> ContactSum:
         spring, sliding, sliding_torque, rolling_force, rolling_torque = contact_channels(
-            model, i, j, radius_in, position_in, velocity_in, omega_in
+            model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out
         )
         out = ContactSum()
         out.spring = total.spring + spring
@@ -269,6 +296,7 @@ def pair_forces_tiled(
         force_out: wp.array(dtype=wp.vec3d),
         torque_out: wp.array(dtype=wp.vec3d),
         channels_out: wp.array2d(dtype=wp.vec3d),  # (N, 4) with the ledger, else empty; zeroed by the caller
+        deepest_out: wp.array(dtype=wp.int64),  # raised to each contact's depth (note_depth), or empty
     ):
         block, lane = wp.tid()
         first = block * wp.static(P)
@@ -325,7 +353,7 @@ def pair_forces_tiled(
                 else:
                     j = slots[p, s]
                 spring, sliding, sliding_torque, rolling, rolling_torque = contact_channels(
-                    model, i, j, radius_in, position_in, velocity_in, omega_in
+                    model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out
                 )
                 force = spring + sliding + rolling
                 torque = sliding_torque + rolling_torque
@@ -462,6 +490,7 @@ def contact_pass(rolling: str = "couple"):
         force_inout: wp.array(dtype=wp.vec3d),
         torque_out: wp.array(dtype=wp.vec3d),
         channels_out: wp.array2d(dtype=wp.vec3d),
+        deepest_out: wp.array(dtype=wp.int64),
     ):
         i = wp.tid()
         noted = candidate_count[i]
@@ -485,7 +514,7 @@ def contact_pass(rolling: str = "couple"):
             j = s
             if listed:
                 j = js[s]
-            total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, total)
+            total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out, total)
         force_inout[i] = force_inout[i] + write_contacts(total, i, torque_out, channels_out)
 
     return contact_pass_kernel
@@ -517,6 +546,7 @@ def pair_forces_reference(precision: str = "mixed", rolling: str = "couple"):
         force_out: wp.array(dtype=wp.vec3d),
         torque_out: wp.array(dtype=wp.vec3d),
         channels_out: wp.array2d(dtype=wp.vec3d),
+        deepest_out: wp.array(dtype=wp.int64),
     ):
         i = wp.tid()
         position_i = position_in[i]
@@ -529,7 +559,7 @@ def pair_forces_reference(precision: str = "mixed", rolling: str = "couple"):
             if d2 > wp.float64(0.0):
                 gravity_sum += gravity(vec_real(r_ij), real(g_mass_i * mass_in[j]))
                 if in_contact(d2, radius_in[i], radius_in[j]):
-                    total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, total)
+                    total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out, total)
         contact_force = write_contacts(total, i, torque_out, channels_out)
         force_out[i] = wp.vec3d(gravity_sum) + contact_force
 
