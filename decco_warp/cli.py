@@ -319,8 +319,8 @@ def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: in
 def _report(result) -> None:
     run_dir = result.run_dir
     typer.echo(
-        f"done: {result.steps} steps, {result.time:.6g} s simulated, {result.wall_seconds:.1f} s wall "
-        f"({result.steps_this_session} steps this session)"
+        f"done: {result.steps} steps, {result.time:.6g} s simulated, {result.wall_seconds:.1f} s wall, "
+        f"{result.stepping_seconds:.1f} s of it stepping ({result.steps_this_session} steps this session)"
     )
     typer.echo(f"outputs in {run_dir}/: spec.toml, trajectory.h5 (H5MD), checkpoint.h5, run.log")
     typer.echo(f"inspect: h5ls -r {run_dir}/trajectory.h5   |   python: decco_warp.io.read_trajectory('{run_dir}/trajectory.h5')")

@@ -63,6 +63,8 @@ class RunResult:
     time: float
     wall_seconds: float
     steps_this_session: int
+    stepping_seconds: float = 0.0
+    """Of the wall time over all sessions, the part spent stepping (the rest: frames, checkpoints, set-up)."""
 
 
 # --- piles and folders ---------------------------------------------------------------
@@ -403,6 +405,8 @@ def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, pro
     size_classes = int(extra["size_classes"])
     first_step = sim.step_count
     wall_before = float(extra["wall_seconds"])
+    stepping_before = float(extra.get("stepping_seconds", 0.0))  # runs of decco-warp 0.2 did not count it
+    stepping = 0.0
     started = _time.perf_counter()
     # Progress is reported about 200 times per run, never between graph blocks.
     report_every = max(50, total // 200)
@@ -417,6 +421,7 @@ def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, pro
 
     def checkpoint(step: int) -> None:
         extra["wall_seconds"] = wall_before + _time.perf_counter() - started
+        extra["stepping_seconds"] = stepping_before + stepping
         write_checkpoint(run_dir / CHECKPOINT_FILE, sim.snapshot(), sim.state, extra)
         log(f"checkpoint: step {step}")
 
@@ -426,7 +431,10 @@ def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, pro
                 step = sim.step_count
                 stops = [total, _next_multiple(step, output_every), _next_multiple(step, checkpoint_every)]
                 stops += [_next_multiple(step, every) for every, _ in observers]
+                before = _time.perf_counter()
                 sim.step(min(min(stops) - step, report_every - step % report_every))
+                sim.finish()  # so that the steps' time is counted here, not in the frame that reads them
+                stepping += _time.perf_counter() - before
                 step = sim.step_count
                 pause_point("step", step)
                 frame = None
@@ -478,9 +486,13 @@ def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, pro
             trajectory.close()
         wall = _time.perf_counter() - started
         if sim.step_count >= total:
-            log(f"done: step {sim.step_count}, t {sim.time:.6g} s, {wall:.1f} s wall this session; {overlaps.summary()}")
+            outside = 100.0 * (wall - stepping) / wall if wall > 0 else 0.0
+            log(
+                f"done: step {sim.step_count}, t {sim.time:.6g} s, {wall:.1f} s wall this session, {stepping:.1f} s of it "
+                f"stepping ({outside:.0f} % outside: frames, checkpoints, output); {overlaps.summary()}"
+            )
         log.close()
-    return RunResult(run_dir, sim.step_count, sim.time, wall_before + wall, sim.step_count - first_step)
+    return RunResult(run_dir, sim.step_count, sim.time, wall_before + wall, sim.step_count - first_step, stepping_before + stepping)
 
 
 class BlowUp(RuntimeError):

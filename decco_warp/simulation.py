@@ -117,6 +117,10 @@ class Simulation:
             self.engine.step()
             self._step += 1
 
+    def finish(self) -> None:
+        """Wait until the device has done every step asked of it (steps on CUDA return at once)."""
+        wp.synchronize_device(self.engine.device)
+
     def _step_graph(self):
         if self._graph is None:
             with wp.ScopedCapture(device=self.engine.device) as capture:

@@ -40,7 +40,7 @@ SWEEP_KEYS = {"name", "out", "min_members", "analyse_every", "keep_trajectory", 
 SUMMARY_FIELDS = [
     "run", "status", "reason", "n_particles", "mass_ratio", "theta_deg", "eta", "speed", "k_in", "dt", "steps",
     "largest_mass_ratio", "ls12_largest_mass_ratio", "particle_size_change", "clusters", "deepest_overlap", "predicted_overlap",
-    "momentum_drift", "angular_momentum_drift", "ledger_closure", "wall_seconds", "analysis_seconds",
+    "momentum_drift", "angular_momentum_drift", "ledger_closure", "wall_seconds", "stepping_seconds", "analysis_seconds",
     "device", "device_name",
 ]  # fmt: skip
 SUMMARY_FILE = "summary.json"
@@ -134,7 +134,9 @@ def simulate_one(spec: dict) -> dict:
             row["device"] = prepared.sim.device
             execute(prepared)
             row["status"] = "ok"
-        row["wall_seconds"] = round(float(read_checkpoint(checkpoint)[2]["wall_seconds"]), 3)
+        extra = read_checkpoint(checkpoint)[2]
+        row["wall_seconds"] = round(float(extra["wall_seconds"]), 3)
+        row["stepping_seconds"] = round(float(extra["stepping_seconds"]), 3) if "stepping_seconds" in extra else None
     except RUN_FAILURES as error:
         row.update(status="failed", reason=" ".join(str(error).split()))
     row["device_name"] = _device_name(row["device"])

@@ -1,7 +1,7 @@
 """Runs: the CLI, run folders, the H5MD trajectory, checkpoints and resume."""
 
 import os
-
+import re
 import signal
 import subprocess
 import sys
@@ -44,7 +44,14 @@ def test_default_simulate_writes_a_complete_run_folder(finished):
     assert str(run_dir) in result.stdout and "trajectory.h5" in result.stdout
     spec = specs.resolve_spec(specs.load_spec_file(run_dir / "spec.toml"))
     assert spec["run"]["steps"] == 600 and spec["piles"]["target"] == "builtin:target"
-    assert "done: step 600" in (run_dir / "run.log").read_text()
+    # The wall time, and the part of it spent stepping (the rest: frames, checkpoints, output).
+    done = re.search(r"done: step 600, .*, ([\d.]+) s wall this session, ([\d.]+) s of it stepping \((\d+) % outside", (run_dir / "run.log").read_text())
+    assert done, (run_dir / "run.log").read_text()
+    wall, stepping, outside = float(done[1]), float(done[2]), int(done[3])
+    assert 0 < stepping <= wall and 0 <= outside <= 100
+    extra = read_checkpoint(run_dir / "checkpoint.h5")[2]
+    assert 0 < extra["stepping_seconds"] < extra["wall_seconds"]
+    assert f"{extra['stepping_seconds']:.1f} s of it stepping" in result.stdout
 
 
 def test_trajectory_follows_h5md_and_round_trips(finished):

@@ -72,6 +72,7 @@ def test_sweep_runs_on_two_workers_reports_failures_and_resumes(tmp_path):
         summary = json.loads((run_dir / "summary.json").read_text())
         assert summary["analyse_every"] == 2 and summary["largest_mass_ratio"] == pytest.approx(float(row["largest_mass_ratio"]))
         assert float(row["deepest_overlap"]) > 0 and float(row["ledger_closure"]) < 1e-9 and int(row["n_particles"]) == 450
+        assert 0 < float(row["stepping_seconds"]) < float(row["wall_seconds"])
     record = json.loads((tmp_path / "grid" / "sweep.json").read_text())
     assert record["runs"] == {"failed": 2, "ok": 2} and record["decco_warp"] == dw.__version__
     # Again: the finished runs are skipped, the failed ones tried again (and fail the same way).
