@@ -145,7 +145,7 @@ def pile(
     mu_r: float = typer.Option(PILE_DEFAULTS["mu_r"], "--mu-r", help="Rolling friction coefficient."),
     dt: float = typer.Option(PILE_DEFAULTS["dt"], "--dt", help="Time step [s]."),
     precision: str = typer.Option(PILE_DEFAULTS["precision"], "--precision", help="mixed or float64."),
-    gravity: str = typer.Option(PILE_DEFAULTS["gravity"], "--gravity", help="all-pairs, or tree for large piles."),
+    gravity: str = typer.Option(PILE_DEFAULTS["gravity"], "--gravity", help="all-pairs, tree for large piles, or auto (by size and device)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing pile file."),
     device: Optional[str] = DeviceOption,
 ) -> None:
@@ -153,7 +153,7 @@ def pile(
     from .checks import InputError, check_destination
     from .device import DeviceError, resolve_device
     from .io import save_pile
-    from .params import Params
+    from .params import GRAVITY_CHOICES, Params, choose_gravity
     from .pile import FormationError, check_formation_inputs, form_pile
 
     if out.exists() and not overwrite:
@@ -161,12 +161,16 @@ def pile(
     try:
         check_destination(out, "pile file")
         chosen = resolve_device(device)
+        if gravity not in GRAVITY_CHOICES:
+            raise ValueError(f"--gravity must be one of {', '.join(GRAVITY_CHOICES)}; got {gravity!r}")
+        if gravity == "auto":
+            gravity = choose_gravity(particles, chosen)
         params = Params(k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt, gravity=gravity)
         size_radii = _floats(radii, "--radii")
         check_formation_inputs(particles, size_radii, density, ke_threshold, fill, max_steps=max_steps)
     except (DeviceError, InputError, ValueError) as error:
         fail(str(error))
-    typer.echo(f"forming a {particles}-particle pile on {chosen} (seed {seed})", err=True)
+    typer.echo(f"forming a {particles}-particle pile on {chosen} (seed {seed}, {gravity} gravity)", err=True)
     bar = _progress_bar("forming", "step", "ratio")
     with bar:
         task = bar.add_task("collapse", total=1.0, step="", ratio="")
@@ -347,7 +351,9 @@ def simulate(
     max_overlap: Optional[float] = typer.Option(
         None, "--max-overlap", help="Stop the run when a contact is deeper than this fraction of the smaller radius."
     ),
-    gravity: Optional[str] = typer.Option(None, "--gravity", help="all-pairs (exact) or tree (O(N log N), for large piles)."),
+    gravity: Optional[str] = typer.Option(
+        None, "--gravity", help="all-pairs (exact), tree (O(N log N), for large piles) or auto (by size and device)."
+    ),
     check: bool = typer.Option(False, "--check", help="Set up the collision, print its margins and predicted deepest overlap, run nothing."),
     output_every: Optional[int] = typer.Option(None, "--output-every", help="Steps between trajectory frames."),
     checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Steps between checkpoints."),

@@ -15,6 +15,19 @@ ROLLING_FRICTION_FORMS = ("couple", "paper")
 #: Gravity solvers: "all-pairs" sums every pair (exact, O(N^2)); "tree" walks a radix tree with
 #: monopole + quadrupole nodes (O(N log N), error set by theta_open; contacts from a hash grid).
 GRAVITY_SOLVERS = ("all-pairs", "tree")
+#: What a specification or the CLI may ask for: a solver, or "auto" (:func:`choose_gravity`).
+GRAVITY_CHOICES = (*GRAVITY_SOLVERS, "auto")
+
+#: From this many particles ``gravity = "auto"`` takes the tree, per device kind. CPU: measured
+#: (docs/benchmarks.md: the tree's step is the faster from ~3 500 particles). CUDA: provisional
+#: until `decco-warp bench --gravity all-pairs,tree` has timed the tree on a GPU; all-pairs reaches
+#: 4.5e11 pairs/s there, 38 ms a step at 131 072 particles.
+TREE_FROM = {"cpu": 4096, "cuda": 131072}
+
+
+def choose_gravity(n: int, device: str) -> str:
+    """The gravity solver ``gravity = "auto"`` takes for ``n`` particles on ``device`` ("cpu", "cuda:0")."""
+    return "tree" if n >= TREE_FROM["cuda" if device.startswith("cuda") else "cpu"] else "all-pairs"
 
 
 @dataclass(frozen=True)

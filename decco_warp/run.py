@@ -23,6 +23,7 @@ import numpy as np
 from . import spec as specs
 from .checks import MAX_REST_OVERLAP, InputError, check_destination, check_particles, deepest_rest_overlap
 from .collision import setup_collision
+from .device import resolve_device
 from .diagnostics import energy_ledger, energy_scale, ledger_closure, stress_shares
 from .io import FileFormatError, Trajectory, load_pile, pause_point, read_checkpoint, read_frame, write_checkpoint
 from .lock import RunFolderLock
@@ -240,7 +241,7 @@ def plan_start(spec: dict, device: str | None = None) -> Plan:
     device = _device(spec, device)
     state, pile_info = prepare_collision(spec, device)
     check_particles(state, "the collision set-up")  # a speed or spin beyond the model's subsonic regime
-    spec, notes = specs.settle_auto(spec, state)
+    spec, notes = specs.settle_auto(spec, state, resolve_device(device))
     params = specs.params_of(spec)
     return Plan(spec, state, pile_info, check_stability(state, params), predict_compression(state, params.k_in), notes)
 

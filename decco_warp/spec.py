@@ -27,7 +27,7 @@ from typing import Any, Callable
 
 from .collision import SPIN_AXES
 from .engine import PRECISIONS
-from .params import GRAVITY_SOLVERS, ROLLING_FRICTION_FORMS, Params
+from .params import GRAVITY_CHOICES, ROLLING_FRICTION_FORMS, Params, choose_gravity
 from .stability import DEFAULT_MAX_COMPRESSION, choose_stiffness, choose_time_step
 
 if sys.version_info >= (3, 11):
@@ -104,7 +104,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "dt": Key(float, _PARAMS_DEFAULT.dt, _positive, "> 0 (s) or \"auto\"", auto=True),
         "G": Key(float, _PARAMS_DEFAULT.G, _non_negative, ">= 0 (cm^3 g^-1 s^-2)"),
         "rolling_friction": Key(str, "couple", lambda v: v in ROLLING_FRICTION_FORMS, " or ".join(ROLLING_FRICTION_FORMS)),
-        "gravity": Key(str, _PARAMS_DEFAULT.gravity, lambda v: v in GRAVITY_SOLVERS, " or ".join(GRAVITY_SOLVERS)),
+        "gravity": Key(str, _PARAMS_DEFAULT.gravity, lambda v: v in GRAVITY_CHOICES, " or ".join(GRAVITY_CHOICES)),
         "theta_open": Key(float, _PARAMS_DEFAULT.theta_open, lambda v: 0 < v < 2, "in (0, 2) (tree opening angle)"),
         "max_compression": Key(
             float, DEFAULT_MAX_COMPRESSION, lambda v: 0 < v <= 1, "in (0, 1] (deepest overlap for k_in = \"auto\", fraction of the smallest radius)"
@@ -187,12 +187,16 @@ def steps_of(duration: float, dt: float) -> int:
     return max(1, math.ceil(duration / dt - 1e-9))
 
 
-def settle_auto(spec: dict, state) -> tuple[dict, list[str]]:
+def settle_auto(spec: dict, state, device: str = "cpu") -> tuple[dict, list[str]]:
     """A copy of ``spec`` with "auto" k_in and dt chosen for the collision ``state`` (paper eqs. 12
-    and 17, docs/model.md) and a duration turned into steps; plus one line per choice made."""
+    and 17, docs/model.md), an "auto" gravity solver for its size on ``device``, and a duration
+    turned into steps; plus one line per choice made."""
     spec = {table: dict(values) for table, values in spec.items()}
     params, run = spec["params"], spec["run"]
     notes = []
+    if params["gravity"] == AUTO:
+        params["gravity"] = choose_gravity(state.n, device)
+        notes.append(f'gravity = "auto": {params["gravity"]} for {state.n} particles on {device}')
     if params["k_in"] == AUTO:
         try:
             params["k_in"] = choose_stiffness(state, params["max_compression"])
@@ -248,7 +252,7 @@ def params_values(spec: dict) -> dict:
 def params_of(spec: dict) -> Params:
     values = params_values(spec)
     if AUTO in values.values():
-        raise SpecError("[params] k_in and dt must be settled from the collision set-up first (settle_auto)")
+        raise SpecError("[params] k_in, dt and gravity must be settled from the collision set-up first (settle_auto)")
     return Params(**values)
 
 

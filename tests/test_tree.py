@@ -100,3 +100,30 @@ def test_a_small_collision_ends_alike_on_both_paths(tmp_path):
         ratios.append(analyse_run(tmp_path / gravity, min_members=20)["summary"]["largest_mass_ratio"])
     assert ratios[0] > 1.0  # the piles merge
     assert ratios[1] == pytest.approx(ratios[0], rel=0.03)
+
+
+def test_auto_gravity_takes_the_tree_from_the_crossover_and_the_spec_records_it(tmp_path):
+    from types import SimpleNamespace
+
+    from decco_warp import spec as specs
+    from decco_warp.params import TREE_FROM, choose_gravity
+
+    for device, kind in (("cpu", "cpu"), ("cuda:0", "cuda"), ("cuda:3", "cuda")):
+        assert choose_gravity(TREE_FROM[kind] - 1, device) == "all-pairs"
+        assert choose_gravity(TREE_FROM[kind], device) == "tree"
+    spec = specs.resolve_spec({"run": {"name": "auto", "out": str(tmp_path), "device": "cpu", "steps": 10}, "params": {"gravity": "auto"}})
+    with pytest.raises(specs.SpecError, match="settled"):
+        specs.params_of(spec)
+    for n, solver in ((TREE_FROM["cpu"] - 1, "all-pairs"), (TREE_FROM["cpu"], "tree")):
+        settled, notes = specs.settle_auto(spec, SimpleNamespace(n=n), "cpu")
+        assert specs.params_of(settled).gravity == solver and notes == [f'gravity = "auto": {solver} for {n} particles on cpu']
+    with pytest.raises(specs.SpecError, match="gravity"):
+        specs.resolve_spec({"params": {"gravity": "fmm"}})
+    # Through the CLI: the shipped 450-particle collision stays on all-pairs, and says so.
+    from helpers import cli
+
+    result = cli("simulate", "--gravity", "auto", "--steps", "10", "--output-every", "10", "--device", "cpu", "--out", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    run_dir = tmp_path / "default"
+    assert specs.load_spec_file(run_dir / "spec.toml")["params"]["gravity"] == "all-pairs"
+    assert 'gravity = "auto": all-pairs for 450 particles on cpu' in (run_dir / "run.log").read_text()
