@@ -43,6 +43,8 @@ class BenchRow:
     baseline_pairs_per_s: float
     speedup: float
     fraction_of_limit: float | None
+    systems: int = 1
+    """Systems of n particles stepped together (an ensemble); pairs/s counts all of them."""
 
 
 def lattice_pile(n: int, seed: int = 0) -> State:
@@ -57,6 +59,16 @@ def lattice_pile(n: int, seed: int = 0) -> State:
     radii = np.full(n, RADIUS)
     masses = np.full(n, 4.0 / 3.0 * math.pi * DENSITY * RADIUS**3)
     return State.from_arrays(positions, velocities, omegas, radii, masses)
+
+
+def lattice_ensemble(n: int, systems: int) -> State:
+    """``systems`` lattice piles of ``n`` spheres (different jitter), one after another: an ensemble."""
+    piles = [lattice_pile(n, seed=k) for k in range(systems)]
+
+    def joined(name: str) -> np.ndarray:
+        return np.concatenate([getattr(p, name) for p in piles])
+
+    return State.from_arrays(joined("positions"), joined("velocities"), joined("omegas"), joined("radii"), joined("masses"))
 
 
 def device_limit_pairs_per_s(device: str) -> tuple[float | None, str]:
@@ -113,16 +125,19 @@ def bench_size(
     steps: int = 100,
     baseline: bool = True,
     gravity: str = "all-pairs",
+    systems: int = 1,
 ) -> BenchRow:
     """One row: the force evaluation and the full step at ``n`` (pairs/s counts N^2 pairs, also
-    for the tree, whose figure is then an equivalent rate), beside the one-thread-per-particle kernel."""
-    state = lattice_pile(n)
+    for the tree, whose figure is then an equivalent rate), beside the one-thread-per-particle kernel.
+    With ``systems`` > 1, that many systems of ``n`` stepped together, and pairs/s counts them all."""
+    state = lattice_ensemble(n, systems) if systems > 1 else lattice_pile(n)
+    sizes = [n] * systems
     params = Params(gravity=gravity)
     layout = layout or choose_layout(n, device)
-    tiled = Engine(state, params, device, precision, "tiled", layout)
+    tiled = Engine(state, params, device, precision, "tiled", layout, systems=sizes)
     force_seconds = _seconds_per_call(tiled.eval_forces, device, budget)
     # The full step as runs take it: with the energy ledger.
-    sim = Simulation(state, params, device=device, precision=precision, layout=layout, allow_unstable=True, ledger=True)
+    sim = Simulation(state, params, device=device, precision=precision, layout=layout, allow_unstable=True, ledger=True, systems=sizes)
     step_seconds = _seconds_per_call(lambda: sim.step(steps), device, budget) / steps
     if baseline:
         reference = Engine(state, Params(), device, precision, "reference")
@@ -130,11 +145,12 @@ def bench_size(
     else:
         baseline_seconds = math.nan
     limit, _ = device_limit_pairs_per_s(device)
-    pairs = float(n) * n
+    pairs = float(n) * n * systems
     return BenchRow(
         n=n,
         device=device,
-        layout=_describe(layout) if gravity == "all-pairs" else f"tree (theta_open {params.theta_open:g}), hash-grid contacts",
+        layout=(_describe(layout) if gravity == "all-pairs" else f"tree (theta_open {params.theta_open:g}), hash-grid contacts")
+        + (f", {systems} systems together" if systems > 1 else ""),
         force_seconds=force_seconds,
         force_pairs_per_s=pairs / force_seconds,
         step_seconds=step_seconds,
@@ -143,6 +159,7 @@ def bench_size(
         baseline_pairs_per_s=pairs / baseline_seconds,
         speedup=baseline_seconds / force_seconds,
         fraction_of_limit=None if limit is None else (pairs / step_seconds) / limit,
+        systems=systems,
     )
 
 

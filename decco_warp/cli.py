@@ -467,6 +467,9 @@ def bench(
     ),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the table as JSON here."),
     gravity: str = typer.Option("all-pairs", "--gravity", help="Gravity solvers to time, side by side: all-pairs, tree or all-pairs,tree."),
+    ensemble: str = typer.Option(
+        "", "--ensemble", help="Also time ensembles of this many systems of N stepped together, e.g. 2,4,8 (aggregate pairs/s, against one at a time)."
+    ),
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Pairs/s of the force kernel and of the full step, beside a one-thread-per-particle baseline."""
@@ -491,6 +494,12 @@ def bench(
     solvers = [g.strip() for g in gravity.split(",") if g.strip()]
     if not solvers or any(g not in GRAVITY_SOLVERS for g in solvers):
         fail(f"--gravity must list {' and/or '.join(GRAVITY_SOLVERS)}; got {gravity!r}")
+    try:
+        ensembles = [int(v) for v in filter(None, (part.strip() for part in ensemble.split(",")))]
+    except ValueError:
+        ensembles = [0]
+    if any(k < 2 for k in ensembles):
+        fail(f"--ensemble must list system counts >= 2, e.g. 2,4,8; got {ensemble!r}")
     default_sizes = "2048,10240,65536,131072" if chosen.startswith("cuda") else "256,1024"
     sizes = [int(v) for v in _floats(n or default_sizes, "--n")]
     if any(v < 2 for v in sizes) or steps < 1 or budget <= 0:
@@ -518,10 +527,17 @@ def bench(
     for size in sizes:
         runs = [("all-pairs", layout) for layout in [None, *extra_layouts]] if "all-pairs" in solvers else []
         runs += [("tree", None)] if "tree" in solvers else []
-        for solver, layout in runs:
-            first = (solver, layout) == runs[0]
-            row = benchmarks.bench_size(size, chosen, precision, layout, budget, steps, baseline=first, gravity=solver)
+        runs = [(solver, layout, 1) for solver, layout in runs]
+        runs += [("all-pairs", None, k) for k in ensembles]
+        alone = None
+        for solver, layout, systems in runs:
+            first = (solver, layout, systems) == runs[0]
+            row = benchmarks.bench_size(size, chosen, precision, layout, budget, steps, baseline=first, gravity=solver, systems=systems)
             rows.append(row)
+            if systems == 1 and layout is None and solver == "all-pairs":
+                alone = row
+            if systems > 1 and alone is not None:
+                row.layout += f": {row.step_pairs_per_s / alone.step_pairs_per_s:.2f}x one at a time"
             fraction = f"{100 * row.fraction_of_limit:8.1f}%" if row.fraction_of_limit is not None else f"{'n/a':>9}"
             baseline_text = f"{row.baseline_pairs_per_s:17.3g} {row.speedup:8.1f}x" if first else f"{'':>17} {'':>9}"
             typer.echo(

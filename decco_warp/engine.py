@@ -8,6 +8,7 @@ are built on it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -83,6 +84,24 @@ def choose_layout(n: int, device: str) -> Layout:
     return Layout(block_dim=1, particles_per_block=4, contact_slots=16)
 
 
+def system_sizes(systems: Sequence[int] | None, count: int) -> np.ndarray:
+    """The sizes of an ensemble's systems, checked against the particle count (None: one system)."""
+    sizes = np.array([count] if systems is None else list(systems), dtype=np.int64)
+    if sizes.ndim != 1 or len(sizes) == 0 or (sizes <= 0).any() or sizes.sum() != count:
+        raise ValueError(f"systems must be positive sizes adding up to the {count} particles; got {list(sizes)}")
+    return sizes
+
+
+def tiled_blocks(starts: np.ndarray, ends: np.ndarray, per_block: int) -> np.ndarray:
+    """Per block of a tiled launch: (first row, end of its rows, first and end of its system)."""
+    rows = [
+        (first, min(first + per_block, end), start, end)
+        for start, end in zip(starts, ends)
+        for first in range(int(start), int(end), per_block)
+    ]
+    return np.array(rows, dtype=np.int32).reshape(-1, 4)
+
+
 def contact_model(params: Params) -> ContactModel:
     model = ContactModel()
     model.G = wp.float64(params.G)
@@ -105,7 +124,10 @@ class Engine:
         force_kernel: str = "tiled",
         layout: Layout | None = None,
         ledger: bool = False,
+        systems: Sequence[int] | None = None,
     ):
+        """``systems``: the sizes of independent systems laid one after another in ``state``
+        (an ensemble: each particle feels only its own system; default, one system)."""
         if precision not in PRECISIONS:
             raise ValueError(f"precision must be one of {', '.join(PRECISIONS)}; got {precision!r}")
         if force_kernel not in FORCE_KERNELS:
@@ -116,7 +138,8 @@ class Engine:
         self.force_kernel = force_kernel
         self.ledger = ledger
         self.count = state.n
-        self.layout = layout or choose_layout(self.count, self.device)
+        self.systems = system_sizes(systems, self.count)
+        self.layout = layout or choose_layout(int(self.systems.max()), self.device)
         self.model = contact_model(params)
 
         def vectors(values):
@@ -151,6 +174,19 @@ class Engine:
         # The tree path: gravity from a radix tree, contacts from a hash grid, both into the contact pass.
         # (A "reference" engine is the all-pairs yardstick, also for diagnostics: it never builds a tree.)
         self.tree = GravityTree(self.count, self.device) if params.gravity == "tree" and tiled else None
+        if self.tree is not None and len(self.systems) > 1:
+            raise ValueError("the tree path steps one system at a time; an ensemble needs gravity = \"all-pairs\"")
+        # Each particle's own system, [first, end), and for the tiled kernels each block's rows (a block
+        # never straddles two systems) with its system's range.
+        ends = np.cumsum(self.systems)
+        starts = ends - self.systems
+        ranges = np.repeat(np.stack([starts, ends], axis=1), self.systems, axis=0).astype(np.int32)
+        self.ranges = wp.array(ranges, dtype=wp.vec2i, device=self.device)
+        self.blocks = wp.array(
+            tiled_blocks(starts, ends, self.layout.particles_per_block) if tiled else np.zeros((0, 4), np.int32),
+            dtype=wp.vec4i,
+            device=self.device,
+        )
         self.max_radius = float(state.radii.max())
         split = self.tree is not None or tiled and self.layout.contact_pass
         self.candidate_count = wp.zeros(self.count if split else 0, dtype=wp.int32, device=self.device)
@@ -181,7 +217,6 @@ class Engine:
 
     def eval_forces(self) -> None:
         """Force and torque on every particle at the current positions and velocities."""
-        state = [self.model, self.count, self.radius, self.mass, self.position, self.velocity, self.omega]
         outputs = [self.force, self.torque, self.channels, self.deepest_contact]
         if self.ledger:
             self.channels.zero_()
@@ -191,8 +226,9 @@ class Engine:
             self.tree.contact_candidates(self.position, self.radius, self.max_radius, self.candidate_count, self.candidates)
             self._contacts(outputs)
             return
+        state = [self.radius, self.mass, self.position, self.velocity, self.omega]
         if self.force_kernel == "reference":
-            wp.launch(self._force_kernel, dim=self.count, inputs=state, outputs=outputs, device=self.device)
+            wp.launch(self._force_kernel, dim=self.count, inputs=[self.model, self.ranges, *state], outputs=outputs, device=self.device)
             return
         wp.launch(
             force_kernels.PACK_KERNELS[self.precision],
@@ -201,16 +237,15 @@ class Engine:
             outputs=[self.body],
             device=self.device,
         )
-        blocks = [(self.count + self.layout.particles_per_block - 1) // self.layout.particles_per_block]
-        tiled = {"dim": blocks, "block_dim": self.layout.block_dim, "device": self.device}
+        tiled = {"dim": [self.blocks.shape[0]], "block_dim": self.layout.block_dim, "device": self.device}
         if not self.layout.contact_pass:
-            wp.launch_tiled(self._force_kernel, inputs=[*state, self.body], outputs=outputs, **tiled)
+            wp.launch_tiled(self._force_kernel, inputs=[self.model, self.blocks, *state, self.body], outputs=outputs, **tiled)
             return
         # The split layout: a gravity sweep noting contact candidates, then the contacts.
         self.candidate_count.zero_()
         wp.launch_tiled(
             self._force_kernel,
-            inputs=[self.count, self.mass, self.body],
+            inputs=[self.blocks, self.mass, self.body],
             outputs=[self.force, self.candidate_count, self.candidates],
             **tiled,
         )
@@ -221,7 +256,7 @@ class Engine:
         wp.launch(
             self._contact_kernel,
             dim=self.count,
-            inputs=[self.model, self.count, self.radius, self.position, self.velocity, self.omega, self.candidate_count, self.candidates],
+            inputs=[self.model, self.ranges, self.radius, self.position, self.velocity, self.omega, self.candidate_count, self.candidates],
             outputs=outputs,
             device=self.device,
         )
@@ -261,7 +296,7 @@ class Engine:
         wp.launch(
             observables.pair_observables,
             dim=self.count,
-            inputs=[self.model, self.count, self.radius, self.mass, self.position, self.velocity],
+            inputs=[self.model, self.ranges, self.radius, self.mass, self.position, self.velocity],
             outputs=list(outputs.values()),
             device=self.device,
         )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -41,13 +42,14 @@ class Simulation:
         force_kernel: str = "tiled",
         layout: Layout | None = None,
         ledger: bool = False,
+        systems: Sequence[int] | None = None,
     ):
         self.params = params
         self.stability: StabilityReport = check_stability(state, params)
         if not self.stability.stable and not allow_unstable:
             raise StabilityError(self.stability)
         self._static = state.copy()
-        self.engine = Engine(state, params, device, precision, force_kernel, layout, ledger)
+        self.engine = Engine(state, params, device, precision, force_kernel, layout, ledger, systems)
         # Time is origin + step * dt, never a running sum, so that a restarted run keeps the same clock.
         self._time_origin = state.time - state.step * params.dt
         self._step = state.step

@@ -142,6 +142,12 @@ def unpack_depth(record: int) -> tuple[float, int]:
     return (record >> PARTNER_BITS) / DEPTH_UNIT, record & ((1 << PARTNER_BITS) - 1)
 
 
+@wp.func
+def unpack_block(block: wp.vec4i):
+    """A tiled block's rows [first, end) and its system's particles [j_first, j_end) (Engine.blocks)."""
+    return block[0], block[1], block[2], block[3]
+
+
 @functools.cache
 def contact_function(rolling: str):
     """The Warp function giving the contact channels on i from j if they touch, in float64 from the state arrays.
@@ -284,7 +290,7 @@ def pair_forces_tiled(
     def pair_forces_tiled_kernel(
         # Model:
         model: ContactModel,
-        count: int,
+        blocks: wp.array(dtype=wp.vec4i),  # per block: first particle, end of its rows, its system's j range
         radius_in: wp.array(dtype=wp.float64),
         mass_in: wp.array(dtype=wp.float64),
         # State in:
@@ -299,22 +305,23 @@ def pair_forces_tiled(
         deepest_out: wp.array(dtype=wp.int64),  # raised to each contact's depth (note_depth), or empty
     ):
         block, lane = wp.tid()
-        first = block * wp.static(P)
+        first, end, j_first, j_end = unpack_block(blocks[block])
 
         # The block's own particles stay in registers; rows past the end repeat the
         # last particle and are never written.
         bodies_i = Bodies()
         for p in range(wp.static(P)):
-            bodies_i[p] = body_in[wp.min(first + p, count - 1)]
+            bodies_i[p] = body_in[wp.min(first + p, end - 1)]
 
         fields = Fields()
         slots = Slots()
         candidates = Counts()
-        for start in range(0, count, wp.static(T)):
-            # One j per thread; out-of-range elements of the last tile load as zero and are skipped.
+        for start in range(j_first, j_end, wp.static(T)):
+            # One j per thread (counted from the system's first, so that a system's sums do not
+            # depend on where it sits among others); elements past its end are skipped.
             body_j = wp.untile(wp.tile_load(body_in, shape=wp.static(T), offset=start, storage="register"))
             j = start + lane
-            if j < count:
+            if j < j_end:
                 for p in range(wp.static(P)):
                     r = separation(bodies_i[p], body_j)
                     d2 = wp.dot(r, r)
@@ -333,18 +340,18 @@ def pair_forces_tiled(
         # loop over the block's particles is deliberately not unrolled: one copy of the
         # contact code keeps the kernel's register count (and so the sweep's occupancy) low.
         contacts = Contacts()
-        for p in range(wp.min(wp.static(P), count - first)):  # a run-time bound: not unrolled
+        for p in range(wp.min(wp.static(P), end - first)):  # a run-time bound: not unrolled
             i = first + p
             noted = candidates[p]
             overflow = noted > wp.static(K)
             walk = noted
             body_i = body_in[i]
             if overflow:
-                walk = (count - lane + wp.static(T) - 1) // wp.static(T)
+                walk = (j_end - j_first - lane + wp.static(T) - 1) // wp.static(T)
             for s in range(walk):
                 j = 0
                 if overflow:
-                    j = lane + s * wp.static(T)
+                    j = j_first + lane + s * wp.static(T)
                     body_j = body_in[j]
                     r = separation(body_i, body_j)
                     reach = body_i[radius_at] + body_j[radius_at]
@@ -382,7 +389,7 @@ def pair_forces_tiled(
         if lane == 0:
             for p in range(wp.static(P)):
                 i = first + p
-                if i < count:
+                if i < end:
                     row = total[p]
                     field_sum = wp.vec3d(wp.float64(row[0]), wp.float64(row[1]), wp.float64(row[2]))
                     contact_sum = wp.vec3d(wp.float64(row[3]), wp.float64(row[4]), wp.float64(row[5]))
@@ -421,7 +428,7 @@ def pair_gravity_tiled(block_dim: int, particles_per_block: int, precision: str 
     )
     def pair_gravity_tiled_kernel(
         # Model:
-        count: int,
+        blocks: wp.array(dtype=wp.vec4i),  # per block: first particle, end of its rows, its system's j range
         mass_in: wp.array(dtype=wp.float64),
         # State in:
         body_in: wp.array(dtype=Body),
@@ -431,16 +438,16 @@ def pair_gravity_tiled(block_dim: int, particles_per_block: int, precision: str 
         candidates: wp.array2d(dtype=wp.int32),
     ):
         block, lane = wp.tid()
-        first = block * wp.static(P)
+        first, end, j_first, j_end = unpack_block(blocks[block])
         bodies_i = Bodies()
         for p in range(wp.static(P)):
-            bodies_i[p] = body_in[wp.min(first + p, count - 1)]
+            bodies_i[p] = body_in[wp.min(first + p, end - 1)]
 
         fields = Fields()
-        for start in range(0, count, wp.static(T)):
+        for start in range(j_first, j_end, wp.static(T)):
             body_j = wp.untile(wp.tile_load(body_in, shape=wp.static(T), offset=start, storage="register"))
             j = start + lane
-            if j < count:
+            if j < j_end:
                 for p in range(wp.static(P)):
                     r = separation(bodies_i[p], body_j)
                     d2 = wp.dot(r, r)
@@ -449,7 +456,7 @@ def pair_gravity_tiled(block_dim: int, particles_per_block: int, precision: str 
                         fields[p] = fields[p] + (body_j[g_mass_at] * inv_d * inv_d * inv_d) * r
                         reach = bodies_i[p][radius_at] + body_j[radius_at]
                         # Rows past the end repeat the last particle: they note nothing.
-                        if d2 < reach * reach * candidate and first + p < count:
+                        if d2 < reach * reach * candidate and first + p < end:
                             slot = wp.atomic_add(candidate_count, first + p, 1)
                             if slot < wp.static(CANDIDATES):
                                 candidates[first + p, slot] = j
@@ -458,7 +465,7 @@ def pair_gravity_tiled(block_dim: int, particles_per_block: int, precision: str 
         if lane == 0:
             for p in range(wp.static(P)):
                 i = first + p
-                if i < count:
+                if i < end:
                     row = total[p]
                     field_sum = wp.vec3d(wp.float64(row[0]), wp.float64(row[1]), wp.float64(row[2]))
                     force_out[i] = -mass_in[i] * field_sum
@@ -478,7 +485,7 @@ def contact_pass(rolling: str = "couple"):
     def contact_pass_kernel(
         # Model:
         model: ContactModel,
-        count: int,
+        ranges: wp.array(dtype=wp.vec2i),  # per particle: its system's particles, [first, end)
         radius_in: wp.array(dtype=wp.float64),
         # State in:
         position_in: wp.array(dtype=wp.vec3d),
@@ -497,7 +504,7 @@ def contact_pass(rolling: str = "couple"):
         listed = noted <= wp.static(CANDIDATES)
         # Sorted by j (insertion), so that the sum does not depend on the order the sweep noted them in.
         js = Noted()
-        walk = count
+        walk = ranges[i][1] - ranges[i][0]
         if listed:
             walk = noted
             for s in range(noted):
@@ -511,7 +518,7 @@ def contact_pass(rolling: str = "couple"):
                 js[k] = j
         total = ContactSum()
         for s in range(walk):  # the list, or every j after an overflow (each pair checked in float64)
-            j = s
+            j = ranges[i][0] + s
             if listed:
                 j = js[s]
             total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out, total)
@@ -535,7 +542,7 @@ def pair_forces_reference(precision: str = "mixed", rolling: str = "couple"):
     def pair_forces_reference_kernel(
         # Model:
         model: ContactModel,
-        count: int,
+        ranges: wp.array(dtype=wp.vec2i),  # per particle: its system's particles, [first, end)
         radius_in: wp.array(dtype=wp.float64),
         mass_in: wp.array(dtype=wp.float64),
         # State in:
@@ -553,7 +560,7 @@ def pair_forces_reference(precision: str = "mixed", rolling: str = "couple"):
         g_mass_i = model.G * mass_in[i]
         gravity_sum = vec_real()
         total = ContactSum()
-        for j in range(count):
+        for j in range(ranges[i][0], ranges[i][1]):
             r_ij = position_i - position_in[j]
             d2 = wp.dot(r_ij, r_ij)
             if d2 > wp.float64(0.0):

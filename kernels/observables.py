@@ -15,7 +15,7 @@ wp.set_module_options({"enable_backward": False})
 def pair_observables(
     # Model:
     model: ContactModel,
-    count: int,
+    ranges: wp.array(dtype=wp.vec2i),  # per particle: its system's particles, [first, end)
     radius_in: wp.array(dtype=wp.float64),
     mass_in: wp.array(dtype=wp.float64),
     # State in:
@@ -44,7 +44,7 @@ def pair_observables(
     max_overlap = wp.float64(0.0)
     depth = wp.float64(0.0)
     partner = int(-1)
-    for j in range(count):
+    for j in range(ranges[i][0], ranges[i][1]):
         r_ij = position_i - position_in[j]
         d2 = wp.dot(r_ij, r_ij)
         if d2 > wp.float64(0.0):
