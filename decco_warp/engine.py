@@ -302,15 +302,18 @@ class Engine:
         )
         return {name: array.numpy() for name, array in outputs.items()}
 
-    def take_deepest_contact(self) -> dict:
+    def take_deepest_contact(self, first: int = 0, end: int | None = None) -> dict:
         """The deepest contact any force evaluation met since the last call (or the start), as
         ``deepest_overlap`` (a fraction of the smaller radius of the pair, to 6e-8) and
-        ``deepest_overlap_pair`` (lower index first; -1 -1 when nothing touched); starts a new record."""
-        records = self.deepest_contact.numpy().copy()  # on the CPU numpy() is a view of the array zeroed next
-        self.deepest_contact.zero_()
+        ``deepest_overlap_pair`` (lower index first, counted from ``first``; -1 -1 when nothing
+        touched), among particles [first, end) (one system of an ensemble); starts their new record."""
+        end = self.count if end is None else end
+        part = self.deepest_contact[first:end]
+        records = part.numpy().copy()  # on the CPU numpy() is a view of the array zeroed next
+        part.zero_()
         i = int(np.argmax(records))
         depth, j = force_kernels.unpack_depth(int(records[i]))
-        pair = np.array(sorted((i, j)) if records[i] > 0 else (-1, -1), dtype=np.int64)
+        pair = np.array(sorted((i, j - first)) if records[i] > 0 else (-1, -1), dtype=np.int64)
         return {"deepest_overlap": depth, "deepest_overlap_pair": pair}
 
     def read(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

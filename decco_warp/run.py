@@ -337,6 +337,11 @@ def execute(
 
 
 def _execute(run: PreparedRun, progress, observers) -> RunResult:
+    return _advance(run.sim, _open(run, progress, observers))
+
+
+def _open(run: PreparedRun, progress, observers) -> RunDriver:
+    """Write a new run folder's first frame and checkpoint, or reopen a resumed one: its driver."""
     observers = observers or []
     sim, spec, run_dir, extra = run.sim, run.spec, run.run_dir, run.extra
     spec_text = specs.dumps(spec, header=f"decco-warp run specification, resolved {datetime.now(timezone.utc):%Y-%m-%d %H:%M UTC}")
@@ -351,7 +356,7 @@ def _execute(run: PreparedRun, progress, observers) -> RunResult:
         log(f"resume: from step {sim.step_count} of {spec['run']['steps']} on {sim.device}")
         sample = record(sim, int(extra["size_classes"]))[1]
         trajectory = Trajectory.reopen(run_dir / TRAJECTORY_FILE, keep_through_step=sim.step_count, observables=sample)
-        return _advance(sim, trajectory, spec, run_dir, log, extra, progress, observers)
+        return RunDriver(sim, trajectory, spec, run_dir, log, extra, progress, observers)
 
     for name in (TRAJECTORY_FILE, CHECKPOINT_FILE, LOG_FILE):
         (run_dir / name).unlink(missing_ok=True)
@@ -382,7 +387,54 @@ def _execute(run: PreparedRun, progress, observers) -> RunResult:
     for _, observe in observers:
         observe(sim.step_count, sim.time, particles, observables)
     write_checkpoint(run_dir / CHECKPOINT_FILE, sim.snapshot(), state, extra)
-    return _advance(sim, trajectory, spec, run_dir, log, extra, progress, observers)
+    return RunDriver(sim, trajectory, spec, run_dir, log, extra, progress, observers)
+
+
+def execute_ensemble(runs: list[PreparedRun]) -> list[RunResult | BaseException]:
+    """Step prepared runs together as one ensemble (decco_warp/ensemble.py): the same Params and
+    step, any sizes.  Each run writes its own folder as if stepped alone (bit for bit), under its
+    own lock; one that fails (a blow-up, its output, a signal) ends with its error in the list
+    while the others go on.  Returns, per run, its RunResult or the error that ended it."""
+    from .ensemble import Ensemble
+
+    outcomes: list[RunResult | BaseException | None] = [None] * len(runs)
+    ensemble = Ensemble([run.sim for run in runs], precision=runs[0].spec["run"]["precision"])
+    drivers: dict[int, RunDriver] = {}
+    locks = []
+    try:
+        for k, run in enumerate(runs):
+            run.sim = ensemble.views[k]
+            try:
+                if not run.resume:
+                    run.run_dir.mkdir(parents=True, exist_ok=True)
+                run.lock = run.lock or RunFolderLock(run.run_dir)
+                run.lock.acquire()
+                locks.append(run.lock)
+                drivers[k] = _open(run, None, None)
+            except (RunError, OSError, FileFormatError) as error:
+                outcomes[k] = error
+        stop = _StopRequests()
+        with stop:
+            while active := [k for k, driver in drivers.items() if not driver.done and outcomes[k] is None]:
+                before = _time.perf_counter()
+                ensemble.step(min(drivers[k].steps_to_next_stop() for k in active))
+                ensemble.finish()
+                seconds = _time.perf_counter() - before
+                for k in active:
+                    try:
+                        drivers[k].after_steps(seconds, stop.signal)
+                    except (BlowUp, OSError) as error:
+                        outcomes[k] = drivers[k].failure(error)
+                    except RunStopped as stopped:
+                        outcomes[k] = stopped
+    finally:
+        for k, driver in drivers.items():
+            driver.close()
+            if outcomes[k] is None and driver.done:
+                outcomes[k] = driver.result()
+        for lock in locks:
+            lock.release()
+    return outcomes
 
 
 def start_run(spec: dict, overwrite: bool = False, device: str | None = None, progress=None) -> RunResult:
@@ -399,101 +451,139 @@ def _parse_toml(text: str) -> dict:
     return specs.tomllib.loads(text)
 
 
-def _advance(sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, progress, observers=()) -> RunResult:
-    total = spec["run"]["steps"]
-    output_every = spec["run"]["output_every"]
-    checkpoint_every = spec["run"]["checkpoint_every"]
-    size_classes = int(extra["size_classes"])
-    first_step = sim.step_count
-    wall_before = float(extra["wall_seconds"])
-    stepping_before = float(extra.get("stepping_seconds", 0.0))  # runs of decco-warp 0.2 did not count it
-    stepping = 0.0
-    started = _time.perf_counter()
-    # Progress is reported about 200 times per run, never between graph blocks.
-    report_every = max(50, total // 200)
-    start_energy = sim.energy_start["total_energy"]
-    # Dissipation only lowers the total energy; a gain of a fraction of this means the integration broke down.
-    scale = energy_scale(sim.energy_start)
-    overlaps = OverlapWatch(extra, spec["run"].get("max_overlap"), log)
-    # A frame's deepest overlap is the deepest since the previous frame, which a resumed run may
-    # have written before it stopped (checkpoints of decco-warp 0.2 do not say: then its start).
-    last_frame = int(extra.get("last_frame_step", first_step))
+def _advance(sim, driver: RunDriver) -> RunResult:
     stop = _StopRequests()
-
-    def checkpoint(step: int) -> None:
-        extra["wall_seconds"] = wall_before + _time.perf_counter() - started
-        extra["stepping_seconds"] = stepping_before + stepping
-        write_checkpoint(run_dir / CHECKPOINT_FILE, sim.snapshot(), sim.state, extra)
-        log(f"checkpoint: step {step}")
-
     try:
         with stop:
-            while sim.step_count < total:
-                step = sim.step_count
-                stops = [total, _next_multiple(step, output_every), _next_multiple(step, checkpoint_every)]
-                stops += [_next_multiple(step, every) for every, _ in observers]
+            while not driver.done:
                 before = _time.perf_counter()
-                sim.step(min(min(stops) - step, report_every - step % report_every))
+                sim.step(driver.steps_to_next_stop())
                 sim.finish()  # so that the steps' time is counted here, not in the frame that reads them
-                stepping += _time.perf_counter() - before
-                step = sim.step_count
-                pause_point("step", step)
-                frame = None
-                warning = None
-                if step % output_every == 0 or step == total:
-                    frame = particles, observables = record(sim, size_classes)
-                    observables.update(deepest_since(observables, sim.take_deepest_contact()))
-                    try:
-                        check_sanity(step, particles)
-                        check_energy(step, observables["total_energy"], start_energy, scale)
-                    except BlowUp as error:
-                        raise BlowUp(f"{error}; likely cause: {likely_cause(sim.stability, overlaps, extra)}") from None
-                    warning = overlaps.see(step, observables, since=last_frame)
-                    last_frame = extra["last_frame_step"] = step
-                    trajectory.append(step, sim.time, particles, observables)
-                    log(
-                        f"frame: step {step}, t {sim.time:.6g} s, E {observables['total_energy']:.9g} erg, "
-                        f"ledger closed to {ledger_closure(observables, start_energy, scale):.2g}, "
-                        f"contacts {int(observables['number_of_contacts'])}, "
-                        f"deepest overlap {float(observables['deepest_overlap']):.3g}"
-                    )
-                for every, observe in observers:
-                    if step % every == 0 or step == total:
-                        frame = frame or record(sim, size_classes)  # copied to the host only when due
-                        observe(step, sim.time, *frame)
-                if step % checkpoint_every == 0 or step == total:
-                    checkpoint(step)
-                if progress is not None:
-                    elapsed = _time.perf_counter() - started
-                    progress(RunProgress(step, total, sim.time, first_step, elapsed, overlaps.deepest, warning))
-                if stop.signal is not None and step < total:
-                    checkpoint(step)
-                    log(f"stopped by {stop.signal} at step {step}; decco-warp resume {run_dir} continues")
-                    raise RunStopped(stop.signal, step, run_dir)
-    except BlowUp as error:
-        log(f"blow-up: {error}; the last checkpoint is kept")
-        raise
-    except OSError as error:
-        kept = read_checkpoint(run_dir / CHECKPOINT_FILE)[0]["step"]
+                driver.after_steps(_time.perf_counter() - before, stop.signal)
+    except (BlowUp, OSError) as error:
+        raise driver.failure(error) from None
+    finally:
+        driver.close()
+    return driver.result()
+
+
+class RunDriver:
+    """One run's side of the stepping loop: when it must stop, and what it does there (frames,
+    checkpoints, progress, the overlap and blow-up watches).  The loop that steps the simulation
+    (one run's, or an ensemble's shared by several drivers) belongs to the caller."""
+
+    def __init__(self, sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, progress, observers=()):
+        self.sim, self.trajectory, self.run_dir, self.log, self.extra = sim, trajectory, run_dir, log, extra
+        self.progress, self.observers = progress, list(observers)
+        self.total = spec["run"]["steps"]
+        self.output_every = spec["run"]["output_every"]
+        self.checkpoint_every = spec["run"]["checkpoint_every"]
+        self.size_classes = int(extra["size_classes"])
+        self.first_step = sim.step_count
+        self.wall_before = float(extra["wall_seconds"])
+        self.stepping_before = float(extra.get("stepping_seconds", 0.0))  # runs of decco-warp 0.2 did not count it
+        self.stepping = 0.0
+        self.started = _time.perf_counter()
+        # Progress is reported about 200 times per run, never between graph blocks.
+        self.report_every = max(50, self.total // 200)
+        self.start_energy = sim.energy_start["total_energy"]
+        # Dissipation only lowers the total energy; a gain of a fraction of this means the integration broke down.
+        self.scale = energy_scale(sim.energy_start)
+        self.overlaps = OverlapWatch(extra, spec["run"].get("max_overlap"), log)
+        # A frame's deepest overlap is the deepest since the previous frame, which a resumed run may
+        # have written before it stopped (checkpoints of decco-warp 0.2 do not say: then its start).
+        self.last_frame = int(extra.get("last_frame_step", self.first_step))
+
+    @property
+    def done(self) -> bool:
+        return self.sim.step_count >= self.total
+
+    def steps_to_next_stop(self) -> int:
+        step = self.sim.step_count
+        stops = [self.total, _next_multiple(step, self.output_every), _next_multiple(step, self.checkpoint_every)]
+        stops += [_next_multiple(step, every) for every, _ in self.observers]
+        return min(min(stops) - step, self.report_every - step % self.report_every)
+
+    def checkpoint(self, step: int) -> None:
+        self.extra["wall_seconds"] = self.wall_before + _time.perf_counter() - self.started
+        self.extra["stepping_seconds"] = self.stepping_before + self.stepping
+        write_checkpoint(self.run_dir / CHECKPOINT_FILE, self.sim.snapshot(), self.sim.state, self.extra)
+        self.log(f"checkpoint: step {step}")
+
+    def after_steps(self, seconds: float, stop_signal: str | None = None) -> None:
+        """Count ``seconds`` of stepping, then do what is due at the step reached (nothing between
+        this run's stops); raises BlowUp, OSError, or RunStopped after a checkpoint when ``stop_signal``."""
+        sim, extra, total = self.sim, self.extra, self.total
+        self.stepping += seconds
+        step = sim.step_count
+        pause_point("step", step)
+        frame = None
+        warning = None
+        if step % self.output_every == 0 or step == total:
+            frame = particles, observables = record(sim, self.size_classes)
+            observables.update(deepest_since(observables, sim.take_deepest_contact()))
+            try:
+                check_sanity(step, particles)
+                check_energy(step, observables["total_energy"], self.start_energy, self.scale)
+            except BlowUp as error:
+                raise BlowUp(f"{error}; likely cause: {likely_cause(sim.stability, self.overlaps, extra)}") from None
+            warning = self.overlaps.see(step, observables, since=self.last_frame)
+            self.last_frame = extra["last_frame_step"] = step
+            self.trajectory.append(step, sim.time, particles, observables)
+            self.log(
+                f"frame: step {step}, t {sim.time:.6g} s, E {observables['total_energy']:.9g} erg, "
+                f"ledger closed to {ledger_closure(observables, self.start_energy, self.scale):.2g}, "
+                f"contacts {int(observables['number_of_contacts'])}, "
+                f"deepest overlap {float(observables['deepest_overlap']):.3g}"
+            )
+        for every, observe in self.observers:
+            if step % every == 0 or step == total:
+                frame = frame or record(sim, self.size_classes)  # copied to the host only when due
+                observe(step, sim.time, *frame)
+        if step % self.checkpoint_every == 0 or step == total:
+            self.checkpoint(step)
+        if self.progress is not None:
+            elapsed = _time.perf_counter() - self.started
+            self.progress(RunProgress(step, total, sim.time, self.first_step, elapsed, self.overlaps.deepest, warning))
+        if stop_signal is not None and step < total:
+            self.checkpoint(step)
+            self.log(f"stopped by {stop_signal} at step {step}; decco-warp resume {self.run_dir} continues")
+            raise RunStopped(stop_signal, step, self.run_dir)
+
+    def failure(self, error: BaseException) -> BaseException:
+        """What a BlowUp or OSError raised by :meth:`after_steps` means for the user, logged."""
+        if isinstance(error, BlowUp):
+            self.log(f"blow-up: {error}; the last checkpoint is kept")
+            return error
+        kept = read_checkpoint(self.run_dir / CHECKPOINT_FILE)[0]["step"]
         message = (
-            f"writing the run folder failed at step {sim.step_count} ({error.strerror or error}); "
-            f"the checkpoint of step {kept} is intact: free space or fix the folder, then decco-warp resume {run_dir}"
+            f"writing the run folder failed at step {self.sim.step_count} ({error.strerror or error}); "
+            f"the checkpoint of step {kept} is intact: free space or fix the folder, then decco-warp resume {self.run_dir}"
         )
         with contextlib.suppress(OSError):
-            log(f"output error: {message}")
-        raise OutputError(message) from None
-    finally:
+            self.log(f"output error: {message}")
+        return OutputError(message)
+
+    def close(self) -> None:
+        """Close the trajectory and the log (saying so when the run is done)."""
         with contextlib.suppress(OSError):  # frames were flushed as written; a failed close loses nothing
-            trajectory.close()
-        wall = _time.perf_counter() - started
-        if sim.step_count >= total:
-            outside = 100.0 * (wall - stepping) / wall if wall > 0 else 0.0
-            log(
-                f"done: step {sim.step_count}, t {sim.time:.6g} s, {wall:.1f} s wall this session, {stepping:.1f} s of it "
-                f"stepping ({outside:.0f} % outside: frames, checkpoints, output); {overlaps.summary()}"
+            self.trajectory.close()
+        self.wall = _time.perf_counter() - self.started
+        if self.done:
+            outside = 100.0 * (self.wall - self.stepping) / self.wall if self.wall > 0 else 0.0
+            self.log(
+                f"done: step {self.sim.step_count}, t {self.sim.time:.6g} s, {self.wall:.1f} s wall this session, "
+                f"{self.stepping:.1f} s of it stepping ({outside:.0f} % outside: frames, checkpoints, output); "
+                f"{self.overlaps.summary()}"
             )
-        log.close()
-    return RunResult(run_dir, sim.step_count, sim.time, wall_before + wall, sim.step_count - first_step, stepping_before + stepping)
+        self.log.close()
+
+    def result(self) -> RunResult:
+        sim = self.sim
+        return RunResult(
+            self.run_dir, sim.step_count, sim.time, self.wall_before + self.wall, sim.step_count - self.first_step,
+            self.stepping_before + self.stepping,
+        )  # fmt: skip
 
 
 class BlowUp(RuntimeError):

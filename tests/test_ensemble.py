@@ -67,3 +67,42 @@ def test_ensemble_sizes_are_checked_and_the_tree_steps_one_system():
             dw.Simulation(state, dw.Params(), device="cpu", systems=sizes)
     with pytest.raises(ValueError, match="one system at a time"):
         dw.Simulation(state, dw.Params(gravity="tree"), device="cpu", systems=SIZES)
+
+
+def _spec(out, name, **run):
+    from decco_warp import spec as specs
+
+    return specs.resolve_spec(
+        {"run": {"name": name, "out": str(out), "device": "cpu", "steps": 300, "output_every": 100, "checkpoint_every": 200, **run},
+         "collision": {"eta": {"a": 0.5, "b": 2.0, "c": 1.0}[name[0]]}}
+    )  # fmt: skip
+
+
+def test_runs_stepped_as_an_ensemble_write_what_they_would_alone_and_one_failing_stops_only_itself(tmp_path):
+    """Three runs of the shipped collision at different eta stepped as one ensemble: two write run
+    folders (frames, checkpoints) identical to those written alone; the third, whose [run]
+    max_overlap is below its piles' resting contacts, stops at its first frame after the start
+    with its own error, and the others go on."""
+    from helpers import assert_same_run
+
+    from decco_warp.io import read_checkpoint
+    from decco_warp.run import BlowUp, RunResult, execute_ensemble, prepare_start, start_run
+
+    names = ["a-slow", "b-fast", "c-strict"]
+    strict = {"max_overlap": 1e-9}
+    for name in names[:2]:
+        start_run(_spec(tmp_path / "alone", name))
+    outcomes = execute_ensemble([prepare_start(_spec(tmp_path / "together", name, **(strict if name == "c-strict" else {}))) for name in names])
+    assert [type(o) for o in outcomes] == [RunResult, RunResult, BlowUp]
+    assert "max_overlap" in str(outcomes[2]) and str(outcomes[2]).startswith("steps 1 to 100:")
+    assert "blow-up" in (tmp_path / "together" / "c-strict" / "run.log").read_text()
+    for name, outcome in zip(names[:2], outcomes):
+        alone, together = tmp_path / "alone" / name, tmp_path / "together" / name
+        assert outcome.steps == 300 and outcome.run_dir == together
+        assert_same_run(dw.read_trajectory(alone / "trajectory.h5"), dw.read_trajectory(together / "trajectory.h5"))
+        mine, theirs = read_checkpoint(together / "checkpoint.h5")[0], read_checkpoint(alone / "checkpoint.h5")[0]
+        for key, values in theirs.items():
+            if isinstance(values, np.ndarray):
+                assert np.array_equal(mine[key], values), key
+        assert "done: step 300" in (together / "run.log").read_text()
+        assert not (together / ".lock").exists()

@@ -1,0 +1,143 @@
+"""Ensembles: several independent runs advanced by one Simulation, each seen by its run as its own.
+
+The runs of a sweep at paper scale leave a GPU partly idle (docs/benchmarks.md); laid one after
+another in one state and stepped by the same launches (``Simulation(..., systems=sizes)``), each
+system moves bit for bit as it would alone.  A :class:`SystemView` gives a run what it reads of a
+Simulation (state, observables, deepest contact, snapshot), cut to its own system, so that frames,
+checkpoints and resume are those of a run stepped alone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .diagnostics import state_diagnostics
+from .simulation import Simulation
+from .stability import StabilityReport
+from .state import State
+
+
+class Ensemble:
+    """Independent simulations (same Params, same step) stepped together on one device.
+
+    Built from each member's Simulation (as a run prepares it): their snapshots, joined, continue
+    exactly where each would have; the members' own Simulations are no longer stepped.
+    """
+
+    def __init__(self, members: list[Simulation], precision: str = "mixed"):
+        if not members:
+            raise ValueError("an ensemble needs at least one member")
+        first = members[0]
+        for sim in members[1:]:
+            if sim.params != first.params:
+                raise ValueError("the members of an ensemble must share their Params")
+            if sim.step_count != first.step_count or sim.device != first.device:
+                raise ValueError("the members of an ensemble must be at the same step on the same device")
+        if not all(sim.engine.ledger for sim in members):
+            raise ValueError("the members of an ensemble keep the energy ledger (ledger=True)")
+        snapshots = [sim.snapshot() for sim in members]
+        statics = [sim._static for sim in members]
+        sizes = [s.n for s in statics]
+        joined = {key: np.concatenate([snap[key] for snap in snapshots]) for key in _ARRAYS}
+        state = State.from_arrays(
+            joined["positions"], joined["velocities"], joined["omegas"],
+            np.concatenate([s.radii for s in statics]), np.concatenate([s.masses for s in statics]),
+        )  # fmt: skip
+        self.sim = Simulation(
+            state, first.params, device=first.device, precision=precision, allow_unstable=True, ledger=True, systems=sizes,
+            force_kernel=first.engine.force_kernel, layout=first.engine.layout,
+        )  # fmt: skip
+        self.sim.engine.restore(joined)
+        self.sim._step = first.step_count
+        ends = np.cumsum(sizes)
+        self.views = [
+            SystemView(self, int(end - size), int(end), sim._static, snap, sim.stability)
+            for sim, snap, size, end in zip(members, snapshots, sizes, ends)
+        ]
+        self._cache: dict = {}
+
+    def step(self, n: int) -> None:
+        self.sim.step(n)
+
+    def finish(self) -> None:
+        self.sim.finish()
+
+    def _at_step(self, key: str, compute):
+        """``compute()`` once per step, shared by the views (the host copies of all systems)."""
+        if self._cache.get("step") != self.sim.step_count:
+            self._cache = {"step": self.sim.step_count}
+        if key not in self._cache:
+            self._cache[key] = compute()
+        return self._cache[key]
+
+    def read(self):
+        return self._at_step("read", self.sim.engine.read)
+
+    def pairs(self) -> dict[str, np.ndarray]:
+        return self._at_step("pairs", self.sim.pair_observables)
+
+
+#: The per-particle arrays of a snapshot, joined along the particles in an ensemble.
+_ARRAYS = ("positions", "velocities", "omegas", "force", "torque", "channels", "work", "deepest_contact")
+
+
+class SystemView:
+    """One system of an :class:`Ensemble`, with the reading side of a :class:`Simulation`."""
+
+    def __init__(self, ensemble: Ensemble, first: int, end: int, static: State, snapshot: dict, stability: StabilityReport):
+        self._ensemble, self.first, self.end = ensemble, first, end
+        self._static = static.copy()
+        self._time_origin = float(snapshot["time_origin"])
+        self.params = ensemble.sim.params
+        self.stability = stability
+        self.energy_start = {key: float(value) for key, value in snapshot["energy_start"].items()}
+
+    @property
+    def device(self) -> str:
+        return self._ensemble.sim.device
+
+    @property
+    def step_count(self) -> int:
+        return self._ensemble.sim.step_count
+
+    @property
+    def time(self) -> float:
+        return self._time_origin + self.step_count * self.params.dt
+
+    def step(self, n: int = 1) -> None:
+        raise RuntimeError("a system of an ensemble is stepped with the whole ensemble (Ensemble.step)")
+
+    def finish(self) -> None:
+        self._ensemble.finish()
+
+    @property
+    def state(self) -> State:
+        positions, velocities, omegas = (values[self.first : self.end].copy() for values in self._ensemble.read())
+        return replace(
+            self._static.copy(), positions=positions, velocities=velocities, omegas=omegas, time=self.time, step=self.step_count
+        )
+
+    def pair_observables(self) -> dict[str, np.ndarray]:
+        pairs = {key: values[self.first : self.end].copy() for key, values in self._ensemble.pairs().items()}
+        partner = pairs["overlap_partner"]
+        pairs["overlap_partner"] = np.where(partner >= 0, partner - self.first, partner).astype(partner.dtype)
+        return pairs
+
+    def diagnostics(self, state: State | None = None, pairs: dict | None = None) -> dict:
+        state = self.state if state is None else state
+        return state_diagnostics(state, self.pair_observables() if pairs is None else pairs)
+
+    def work(self) -> np.ndarray:
+        return self._ensemble.sim.work()[self.first : self.end]
+
+    def take_deepest_contact(self) -> dict:
+        return self._ensemble.sim.engine.take_deepest_contact(self.first, self.end)
+
+    def snapshot(self) -> dict:
+        """This system's part of the ensemble's snapshot: what a Simulation stepped alone would give."""
+        whole = self._ensemble.sim.engine.snapshot()
+        snap = {key: whole[key][self.first : self.end].copy() for key in _ARRAYS}
+        snap.update(step=self.step_count, time_origin=self._time_origin, ledger=True, energy_start=dict(self.energy_start))
+        return snap
