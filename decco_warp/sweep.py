@@ -8,6 +8,7 @@ A sweep specification is a run specification plus a ``[sweep]`` table:
     min_members = 50               # for the analysis of each run
     analyse_every = 1              # analyse every Nth frame of a run (the last one always)
     keep_trajectory = true         # false: delete trajectory.h5 once the run is analysed
+    ensemble = 1                   # runs handed to a worker at a time; those sharing Params step together
     [sweep.grid]                   # the cartesian product of these lists
     "collision.eta" = [0.5, 1.0, 2.0]
     "collision.theta_deg" = [0.0, 22.0]
@@ -36,7 +37,7 @@ from pathlib import Path
 from . import spec as specs
 from ._version import __version__
 
-SWEEP_KEYS = {"name", "out", "min_members", "analyse_every", "keep_trajectory", "grid"}
+SWEEP_KEYS = {"name", "out", "min_members", "analyse_every", "keep_trajectory", "ensemble", "grid"}
 SUMMARY_FIELDS = [
     "run", "status", "reason", "n_particles", "mass_ratio", "theta_deg", "eta", "speed", "k_in", "dt", "steps",
     "largest_mass_ratio", "ls12_largest_mass_ratio", "particle_size_change", "clusters", "deepest_overlap", "predicted_overlap",
@@ -66,8 +67,9 @@ def load_sweep(path) -> tuple[dict, list[dict]]:
         "min_members": sweep.get("min_members", 50),
         "analyse_every": sweep.get("analyse_every", 1),
         "keep_trajectory": sweep.get("keep_trajectory", True),
+        "ensemble": sweep.get("ensemble", 1),
     }
-    for key in ("min_members", "analyse_every"):
+    for key in ("min_members", "analyse_every", "ensemble"):
         value = settings[key]
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise specs.SpecError(f"[sweep] {key} = {value!r}: must be an integer >= 1")
@@ -119,24 +121,68 @@ def simulate_one(spec: dict) -> dict:
     Returns a row with ``status`` (ok, skipped (complete) or failed, with ``reason``),
     the run folder, the device, and the run's own wall time over all its sessions.
     """
-    from .io import read_checkpoint
-    from .run import RUN_FAILURES, execute, prepare_resume, prepare_start, run_dir_of
+    return simulate_batch([spec])[0]
+
+
+def simulate_batch(batch: list[dict]) -> list[dict]:
+    """Run (or resume, or skip) several runs of a sweep on one Dask worker, those that share their
+    Params and step advanced together as one ensemble (decco_warp/ensemble.py: each writes what it
+    would alone); never raises.  One row per run, as :func:`simulate_one` gives."""
+    from .run import RUN_FAILURES, execute, execute_ensemble
+
+    device = _worker_device()
+    rows, prepared = zip(*(_prepare(spec, device) for spec in batch))
+    rows = list(rows)
+    groups: dict[tuple, list[int]] = {}
+    for k, run in enumerate(prepared):
+        if run is not None:
+            groups.setdefault((specs.params_of(run.spec), run.sim.step_count), []).append(k)
+    for members in groups.values():
+        if len(members) == 1:
+            try:
+                outcomes = [execute(prepared[members[0]])]
+            except RUN_FAILURES as error:
+                outcomes = [error]
+        else:
+            outcomes = execute_ensemble([prepared[k] for k in members])
+        for k, outcome in zip(members, outcomes):
+            if isinstance(outcome, BaseException):
+                rows[k].update(status="failed", reason=" ".join(str(outcome).split()))
+            else:
+                rows[k].update(status="ok", ensemble=len(members))
+    return [_timed(row) for row in rows]
+
+
+def _prepare(spec: dict, device: str | None) -> tuple[dict, object]:
+    """A sweep run's row so far, and the run prepared to start or resume (None if complete or failed)."""
+    from .run import RUN_FAILURES, prepare_resume, prepare_start, run_dir_of
 
     run_dir = run_dir_of(spec)
-    device = _worker_device()
     row = {"run": spec["run"]["name"], "run_dir": str(run_dir), "device": device or "auto"}
     try:
         checkpoint = run_dir / CHECKPOINT_FILE
         if checkpoint.is_file() and _run_complete(run_dir):
             row["status"] = "skipped (complete)"
-        else:
-            prepared = prepare_resume(run_dir, device=device) if checkpoint.is_file() else prepare_start(spec, overwrite=True, device=device)
-            row["device"] = prepared.sim.device
-            execute(prepared)
-            row["status"] = "ok"
-        extra = read_checkpoint(checkpoint)[2]
-        row["wall_seconds"] = round(float(extra["wall_seconds"]), 3)
-        row["stepping_seconds"] = round(float(extra["stepping_seconds"]), 3) if "stepping_seconds" in extra else None
+            return row, None
+        prepared = prepare_resume(run_dir, device=device) if checkpoint.is_file() else prepare_start(spec, overwrite=True, device=device)
+        row["device"] = prepared.sim.device
+        return row, prepared
+    except RUN_FAILURES as error:
+        row.update(status="failed", reason=" ".join(str(error).split()))
+        return row, None
+
+
+def _timed(row: dict) -> dict:
+    """A row with the run's wall and stepping time over all its sessions (from its checkpoint)."""
+    from .io import read_checkpoint
+    from .run import RUN_FAILURES
+
+    checkpoint = Path(row["run_dir"]) / CHECKPOINT_FILE
+    try:
+        if checkpoint.is_file():
+            extra = read_checkpoint(checkpoint)[2]
+            row["wall_seconds"] = round(float(extra["wall_seconds"]), 3)
+            row["stepping_seconds"] = round(float(extra["stepping_seconds"]), 3) if "stepping_seconds" in extra else None
     except RUN_FAILURES as error:
         row.update(status="failed", reason=" ".join(str(error).split()))
     row["device_name"] = _device_name(row["device"])
@@ -261,22 +307,28 @@ def run_sweep(
                 finish(k, {**row, "status": "failed", "reason": f"analysis: {' '.join(str(error).split())}"})
 
     try:
-        futures = {client.submit(simulate_one, spec, pure=False): k for k, spec in enumerate(runs)}
+        # Runs in grid order, `ensemble` at a time to a worker (neighbours in a grid mostly share
+        # their piles and Params, and those are stepped together).
+        size = settings.get("ensemble", 1)
+        batches = [list(range(k, min(k + size, len(runs)))) for k in range(0, len(runs), size)]
+        futures = {client.submit(simulate_batch, [runs[k] for k in batch], pure=False): batch for batch in batches}
         simulations = as_completed(futures)
         while not simulations.is_empty() or pending:
             # Poll both kinds of work, so that each run is reported as soon as its analysis ends.
             for future in simulations.next_batch(block=False):
-                k = futures[future]
+                batch = futures[future]
                 try:
-                    row = future.result()
+                    results = future.result()
                 except Exception as error:  # a worker that died: record it, go on
-                    row = {"run": runs[k]["run"]["name"], "status": "failed", "reason": f"worker lost: {error}"}
-                row.update(eta=runs[k]["collision"].get("eta"), speed=runs[k]["collision"].get("speed"), theta_deg=runs[k]["collision"]["theta_deg"])
-                if row["status"] == "failed":
-                    finish(k, row)
-                else:
-                    args = (row["run_dir"], settings["min_members"], settings["analyse_every"], settings["keep_trajectory"])
-                    pending[pool.submit(analyse_one, *args)] = (k, row)
+                    results = [{"run": runs[k]["run"]["name"], "status": "failed", "reason": f"worker lost: {error}"} for k in batch]
+                for k, row in zip(batch, results):
+                    collision = runs[k]["collision"]
+                    row.update(eta=collision.get("eta"), speed=collision.get("speed"), theta_deg=collision["theta_deg"])
+                    if row["status"] == "failed":
+                        finish(k, row)
+                    else:
+                        args = (row["run_dir"], settings["min_members"], settings["analyse_every"], settings["keep_trajectory"])
+                        pending[pool.submit(analyse_one, *args)] = (k, row)
             collect()
             time.sleep(POLL_SECONDS)
     finally:

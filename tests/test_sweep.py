@@ -159,3 +159,33 @@ def test_a_stopped_sweep_keeps_its_table_and_continues(tmp_path):
     assert again.returncode == 0, again.stderr
     rows = _rows(table)
     assert len(rows) == 6 and all(rows[name]["status"] == "skipped (complete)" for name in done)
+
+
+def test_a_sweep_packs_runs_into_ensembles_with_the_results_of_runs_alone(tmp_path):
+    """[sweep] ensemble = 4 hands the whole grid to one worker: the two runs of each dt are stepped
+    together, the dt = 5 s pair blows up on its own (each with its own reason), and the others
+    end exactly as they do alone."""
+    import numpy as np
+
+    from decco_warp.io import read_checkpoint
+    from decco_warp.run import start_run
+
+    path = tmp_path / "s.toml"
+    path.write_text(SWEEP.format(out=tmp_path).replace("analyse_every = 2", "analyse_every = 2\nensemble = 4"))
+    settings, runs = load_sweep(path)
+    assert settings["ensemble"] == 4
+    result = cli("sweep", str(path), "--workers", "1")
+    assert result.returncode == 0, result.stderr
+    rows = _rows(tmp_path / "grid" / "summary.csv")
+    assert {name: row["status"] for name, row in rows.items()} == {
+        "eta0.5_dt0.04": "ok", "eta1_dt0.04": "ok", "eta0.5_dt5": "failed", "eta1_dt5": "failed"
+    }  # fmt: skip
+    assert all(rows[name]["reason"].startswith("step ") and "too long" in rows[name]["reason"] for name in ("eta0.5_dt5", "eta1_dt5"))
+    for spec in (r for r in runs if r["params"]["dt"] == 0.04):
+        alone = start_run({**spec, "run": {**spec["run"], "out": str(tmp_path / "alone")}})
+        mine = read_checkpoint(tmp_path / "grid" / spec["run"]["name"] / "checkpoint.h5")[0]
+        theirs = read_checkpoint(alone.run_dir / "checkpoint.h5")[0]
+        assert all(np.array_equal(mine[key], theirs[key]) for key in ("positions", "velocities", "omegas", "work"))
+    with pytest.raises(specs.SpecError, match="ensemble"):
+        path.write_text(SWEEP.format(out=tmp_path).replace("analyse_every = 2", "ensemble = 0"))
+        load_sweep(path)
