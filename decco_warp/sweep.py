@@ -136,15 +136,18 @@ def simulate_batch(batch: list[dict]) -> list[dict]:
     groups: dict[tuple, list[int]] = {}
     for k, run in enumerate(prepared):
         if run is not None:
-            groups.setdefault((specs.params_of(run.spec), run.sim.step_count), []).append(k)
+            params = specs.params_of(run.spec)
+            # The tree steps one system at a time: its runs go alone.
+            key = (params, run.sim.step_count) if params.gravity == "all-pairs" else (k,)
+            groups.setdefault(key, []).append(k)
     for members in groups.values():
-        if len(members) == 1:
-            try:
+        try:
+            if len(members) == 1:
                 outcomes = [execute(prepared[members[0]])]
-            except RUN_FAILURES as error:
-                outcomes = [error]
-        else:
-            outcomes = execute_ensemble([prepared[k] for k in members])
+            else:
+                outcomes = execute_ensemble([prepared[k] for k in members])
+        except RUN_FAILURES as error:  # the run, or the ensemble as a whole (its device memory, ...)
+            outcomes = [error] * len(members)
         for k, outcome in zip(members, outcomes):
             if isinstance(outcome, BaseException):
                 rows[k].update(status="failed", reason=" ".join(str(outcome).split()))

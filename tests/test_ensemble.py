@@ -106,3 +106,15 @@ def test_runs_stepped_as_an_ensemble_write_what_they_would_alone_and_one_failing
                 assert np.array_equal(mine[key], values), key
         assert "done: step 300" in (together / "run.log").read_text()
         assert not (together / ".lock").exists()
+
+
+def test_a_sweep_batch_steps_tree_runs_one_at_a_time(tmp_path):
+    """The tree path cannot share a launch: a batch of tree runs runs them alone, each ok."""
+    from decco_warp.sweep import simulate_batch
+
+    batch = [_spec(tmp_path, name, steps=100, output_every=50) for name in ("a-tree", "b-tree")]
+    for spec in batch:
+        spec["params"]["gravity"] = "tree"
+    rows = simulate_batch(batch)
+    assert [row["status"] for row in rows] == ["ok", "ok"] and all(row["ensemble"] == 1 for row in rows)
+    assert all((tmp_path / name / "checkpoint.h5").is_file() for name in ("a-tree", "b-tree"))
