@@ -38,22 +38,23 @@ class Ensemble:
         if not all(sim.engine.ledger for sim in members):
             raise ValueError("the members of an ensemble keep the energy ledger (ledger=True)")
         snapshots = [sim.snapshot() for sim in members]
-        statics = [sim._static for sim in members]
+        statics = [sim.static for sim in members]
         sizes = [s.n for s in statics]
         joined = {key: np.concatenate([snap[key] for snap in snapshots]) for key in _ARRAYS}
         state = State.from_arrays(
             joined["positions"], joined["velocities"], joined["omegas"],
             np.concatenate([s.radii for s in statics]), np.concatenate([s.masses for s in statics]),
         )  # fmt: skip
+        # At the members' step (each view keeps its own clock's origin).
+        state = replace(state, step=first.step_count, time=first.step_count * first.params.dt)
         self.sim = Simulation(
             state, first.params, device=first.device, precision=precision, allow_unstable=True, ledger=True, systems=sizes,
             force_kernel=first.engine.force_kernel, layout=first.engine.layout,
         )  # fmt: skip
         self.sim.engine.restore(joined)
-        self.sim._step = first.step_count
         ends = np.cumsum(sizes)
         self.views = [
-            SystemView(self, int(end - size), int(end), sim._static, snap, sim.stability)
+            SystemView(self, int(end - size), int(end), sim.static, snap, sim.stability)
             for sim, snap, size, end in zip(members, snapshots, sizes, ends)
         ]
         self._cache: dict = {}

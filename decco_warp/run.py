@@ -411,6 +411,8 @@ def execute_ensemble(runs: list[PreparedRun]) -> list[RunResult | BaseException]
                 run.lock.acquire()
                 locks.append(run.lock)
                 drivers[k] = _open(run, None, None)
+                others = [other.run_dir.name for other in runs if other is not run]
+                drivers[k].log(f"ensemble: stepped together with {len(others)} other run(s) in one set of launches: {', '.join(others)}")
             except (RunError, OSError, FileFormatError) as error:
                 outcomes[k] = error
         stop = _StopRequests()

@@ -132,6 +132,11 @@ class Simulation:
         return self._graph
 
     @property
+    def static(self) -> State:
+        """The state this simulation began from, for its per-particle constants (radii, masses, ...)."""
+        return self._static
+
+    @property
     def state(self) -> State:
         """A host copy of the current state."""
         positions, velocities, omegas = self.engine.read()

@@ -42,7 +42,7 @@ SUMMARY_FIELDS = [
     "run", "status", "reason", "n_particles", "mass_ratio", "theta_deg", "eta", "speed", "k_in", "dt", "steps",
     "largest_mass_ratio", "ls12_largest_mass_ratio", "particle_size_change", "clusters", "deepest_overlap", "predicted_overlap",
     "momentum_drift", "angular_momentum_drift", "ledger_closure", "wall_seconds", "stepping_seconds", "analysis_seconds",
-    "device", "device_name",
+    "device", "device_name", "ensemble",
 ]  # fmt: skip
 SUMMARY_FILE = "summary.json"
 TRAJECTORY_FILE = "trajectory.h5"

@@ -105,6 +105,7 @@ def test_runs_stepped_as_an_ensemble_write_what_they_would_alone_and_one_failing
             if isinstance(values, np.ndarray):
                 assert np.array_equal(mine[key], values), key
         assert "done: step 300" in (together / "run.log").read_text()
+        assert "ensemble: stepped together with 2 other run(s) in one set of launches" in (together / "run.log").read_text()
         assert not (together / ".lock").exists()
 
 
