@@ -119,3 +119,23 @@ def test_a_sweep_batch_steps_tree_runs_one_at_a_time(tmp_path):
     rows = simulate_batch(batch)
     assert [row["status"] for row in rows] == ["ok", "ok"] and all(row["ensemble"] == 1 for row in rows)
     assert all((tmp_path / name / "checkpoint.h5").is_file() for name in ("a-tree", "b-tree"))
+
+
+def test_resumed_runs_continue_as_an_ensemble_as_they_would_alone(tmp_path):
+    """Two runs stopped at step 200 and continued to 300, together and alone: the same folders."""
+    from helpers import assert_same_run
+
+    from decco_warp.run import RunResult, execute, execute_ensemble, prepare_resume, start_run
+
+    names = ("a-slow", "b-fast")
+    for where in ("alone", "together"):
+        for name in names:
+            start_run(_spec(tmp_path / where, name, steps=200))
+    for name in names:
+        execute(prepare_resume(tmp_path / "alone" / name, steps=300))
+    outcomes = execute_ensemble([prepare_resume(tmp_path / "together" / name, steps=300) for name in names])
+    assert all(isinstance(o, RunResult) and o.steps == 300 and o.steps_this_session == 100 for o in outcomes)
+    for name in names:
+        alone, together = (dw.read_trajectory(tmp_path / where / name / "trajectory.h5") for where in ("alone", "together"))
+        assert_same_run(alone, together)
+        assert together["step"].tolist() == [0, 100, 200, 300]
