@@ -293,13 +293,26 @@ class Engine:
         """Per particle: half its pair potential and elastic energy, its contacts, its largest
         overlap [cm], and its deepest contact as a fraction of the pair's smaller radius with that partner."""
         outputs = {name: wp.zeros(self.count, dtype=dtype, device=self.device) for name, dtype in PAIR_OBSERVABLES.items()}
-        wp.launch(
-            observables.pair_observables,
-            dim=self.count,
-            inputs=[self.model, self.ranges, self.radius, self.mass, self.position, self.velocity],
-            outputs=list(outputs.values()),
-            device=self.device,
-        )
+        if self.tree is None:
+            wp.launch(
+                observables.pair_observables,
+                dim=self.count,
+                inputs=[self.model, self.ranges, self.radius, self.mass, self.position, self.velocity],
+                outputs=list(outputs.values()),
+                device=self.device,
+            )
+        else:  # O(N log N): the potential from the tree, the contacts from the hash grid's candidates
+            potential, *contacts = outputs.values()
+            self.tree.build(self.position, self.mass)
+            self.tree.potential(self.params.G, self.params.theta_open, self.position, self.mass, potential)
+            self.tree.contact_candidates(self.position, self.radius, self.max_radius, self.candidate_count, self.candidates)
+            wp.launch(
+                observables.candidate_observables,
+                dim=self.count,
+                inputs=[self.model, self.ranges, self.radius, self.position, self.velocity, self.candidate_count, self.candidates],
+                outputs=contacts,
+                device=self.device,
+            )
         return {name: array.numpy() for name, array in outputs.items()}
 
     def take_deepest_contact(self, first: int = 0, end: int | None = None) -> dict:

@@ -70,6 +70,14 @@ class GravityTree:
             [wp.float64(G), wp.float64(theta_open), position, mass, self.order, self.count, self.nodes, force_out],
         )
 
+    def potential(self, G: float, theta_open: float, position: wp.array, mass: wp.array, potential_out: wp.array) -> None:
+        """potential_out = half of each particle's gravitational energy (call :meth:`build` first)."""
+        self._launch(
+            kernels.tree_potential,
+            self.count,
+            [wp.float64(G), wp.float64(theta_open), position, mass, self.order, self.count, self.nodes, potential_out],
+        )
+
     def contact_candidates(self, position, radius, max_radius: float, candidate_count, candidates) -> None:
         """Each particle's neighbours within R_i + R_max (plus a margin), from the hash grid."""
         self._launch(kernels.float32_points, self.count, [position, self.box, self.points])

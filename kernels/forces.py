@@ -403,6 +403,28 @@ def pair_forces_tiled(
 #: in a pile: ~12 neighbours at most) has all j looked at again.
 CANDIDATES = 24
 
+Noted = wp.types.vector(length=CANDIDATES, dtype=wp.int32)
+
+
+@wp.func
+def sorted_candidates(i: int, candidate_count: wp.array(dtype=wp.int32), candidates: wp.array2d(dtype=wp.int32)):
+    """i's noted candidates sorted by j (insertion), so that sums over them do not depend on the
+    order they were noted in; and whether they fit the list (else every j must be looked at)."""
+    noted = candidate_count[i]
+    listed = noted <= wp.static(CANDIDATES)
+    js = Noted()
+    if listed:
+        for s in range(noted):
+            j = candidates[i, s]
+            k = s
+            for _ in range(s):
+                if k > 0:
+                    if js[k - 1] > j:
+                        js[k] = js[k - 1]
+                        k = k - 1
+            js[k] = j
+    return listed, noted, js
+
 
 @functools.cache
 def pair_gravity_tiled(block_dim: int, particles_per_block: int, precision: str = "mixed", max_registers: int = 0):
@@ -479,7 +501,6 @@ def contact_pass(rolling: str = "couple"):
     sorted by j, each evaluated in float64 and added to ``force_inout``; ``torque_out`` and the
     ledger's ``channels_out`` (when it has rows) are written whole."""
     add_contact = contact_sum_function(rolling)
-    Noted = wp.types.vector(length=CANDIDATES, dtype=wp.int32)
 
     @wp.kernel(module="unique", enable_backward=False)
     def contact_pass_kernel(
@@ -500,22 +521,10 @@ def contact_pass(rolling: str = "couple"):
         deepest_out: wp.array(dtype=wp.int64),
     ):
         i = wp.tid()
-        noted = candidate_count[i]
-        listed = noted <= wp.static(CANDIDATES)
-        # Sorted by j (insertion), so that the sum does not depend on the order the sweep noted them in.
-        js = Noted()
+        listed, noted, js = sorted_candidates(i, candidate_count, candidates)
         walk = ranges[i][1] - ranges[i][0]
         if listed:
             walk = noted
-            for s in range(noted):
-                j = candidates[i, s]
-                k = s
-                for _ in range(s):
-                    if k > 0:
-                        if js[k - 1] > j:
-                            js[k] = js[k - 1]
-                            k = k - 1
-                js[k] = j
         total = ContactSum()
         for s in range(walk):  # the list, or every j after an overflow (each pair checked in float64)
             j = ranges[i][0] + s

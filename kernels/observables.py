@@ -1,14 +1,72 @@
 """Per-particle pair observables for diagnostics and output, in float64.
 
 Not on the hot path: launched only when diagnostics or output are due, one
-thread per particle over all j.
+thread per particle over all j (or, on the tree path, over its contact candidates, the
+potential coming from the tree: kernels/tree.py ``tree_potential``).
 """
 
 import warp as wp
 
+from .forces import sorted_candidates
 from .pair import ContactModel, in_contact, normal_force_magnitude, overlap, spring_constant
 
 wp.set_module_options({"enable_backward": False})
+
+
+@wp.struct
+class ContactObservables:
+    """One particle's contacts, summed: half their elastic energy, how many, the largest overlap
+    [cm], and the deepest as a fraction of the pair's smaller radius, with that partner (-1: none)."""
+
+    elastic: wp.float64
+    contacts: int
+    max_overlap: wp.float64
+    depth: wp.float64
+    partner: int
+
+
+@wp.func
+def add_contact_observables(
+    model: ContactModel, total: ContactObservables, i: int, j: int, d2: wp.float64, r_ij: wp.vec3d,
+    radius_in: wp.array(dtype=wp.float64), velocity_in: wp.array(dtype=wp.vec3d),
+) -> ContactObservables:  # fmt: skip
+    """``total`` with the pair (i, j), at separation r_ij (d2 = |r_ij|^2 > 0), added if they touch."""
+    out = total
+    radius_i, radius_j = radius_in[i], radius_in[j]
+    if in_contact(d2, radius_i, radius_j):
+        d = wp.sqrt(d2)
+        delta = overlap(d, radius_i, radius_j)
+        k = spring_constant(wp.dot(velocity_in[i] - velocity_in[j], r_ij / d), model.k_in, model.k_out)
+        # Energy of the spring pair, (k/4) delta^2 for the force (k/2) delta, halved per side.
+        out.elastic = total.elastic + wp.float64(0.5) * wp.float64(0.5) * normal_force_magnitude(delta, k) * delta
+        out.contacts = total.contacts + 1
+        out.max_overlap = wp.max(total.max_overlap, delta)
+        # Depth relative to the smaller sphere: past 1 a centre lies inside the other sphere.
+        fraction = delta / wp.min(radius_i, radius_j)
+        if fraction > total.depth:
+            out.depth = fraction
+            out.partner = j
+    return out
+
+
+@wp.func
+def write_contact_observables(
+    total: ContactObservables, i: int, elastic_out: wp.array(dtype=wp.float64), contacts_out: wp.array(dtype=wp.int32),
+    max_overlap_out: wp.array(dtype=wp.float64), overlap_depth_out: wp.array(dtype=wp.float64),
+    overlap_partner_out: wp.array(dtype=wp.int32),
+):  # fmt: skip
+    elastic_out[i] = total.elastic
+    contacts_out[i] = wp.int32(total.contacts)
+    max_overlap_out[i] = total.max_overlap
+    overlap_depth_out[i] = total.depth
+    overlap_partner_out[i] = wp.int32(total.partner)
+
+
+@wp.func
+def no_contacts() -> ContactObservables:
+    total = ContactObservables()
+    total.partner = -1
+    return total
 
 
 @wp.kernel
@@ -35,36 +93,51 @@ def pair_observables(
     (-1 without contacts)."""
     i = wp.tid()
     position_i = position_in[i]
-    velocity_i = velocity_in[i]
-    radius_i = radius_in[i]
     g_mass_i = model.G * mass_in[i]
     potential = wp.float64(0.0)
-    elastic = wp.float64(0.0)
-    contacts = int(0)
-    max_overlap = wp.float64(0.0)
-    depth = wp.float64(0.0)
-    partner = int(-1)
+    total = no_contacts()
     for j in range(ranges[i][0], ranges[i][1]):
         r_ij = position_i - position_in[j]
         d2 = wp.dot(r_ij, r_ij)
         if d2 > wp.float64(0.0):
-            d = wp.sqrt(d2)
-            potential -= wp.float64(0.5) * g_mass_i * mass_in[j] / d
-            if in_contact(d2, radius_i, radius_in[j]):
-                delta = overlap(d, radius_i, radius_in[j])
-                k = spring_constant(wp.dot(velocity_i - velocity_in[j], r_ij / d), model.k_in, model.k_out)
-                # Energy of the spring pair, (k/4) delta^2 for the force (k/2) delta, halved per side.
-                elastic += wp.float64(0.5) * wp.float64(0.5) * normal_force_magnitude(delta, k) * delta
-                contacts += 1
-                max_overlap = wp.max(max_overlap, delta)
-                # Depth relative to the smaller sphere: past 1 a centre lies inside the other sphere.
-                fraction = delta / wp.min(radius_i, radius_in[j])
-                if fraction > depth:
-                    depth = fraction
-                    partner = j
+            potential -= wp.float64(0.5) * g_mass_i * mass_in[j] / wp.sqrt(d2)
+            total = add_contact_observables(model, total, i, j, d2, r_ij, radius_in, velocity_in)
     potential_out[i] = potential
-    elastic_out[i] = elastic
-    contacts_out[i] = wp.int32(contacts)
-    max_overlap_out[i] = max_overlap
-    overlap_depth_out[i] = depth
-    overlap_partner_out[i] = wp.int32(partner)
+    write_contact_observables(total, i, elastic_out, contacts_out, max_overlap_out, overlap_depth_out, overlap_partner_out)
+
+
+@wp.kernel
+def candidate_observables(
+    # Model:
+    model: ContactModel,
+    ranges: wp.array(dtype=wp.vec2i),
+    radius_in: wp.array(dtype=wp.float64),
+    # State in:
+    position_in: wp.array(dtype=wp.vec3d),
+    velocity_in: wp.array(dtype=wp.vec3d),
+    candidate_count: wp.array(dtype=wp.int32),
+    candidates: wp.array2d(dtype=wp.int32),
+    # Out:
+    elastic_out: wp.array(dtype=wp.float64),
+    contacts_out: wp.array(dtype=wp.int32),
+    max_overlap_out: wp.array(dtype=wp.float64),
+    overlap_depth_out: wp.array(dtype=wp.float64),
+    overlap_partner_out: wp.array(dtype=wp.int32),
+):
+    """The contact part of :func:`pair_observables` from each particle's contact candidates (the
+    tree path's hash grid), in the same order of j, so with the same sums."""
+    i = wp.tid()
+    listed, noted, js = sorted_candidates(i, candidate_count, candidates)
+    walk = ranges[i][1] - ranges[i][0]
+    if listed:
+        walk = noted
+    total = no_contacts()
+    for s in range(walk):
+        j = ranges[i][0] + s
+        if listed:
+            j = js[s]
+        r_ij = position_in[i] - position_in[j]
+        d2 = wp.dot(r_ij, r_ij)
+        if d2 > wp.float64(0.0):
+            total = add_contact_observables(model, total, i, j, d2, r_ij, radius_in, velocity_in)
+    write_contact_observables(total, i, elastic_out, contacts_out, max_overlap_out, overlap_depth_out, overlap_partner_out)

@@ -15,6 +15,7 @@ trees") is built every evaluation, all on the device:
 5. ``tree_gravity``: each particle walks the tree from the root with a stack; a node is used
    whole (monopole + quadrupole) when its size is below ``theta_open`` times its distance and the
    particle is not one of its own, else it is opened; leaves are summed directly.
+   ``tree_potential`` walks the same way for the potential energy of frames.
 
 Everything is float64 and deterministic: the sort is stable, each node's sum has a fixed order, and
 each particle's walk is sequential.  Contacts do not use the tree: ``grid_candidates`` lists each
@@ -257,22 +258,30 @@ def multipole_field(r: wp.vec3d, mass: wp.float64, quadrupole: wp.mat33d) -> wp.
     return -mass * inv_d3 * r + inv_d5 * qr - wp.float64(2.5) * wp.dot(r, qr) * inv_d5 * inv_d2 * r
 
 
-@wp.kernel
-def tree_gravity(
-    G: wp.float64,
+@wp.func
+def multipole_potential(r: wp.vec3d, mass: wp.float64, quadrupole: wp.mat33d) -> wp.float64:
+    """Potential / G at separation r from a node's centre: -M/r - (r.Q r)/(2 r^5), whose gradient
+    is :func:`multipole_field` (with the opposite sign)."""
+    d2 = wp.dot(r, r)
+    inv_d = wp.float64(1.0) / wp.sqrt(d2)
+    return -mass * inv_d - wp.float64(0.5) * wp.dot(r, quadrupole * r) * inv_d * inv_d * inv_d * inv_d * inv_d
+
+
+@wp.func
+def tree_walk(
+    k: int,
     theta_open: wp.float64,
     position_in: wp.array(dtype=wp.vec3d),
-    mass_in: wp.array(dtype=wp.float64),
     order: wp.array(dtype=wp.int32),
     count: int,
     nodes: TreeNodes,
-    force_out: wp.array(dtype=wp.vec3d),
 ):
-    """Gravity on the particle at sorted position k (neighbours in space walk alike)."""
-    k = wp.tid()
+    """Field / G and potential / G at the particle at sorted position k, from every other particle
+    (neighbours in space walk alike); a kernel that uses one of them lets the compiler drop the other."""
     i = int(order[k])
     x = position_in[i]
     field = wp.vec3d()
+    potential = wp.float64(0.0)
     stack = Stack()
     top = int(0)
     if count > 1:
@@ -289,6 +298,7 @@ def tree_gravity(
                 if d2 > wp.float64(0.0):
                     inv_d = wp.float64(1.0) / wp.sqrt(d2)
                     field -= nodes.mass[node] * inv_d * inv_d * inv_d * r
+                    potential -= nodes.mass[node] * inv_d
             continue
         extent = nodes.high[node] - nodes.low[node]
         size = wp.max(wp.max(extent[0], extent[1]), extent[2])
@@ -300,11 +310,45 @@ def tree_gravity(
         own = k >= int(nodes.first[node]) and k <= int(nodes.last[node])
         if not own and reach * reach < wp.dot(r, r):
             field += multipole_field(r, nodes.mass[node], nodes.quadrupole[node])
+            potential += multipole_potential(r, nodes.mass[node], nodes.quadrupole[node])
         else:
             stack[top] = nodes.child[node, 1]
             stack[top + 1] = nodes.child[node, 0]
             top += 2
+    return i, field, potential
+
+
+@wp.kernel
+def tree_gravity(
+    G: wp.float64,
+    theta_open: wp.float64,
+    position_in: wp.array(dtype=wp.vec3d),
+    mass_in: wp.array(dtype=wp.float64),
+    order: wp.array(dtype=wp.int32),
+    count: int,
+    nodes: TreeNodes,
+    force_out: wp.array(dtype=wp.vec3d),
+):
+    """Gravity on each particle, one thread per sorted position."""
+    i, field, potential = tree_walk(wp.tid(), theta_open, position_in, order, count, nodes)
     force_out[i] = G * mass_in[i] * field
+
+
+@wp.kernel
+def tree_potential(
+    G: wp.float64,
+    theta_open: wp.float64,
+    position_in: wp.array(dtype=wp.vec3d),
+    mass_in: wp.array(dtype=wp.float64),
+    order: wp.array(dtype=wp.int32),
+    count: int,
+    nodes: TreeNodes,
+    potential_out: wp.array(dtype=wp.float64),
+):
+    """Half of each particle's gravitational energy with all others (summed over particles, the
+    potential energy), for frames on the tree path."""
+    i, field, potential = tree_walk(wp.tid(), theta_open, position_in, order, count, nodes)
+    potential_out[i] = wp.float64(0.5) * G * mass_in[i] * potential
 
 
 @wp.kernel

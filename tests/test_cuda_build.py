@@ -25,7 +25,7 @@ SCRIPT = textwrap.dedent(
         kernels.append((forces.pair_gravity_tiled(128, 4, precision, 0), 128))
     kernels += [(forces.contact_pass(rolling), 256) for rolling in ("couple", "paper")]
     kernels += [(forces.pack_bodies_mixed, 256), (integrate.kick, 256), (observables.pair_observables, 256),
-                (tree.tree_gravity, 256)]
+                (observables.candidate_observables, 256), (tree.tree_gravity, 256), (tree.tree_potential, 256)]
     folder = tempfile.mkdtemp()
     for kernel, block_dim in kernels:
         kernel.module.options["block_dim"] = block_dim

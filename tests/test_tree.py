@@ -127,3 +127,24 @@ def test_auto_gravity_takes_the_tree_from_the_crossover_and_the_spec_records_it(
     run_dir = tmp_path / "default"
     assert specs.load_spec_file(run_dir / "spec.toml")["params"]["gravity"] == "all-pairs"
     assert 'gravity = "auto": all-pairs for 450 particles on cpu' in (run_dir / "run.log").read_text()
+
+
+@pytest.mark.parametrize("scene", ["pile", "cloud"])
+def test_tree_frames_give_the_all_pairs_observables_in_n_log_n(device, scene):
+    """A frame on the tree path costs O(N log N): the potential from the tree walk (per particle
+    within 3e-4 rms of all-pairs at the default theta_open, falling with theta; the total within
+    5e-5), and the contact observables from the hash grid's candidates, identical to all-pairs."""
+    state = dw.load_pile(builtin_pile("target")) if scene == "pile" else overlapping_cloud(300, seed=2, fill=0.7)
+    exact = dw.Simulation(state, dw.Params(), device=device, allow_unstable=True).pair_observables()
+    assert exact["contacts"].sum() > 500
+    rms = {}
+    for theta in (0.2, 0.4, 0.7):
+        params = dw.Params(gravity="tree", theta_open=theta)
+        tree = dw.Simulation(state, params, device=device, allow_unstable=True).pair_observables()
+        for key in ("elastic", "contacts", "max_overlap", "overlap_depth", "overlap_partner"):
+            assert np.array_equal(tree[key], exact[key]), key
+        error = (tree["potential"] - exact["potential"]) / np.abs(exact["potential"])
+        rms[theta] = float(np.sqrt(np.mean(error**2)))
+        if theta == dw.Params().theta_open:
+            assert rms[theta] < 3e-4 and abs(tree["potential"].sum() / exact["potential"].sum() - 1) < 5e-5
+    assert rms[0.2] < rms[0.4] < rms[0.7]
