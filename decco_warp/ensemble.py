@@ -40,7 +40,9 @@ class Ensemble:
         snapshots = [sim.snapshot() for sim in members]
         statics = [sim.static for sim in members]
         sizes = [s.n for s in statics]
+        starts = np.cumsum([0, *(s.n for s in statics)])[:-1]
         joined = {key: np.concatenate([snap[key] for snap in snapshots]) for key in _ARRAYS}
+        joined["deepest_contact"] = np.concatenate([_partners_moved(snap["deepest_contact"], first) for snap, first in zip(snapshots, starts)])
         state = State.from_arrays(
             joined["positions"], joined["velocities"], joined["omegas"],
             np.concatenate([s.radii for s in statics]), np.concatenate([s.masses for s in statics]),
@@ -82,6 +84,12 @@ class Ensemble:
 
 #: The per-particle arrays of a snapshot, joined along the particles in an ensemble.
 _ARRAYS = ("positions", "velocities", "omegas", "force", "torque", "channels", "work", "deepest_contact")
+
+
+def _partners_moved(records: np.ndarray, offset: int) -> np.ndarray:
+    """Deepest-contact records (kernels/forces.py note_depth) with their partner's index moved by
+    ``offset``: a system's own numbering in its snapshot, the ensemble's inside the ensemble."""
+    return np.where(records > 0, records + offset, records)
 
 
 class SystemView:
@@ -140,5 +148,6 @@ class SystemView:
         """This system's part of the ensemble's snapshot: what a Simulation stepped alone would give."""
         whole = self._ensemble.sim.engine.snapshot()
         snap = {key: whole[key][self.first : self.end].copy() for key in _ARRAYS}
+        snap["deepest_contact"] = _partners_moved(snap["deepest_contact"], -self.first)
         snap.update(step=self.step_count, time_origin=self._time_origin, ledger=True, energy_start=dict(self.energy_start))
         return snap

@@ -422,9 +422,10 @@ def execute_ensemble(runs: list[PreparedRun]) -> list[RunResult | BaseException]
                 ensemble.step(min(drivers[k].steps_to_next_stop() for k in active))
                 ensemble.finish()
                 seconds = _time.perf_counter() - before
+                requested = stop.signal  # read once, so that every run stops at the same step
                 for k in active:
                     try:
-                        drivers[k].after_steps(seconds, stop.signal)
+                        drivers[k].after_steps(seconds, requested)
                     except (BlowUp, OSError) as error:
                         outcomes[k] = drivers[k].failure(error)
                     except RunStopped as stopped:

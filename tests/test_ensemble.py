@@ -139,3 +139,33 @@ def test_resumed_runs_continue_as_an_ensemble_as_they_would_alone(tmp_path):
         alone, together = (dw.read_trajectory(tmp_path / where / name / "trajectory.h5") for where in ("alone", "together"))
         assert_same_run(alone, together)
         assert together["step"].tolist() == [0, 100, 200, 300]
+
+
+def test_a_signal_stops_every_run_of_an_ensemble_at_one_step_and_each_resumes_alone(tmp_path, monkeypatch):
+    """SIGINT during an ensemble: every run checkpoints at the same step and stops; resumed alone,
+    each ends exactly as a run never interrupted."""
+    import signal
+
+    from helpers import assert_same_run
+
+    from decco_warp import run as runs
+
+    names = ("a-slow", "b-fast")
+    for name in names:
+        runs.start_run(_spec(tmp_path / "alone", name))
+    real_pause = runs.pause_point
+
+    def interrupt(phase, step):
+        if phase == "step" and step == 100:
+            signal.raise_signal(signal.SIGINT)
+        real_pause(phase, step)
+
+    monkeypatch.setattr(runs, "pause_point", interrupt)
+    outcomes = runs.execute_ensemble([runs.prepare_start(_spec(tmp_path / "together", name)) for name in names])
+    monkeypatch.setattr(runs, "pause_point", real_pause)
+    assert all(isinstance(o, runs.RunStopped) for o in outcomes) and len({o.step for o in outcomes}) == 1
+    assert 100 < outcomes[0].step < 300
+    for name in names:
+        runs.resume_run(tmp_path / "together" / name)
+        alone, together = (dw.read_trajectory(tmp_path / where / name / "trajectory.h5") for where in ("alone", "together"))
+        assert_same_run(alone, together)
