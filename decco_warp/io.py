@@ -356,6 +356,9 @@ def pause_point(phase: str, step: int) -> None:
         time.sleep(1.0)
 
 
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
 def check_complete(path, what: str) -> None:
     """Raise FileFormatError if an HDF5 file (superblock v2/3) is shorter than its recorded end of file.
 
@@ -367,7 +370,9 @@ def check_complete(path, what: str) -> None:
         raise FileFormatError(f"{what} {path} does not exist")
     with open(path, "rb") as f:
         head = f.read(48)
-    if len(head) < 48 or head[:8] != b"\x89HDF\r\n\x1a\n" or head[8] not in (2, 3) or head[9] != 8:
+    if head[:8] == HDF5_SIGNATURE and len(head) < 48:  # cut inside the superblock: a SWMR open would retry for an hour
+        raise FileFormatError(f"{what} {path} is truncated ({len(head)} bytes, inside its superblock)")
+    if len(head) < 48 or head[:8] != HDF5_SIGNATURE or head[8] not in (2, 3) or head[9] != 8:
         return
     end = int.from_bytes(head[28:36], "little")
     size = path.stat().st_size
@@ -453,7 +458,7 @@ def clear_write_flags(path: Path) -> None:
     """
     with open(path, "r+b") as f:
         head = f.read(48)
-        if len(head) < 12 or head[:8] != b"\x89HDF\r\n\x1a\n" or head[8] not in (2, 3) or head[11] == 0:
+        if len(head) < 12 or head[:8] != HDF5_SIGNATURE or head[8] not in (2, 3) or head[11] == 0:
             return
         size = 12 + 4 * head[9]
         if int.from_bytes(head[size : size + 4], "little") != lookup3(head[:size]):
