@@ -121,13 +121,30 @@ def open_h5(path, what: str, mode: str = "r", **options):
         raise FileFormatError(f"{what} {path} does not exist")
     try:
         f = h5py.File(path, mode, **options)
-    except OSError as error:
+    except (OSError, RuntimeError) as error:
         raise FileFormatError(f"{what} {path} is not a readable HDF5 file ({_first_line(error)})") from None
     with f:
         try:
             yield f
-        except (KeyError, OSError, TypeError) as error:
+        except (KeyError, OSError, RuntimeError, TypeError) as error:
             raise FileFormatError(f"{what} {path} is incomplete or corrupted ({_first_line(error)})") from None
+
+
+@contextlib.contextmanager
+def open_trajectory(path):
+    """A trajectory opened for reading: plainly when no writer holds it (a damaged one then fails at
+    once), else as a SWMR reader (a running or killed writer leaves its flags set), which HDF5 2
+    would have retried on damaged metadata for up to an hour."""
+    check_complete(path, "trajectory")
+    try:
+        with open_h5(path, "trajectory", locking=False) as f:
+            yield f
+            return
+    except FileFormatError as error:
+        if "already open for write" not in str(error):
+            raise
+    with open_h5(path, "trajectory", swmr=True, locking=False) as f:
+        yield f
 
 
 def _first_line(error: BaseException) -> str:
@@ -382,8 +399,7 @@ def check_complete(path, what: str) -> None:
 
 def read_trajectory(path) -> dict:
     """A finished or running trajectory as NumPy arrays: steps, times, particle frames, observables, parameters."""
-    check_complete(path, "trajectory")
-    with open_h5(path, "trajectory", swmr=True, locking=False) as f:
+    with open_trajectory(path) as f:
         particles = f["particles/all"]
         result = {
             "step": particles["position/step"][()],
@@ -399,8 +415,7 @@ def read_trajectory(path) -> dict:
 
 def read_frame(path, index: int = 0) -> tuple[dict, dict, dict]:
     """(particles, observables, static) of one frame of a trajectory, without reading the rest."""
-    check_complete(path, "trajectory")
-    with open_h5(path, "trajectory", swmr=True, locking=False) as f:
+    with open_trajectory(path) as f:
         particles = f["particles/all"]
         frame = {name: particles[name]["value"][index] for name in Trajectory.PARTICLE_ELEMENTS}
         observables = {name: group["value"][index] for name, group in f["observables"].items()}

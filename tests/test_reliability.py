@@ -259,3 +259,21 @@ def test_damaged_run_folders_are_refused_on_resume_with_a_reason(finished_run, t
         prepare_resume(run_dir, device="cpu")
     assert str(raised.value) and "\n" not in str(raised.value)
     assert sorted(p.name for p in run_dir.iterdir()) == before  # nothing written
+
+
+@pytest.mark.parametrize("offset", [48, 1000])
+def test_a_trajectory_with_damaged_metadata_is_refused_at_once(finished_run, tmp_path, offset):
+    """Bytes flipped in a finished trajectory's metadata: read at once as a FileFormatError (a SWMR
+    reader under HDF5 2 retried such a file for up to an hour; checked in a subprocess with a
+    time limit so that a regression fails instead of hanging)."""
+    data = bytearray((finished_run / "trajectory.h5").read_bytes())
+    for k in range(offset, offset + 64):
+        data[k] ^= 0xFF
+    damaged = tmp_path / "trajectory.h5"
+    damaged.write_bytes(bytes(data))
+    code = (
+        "import sys\nfrom decco_warp.io import FileFormatError, read_trajectory\n"
+        f"try:\n    read_trajectory({str(damaged)!r})\nexcept FileFormatError as error:\n    print('refused:', error)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and "refused:" in done.stdout and "corrupted" in done.stdout, done.stdout + done.stderr
