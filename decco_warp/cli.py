@@ -720,7 +720,8 @@ def sweep(
             detail = f", m_lf/m_t {ratio:.4g}" if isinstance(ratio, float) else ""
             depth = row.get("deepest_overlap")
             detail += f", deepest overlap {depth:.2f}" if isinstance(depth, float) else ""
-            bar.console.print(f"{row['run']}: {outcome}{detail} ({row.get('wall_seconds') or 0:.1f} s on {row.get('device')})")
+            together = f", {row['ensemble']} runs together" if (row.get("ensemble") or 1) > 1 else ""
+            bar.console.print(f"{row['run']}: {outcome}{detail} ({row.get('wall_seconds') or 0:.1f} s on {row.get('device')}{together})")
             bar.update(task, completed=len(finished), runs=f"{len(finished)}/{len(runs)} runs")
 
         previous = signal.signal(signal.SIGTERM, signal.default_int_handler)  # a batch scheduler's stop, as Ctrl-C

@@ -149,10 +149,11 @@ def simulate_batch(batch: list[dict]) -> list[dict]:
         except RUN_FAILURES as error:  # the run, or the ensemble as a whole (its device memory, ...)
             outcomes = [error] * len(members)
         for k, outcome in zip(members, outcomes):
+            rows[k]["ensemble"] = len(members)
             if isinstance(outcome, BaseException):
                 rows[k].update(status="failed", reason=" ".join(str(outcome).split()))
             else:
-                rows[k].update(status="ok", ensemble=len(members))
+                rows[k]["status"] = "ok"
     return [_timed(row) for row in rows]
 
 

@@ -176,12 +176,13 @@ def test_a_sweep_packs_runs_into_ensembles_with_the_results_of_runs_alone(tmp_pa
     assert settings["ensemble"] == 4
     result = cli("sweep", str(path), "--workers", "1")
     assert result.returncode == 0, result.stderr
+    assert " ".join((result.stdout + result.stderr).split()).count("2 runs together") == 4
     rows = _rows(tmp_path / "grid" / "summary.csv")
     assert {name: row["status"] for name, row in rows.items()} == {
         "eta0.5_dt0.04": "ok", "eta1_dt0.04": "ok", "eta0.5_dt5": "failed", "eta1_dt5": "failed"
     }  # fmt: skip
     assert all(rows[name]["reason"].startswith("step ") and "too long" in rows[name]["reason"] for name in ("eta0.5_dt5", "eta1_dt5"))
-    assert rows["eta0.5_dt0.04"]["ensemble"] == rows["eta1_dt0.04"]["ensemble"] == "2"
+    assert {row["ensemble"] for row in rows.values()} == {"2"}
     for spec in (r for r in runs if r["params"]["dt"] == 0.04):
         alone = start_run({**spec, "run": {**spec["run"], "out": str(tmp_path / "alone")}})
         mine = read_checkpoint(tmp_path / "grid" / spec["run"]["name"] / "checkpoint.h5")[0]
