@@ -81,6 +81,9 @@ class Ensemble:
     def pairs(self) -> dict[str, np.ndarray]:
         return self._at_step("pairs", self.sim.pair_observables)
 
+    def work(self) -> np.ndarray:
+        return self._at_step("work", self.sim.work)
+
 
 #: The per-particle arrays of a snapshot, joined along the particles in an ensemble.
 _ARRAYS = ("positions", "velocities", "omegas", "force", "torque", "channels", "work", "deepest_contact")
@@ -139,7 +142,7 @@ class SystemView:
         return state_diagnostics(state, self.pair_observables() if pairs is None else pairs)
 
     def work(self) -> np.ndarray:
-        return self._ensemble.sim.work()[self.first : self.end]
+        return self._ensemble.work()[self.first : self.end].copy()
 
     def take_deepest_contact(self) -> dict:
         return self._ensemble.sim.engine.take_deepest_contact(self.first, self.end)

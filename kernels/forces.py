@@ -407,13 +407,18 @@ Noted = wp.types.vector(length=CANDIDATES, dtype=wp.int32)
 
 
 @wp.func
-def sorted_candidates(i: int, candidate_count: wp.array(dtype=wp.int32), candidates: wp.array2d(dtype=wp.int32)):
-    """i's noted candidates sorted by j (insertion), so that sums over them do not depend on the
-    order they were noted in; and whether they fit the list (else every j must be looked at)."""
+def sorted_candidates(
+    i: int, ranges: wp.array(dtype=wp.vec2i), candidate_count: wp.array(dtype=wp.int32), candidates: wp.array2d(dtype=wp.int32)
+):
+    """What i must look at: its noted candidates sorted by j (insertion), so that sums over them do
+    not depend on the order they were noted in, or, when they overflowed the list, every j of its
+    system.  Returns (listed, how many, the sorted list); :func:`candidate` gives the s-th."""
     noted = candidate_count[i]
     listed = noted <= wp.static(CANDIDATES)
     js = Noted()
+    walk = ranges[i][1] - ranges[i][0]
     if listed:
+        walk = noted
         for s in range(noted):
             j = candidates[i, s]
             k = s
@@ -423,7 +428,15 @@ def sorted_candidates(i: int, candidate_count: wp.array(dtype=wp.int32), candida
                         js[k] = js[k - 1]
                         k = k - 1
             js[k] = j
-    return listed, noted, js
+    return listed, walk, js
+
+
+@wp.func
+def candidate(listed: bool, js: Noted, first: int, s: int) -> int:
+    """The s-th particle of :func:`sorted_candidates`: from the list, or the s-th of the system."""
+    if listed:
+        return js[s]
+    return first + s
 
 
 @functools.cache
@@ -521,15 +534,10 @@ def contact_pass(rolling: str = "couple"):
         deepest_out: wp.array(dtype=wp.int64),
     ):
         i = wp.tid()
-        listed, noted, js = sorted_candidates(i, candidate_count, candidates)
-        walk = ranges[i][1] - ranges[i][0]
-        if listed:
-            walk = noted
+        listed, walk, js = sorted_candidates(i, ranges, candidate_count, candidates)
         total = ContactSum()
         for s in range(walk):  # the list, or every j after an overflow (each pair checked in float64)
-            j = ranges[i][0] + s
-            if listed:
-                j = js[s]
+            j = candidate(listed, js, ranges[i][0], s)
             total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out, total)
         force_inout[i] = force_inout[i] + write_contacts(total, i, torque_out, channels_out)
 

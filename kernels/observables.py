@@ -7,7 +7,7 @@ potential coming from the tree: kernels/tree.py ``tree_potential``).
 
 import warp as wp
 
-from .forces import sorted_candidates
+from .forces import candidate, sorted_candidates
 from .pair import ContactModel, in_contact, normal_force_magnitude, overlap, spring_constant
 
 wp.set_module_options({"enable_backward": False})
@@ -127,15 +127,10 @@ def candidate_observables(
     """The contact part of :func:`pair_observables` from each particle's contact candidates (the
     tree path's hash grid), in the same order of j, so with the same sums."""
     i = wp.tid()
-    listed, noted, js = sorted_candidates(i, candidate_count, candidates)
-    walk = ranges[i][1] - ranges[i][0]
-    if listed:
-        walk = noted
+    listed, walk, js = sorted_candidates(i, ranges, candidate_count, candidates)
     total = no_contacts()
     for s in range(walk):
-        j = ranges[i][0] + s
-        if listed:
-            j = js[s]
+        j = candidate(listed, js, ranges[i][0], s)
         r_ij = position_in[i] - position_in[j]
         d2 = wp.dot(r_ij, r_ij)
         if d2 > wp.float64(0.0):
