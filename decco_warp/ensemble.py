@@ -39,8 +39,9 @@ class Ensemble:
             raise ValueError("the members of an ensemble keep the energy ledger (ledger=True)")
         snapshots = [sim.snapshot() for sim in members]
         statics = [sim.static for sim in members]
-        sizes = [s.n for s in statics]
-        starts = np.cumsum([0, *(s.n for s in statics)])[:-1]
+        sizes = np.array([s.n for s in statics])
+        ends = np.cumsum(sizes)
+        starts = ends - sizes
         joined = {key: np.concatenate([snap[key] for snap in snapshots]) for key in _ARRAYS}
         joined["deepest_contact"] = np.concatenate([_partners_moved(snap["deepest_contact"], first) for snap, first in zip(snapshots, starts)])
         state = State.from_arrays(
@@ -50,14 +51,13 @@ class Ensemble:
         # At the members' step (each view keeps its own clock's origin).
         state = replace(state, step=first.step_count, time=first.step_count * first.params.dt)
         self.sim = Simulation(
-            state, first.params, device=first.device, precision=precision, allow_unstable=True, ledger=True, systems=sizes,
+            state, first.params, device=first.device, precision=precision, allow_unstable=True, ledger=True, systems=sizes.tolist(),
             force_kernel=first.engine.force_kernel, layout=first.engine.layout,
         )  # fmt: skip
         self.sim.engine.restore(joined)
-        ends = np.cumsum(sizes)
         self.views = [
-            SystemView(self, int(end - size), int(end), sim.static, snap, sim.stability)
-            for sim, snap, size, end in zip(members, snapshots, sizes, ends)
+            SystemView(self, int(start), int(end), sim.static, snap, sim.stability)
+            for sim, snap, start, end in zip(members, snapshots, starts, ends)
         ]
         self._cache: dict = {}
 
