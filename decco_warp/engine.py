@@ -251,6 +251,13 @@ class Engine:
         )
         self._contacts(outputs)
 
+    def candidate_overflows(self) -> int:
+        """Particles whose contact candidates overflowed the list at the last force evaluation (the
+        split layout and the tree path; 0 otherwise): each costs a walk over its whole system."""
+        if self.candidates.shape[0] == 0:
+            return 0
+        return int((self.candidate_count.numpy() > self.candidates.shape[1]).sum())
+
     def _contacts(self, outputs: list) -> None:
         """The contact pass over the candidates noted by the sweep or the hash grid."""
         wp.launch(

@@ -79,7 +79,7 @@ class GravityTree:
         )
 
     def contact_candidates(self, position, radius, max_radius: float, candidate_count, candidates) -> None:
-        """Each particle's neighbours within R_i + R_max (plus a margin), from the hash grid."""
+        """Each particle's contact candidates (neighbours within R_i + R_j, plus a margin), from the hash grid."""
         self._launch(kernels.float32_points, self.count, [position, self.box, self.points])
         self.grid.build(self.points, 2.0 * max_radius * 1.0001)
         self._launch(

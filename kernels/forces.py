@@ -14,8 +14,8 @@
 * ``pair_gravity_tiled`` + ``contact_pass`` -- the same work split in two launches
   (``Layout(contact_pass=True)``, opt-in until measured on a GPU): the tiled sweep keeps only
   gravity and notes each particle's contact candidates in a global list (atomics, any order);
-  then one thread per particle sorts its list and evaluates the contacts in float64.  The
-  sweep carries no contact code, so it needs fewer registers; the sort keeps the motion (and
+  then one thread per particle walks its list in increasing j and evaluates the contacts in float64.  The
+  sweep carries no contact code, so it needs fewer registers; the fixed order keeps the motion (and
   here the ledger too) independent of scheduling.
 * ``pair_forces_reference`` -- one thread per particle, a plain loop over j.  It
   is the yardstick for tests and the baseline of ``decco-warp bench``.
@@ -399,44 +399,38 @@ def pair_forces_tiled(
     return pair_forces_tiled_kernel
 
 
-#: Contact candidates a particle may note for the contact pass; a particle with more (never seen
-#: in a pile: ~12 neighbours at most) has all j looked at again.
-CANDIDATES = 24
-
-Noted = wp.types.vector(length=CANDIDATES, dtype=wp.int32)
+#: Contact candidates a particle may note for the contact pass (the list's width; kernels read it
+#: from the array).  A large grain of a settled pile touches up to ~27 small ones, ~33 when the
+#: pile is squeezed to overlaps of 0.25 of a radius; the geometric limit for the paper's radius
+#: ratio of 3 is ~60.  A particle with more has every j of its system looked at again, which is
+#: right but costs a whole-system walk per step (24 slots made a merged pile 10x slower).
+CANDIDATES = 64
 
 
 @wp.func
-def sorted_candidates(
-    i: int, ranges: wp.array(dtype=wp.vec2i), candidate_count: wp.array(dtype=wp.int32), candidates: wp.array2d(dtype=wp.int32)
-):
-    """What i must look at: its noted candidates sorted by j (insertion), so that sums over them do
-    not depend on the order they were noted in, or, when they overflowed the list, every j of its
-    system.  Returns (listed, how many, the sorted list); :func:`candidate` gives the s-th."""
+def candidates_walk(i: int, ranges: wp.array(dtype=wp.vec2i), candidate_count: wp.array(dtype=wp.int32), candidates: wp.array2d(dtype=wp.int32)):
+    """How i's candidates are walked: (listed, how many steps).  Listed: its noted candidates in
+    increasing j (see :func:`next_candidate`), so that sums over them do not depend on the order
+    they were noted in; after an overflow of the list, every j of its system."""
     noted = candidate_count[i]
-    listed = noted <= wp.static(CANDIDATES)
-    js = Noted()
-    walk = ranges[i][1] - ranges[i][0]
-    if listed:
-        walk = noted
-        for s in range(noted):
-            j = candidates[i, s]
-            k = s
-            for _ in range(s):
-                if k > 0:
-                    if js[k - 1] > j:
-                        js[k] = js[k - 1]
-                        k = k - 1
-            js[k] = j
-    return listed, walk, js
+    if noted <= candidates.shape[1]:
+        return True, noted
+    return False, ranges[i][1] - ranges[i][0]
 
 
 @wp.func
-def candidate(listed: bool, js: Noted, first: int, s: int) -> int:
-    """The s-th particle of :func:`sorted_candidates`: from the list, or the s-th of the system."""
-    if listed:
-        return js[s]
-    return first + s
+def next_candidate(i: int, listed: bool, candidates: wp.array2d(dtype=wp.int32), walk: int, previous: int) -> int:
+    """The candidate after ``previous`` (start from the system's first particle - 1): the smallest
+    noted j above it (a selection pass over the row: no per-thread copy of the list), or simply
+    the next j of the system after an overflow."""
+    if not listed:
+        return previous + 1
+    best = int(2147483647)
+    for s in range(walk):
+        j = candidates[i, s]
+        if j > previous and j < best:
+            best = j
+    return best
 
 
 @functools.cache
@@ -493,7 +487,7 @@ def pair_gravity_tiled(block_dim: int, particles_per_block: int, precision: str 
                         # Rows past the end repeat the last particle: they note nothing.
                         if d2 < reach * reach * candidate and first + p < end:
                             slot = wp.atomic_add(candidate_count, first + p, 1)
-                            if slot < wp.static(CANDIDATES):
+                            if slot < candidates.shape[1]:
                                 candidates[first + p, slot] = j
 
         total = wp.tile_sum(wp.tile(fields, preserve_type=True))[0]
@@ -534,10 +528,11 @@ def contact_pass(rolling: str = "couple"):
         deepest_out: wp.array(dtype=wp.int64),
     ):
         i = wp.tid()
-        listed, walk, js = sorted_candidates(i, ranges, candidate_count, candidates)
+        listed, walk = candidates_walk(i, ranges, candidate_count, candidates)
         total = ContactSum()
-        for s in range(walk):  # the list, or every j after an overflow (each pair checked in float64)
-            j = candidate(listed, js, ranges[i][0], s)
+        j = ranges[i][0] - 1
+        for _ in range(walk):  # the list, or every j after an overflow (each pair checked in float64)
+            j = next_candidate(i, listed, candidates, walk, j)
             total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out, total)
         force_inout[i] = force_inout[i] + write_contacts(total, i, torque_out, channels_out)
 

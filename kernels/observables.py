@@ -7,7 +7,7 @@ potential coming from the tree: kernels/tree.py ``tree_potential``).
 
 import warp as wp
 
-from .forces import candidate, sorted_candidates
+from .forces import candidates_walk, next_candidate
 from .pair import ContactModel, in_contact, normal_force_magnitude, overlap, spring_constant
 
 wp.set_module_options({"enable_backward": False})
@@ -127,10 +127,11 @@ def candidate_observables(
     """The contact part of :func:`pair_observables` from each particle's contact candidates (the
     tree path's hash grid), in the same order of j, so with the same sums."""
     i = wp.tid()
-    listed, walk, js = sorted_candidates(i, ranges, candidate_count, candidates)
+    listed, walk = candidates_walk(i, ranges, candidate_count, candidates)
     total = no_contacts()
-    for s in range(walk):
-        j = candidate(listed, js, ranges[i][0], s)
+    j = ranges[i][0] - 1
+    for _ in range(walk):
+        j = next_candidate(i, listed, candidates, walk, j)
         r_ij = position_in[i] - position_in[j]
         d2 = wp.dot(r_ij, r_ij)
         if d2 > wp.float64(0.0):

@@ -7,6 +7,8 @@ from oracle import pair_loop_forces
 from scenes import contact_cluster, oracle_args, overlapping_cloud
 
 import decco_warp as dw
+from decco_warp.engine import Engine
+from decco_warp.run import builtin_pile
 
 #: float64 mode: relative error of each particle's force and torque.
 FLOAT64_TOLERANCE = 1e-9
@@ -135,21 +137,51 @@ def test_pair_forces_are_exactly_opposite(device):
 
 @pytest.mark.parametrize("case", [c for c in LAYOUTS if c[1].contact_pass], ids=_layout_id)
 def test_contact_pass_handles_more_candidates_than_its_list_holds(case):
-    """A 22.5 km sphere touched by 30 small ones: more candidates than the list holds, so the
-    contact pass looks at every j for it; forces still equal the plain loop's."""
+    """A 22.5 km sphere touched by more small ones than the list holds (they overlap each other
+    too): the contact pass looks at every j for it; forces still equal the plain loop's, and the
+    tree path's contacts (gravity off) too."""
     from decco_warp.kernels.forces import CANDIDATES
     from scenes import sphere_mass
 
     device, layout = case
+    count = CANDIDATES + 6
     rng = np.random.default_rng(4)
-    direction = rng.normal(size=(30, 3))
+    direction = rng.normal(size=(count, 3))
     direction /= np.linalg.norm(direction, axis=1)[:, None]
     x = np.vstack([[0.0, 0.0, 0.0], direction * (2.25e6 + 0.75e6 - 500.0)]) + 1.5e7
-    radii = np.array([2.25e6] + [0.75e6] * 30)
-    state = dw.State.from_arrays(x, rng.normal(size=(31, 3)), rng.normal(size=(31, 3)) * 1e-4, radii, sphere_mass(radii))
-    assert 30 > CANDIDATES
-    params = dw.Params()
-    split = dw.compute_forces(state, params, device=device, precision="float64", layout=layout)
-    reference = dw.compute_forces(state, params, device=device, precision="float64", force_kernel="reference")
-    for got, want in zip(split, reference):
-        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
+    radii = np.array([2.25e6] + [0.75e6] * count)
+    state = dw.State.from_arrays(x, rng.normal(size=(count + 1, 3)), rng.normal(size=(count + 1, 3)) * 1e-4, radii, sphere_mass(radii))
+    for params in (dw.Params(), dw.Params(G=0.0, gravity="tree")):
+        engine = Engine(state, params, device, "float64", layout=layout)
+        engine.eval_forces()
+        assert engine.candidate_overflows() >= 1
+        reference = dw.compute_forces(state, params, device=device, precision="float64", force_kernel="reference")
+        for got, want in zip(engine.read_forces(), reference):
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
+
+
+def _contact_counts(state, margin):
+    """Per particle, how many others lie closer than (R_i + R_j) * margin (float64 NumPy)."""
+    r = state.positions[:, None, :] - state.positions[None, :, :]
+    distance = np.sqrt((r**2).sum(axis=-1))
+    reach = (state.radii[:, None] + state.radii[None, :]) * margin
+    np.fill_diagonal(distance, np.inf)
+    return (distance < reach).sum(axis=1)
+
+
+@pytest.mark.parametrize("gravity", ["all-pairs", "tree"])
+def test_a_squeezed_pile_notes_its_contacts_and_no_list_overflows(gravity, device):
+    """The shipped target pile squeezed by 6 %: overlaps to ~0.25 of a radius, and its large grains
+    touch ~30 small ones (a list of 24 overflowed here, and a merged pile stepped 10x slower).
+    Each particle notes exactly its contacts (within the candidate margin), and every list holds."""
+    pile = dw.load_pile(builtin_pile("target"))
+    centre = pile.positions.mean(axis=0)
+    state = dw.State.from_arrays(centre + 0.94 * (pile.positions - centre), pile.velocities, pile.omegas, pile.radii, pile.masses)
+    layout = dw.Layout(128, 4, contact_pass=True) if device.startswith("cuda") else dw.Layout(1, 3, contact_pass=True)
+    engine = Engine(state, dw.Params(gravity=gravity), device, layout=layout)
+    engine.eval_forces()
+    noted = engine.candidate_count.numpy()
+    contacts = _contact_counts(state, 1.0)
+    assert contacts.max() > 24  # the case that overflowed
+    assert (noted >= contacts).all() and (noted <= _contact_counts(state, 1.0002)).all()
+    assert engine.candidate_overflows() == 0
