@@ -1,9 +1,11 @@
 """Throughput of the force kernel and of the full step, beside a plain baseline in the same process.
 
-The test system is a jittered cubic lattice of the paper's smallest spheres,
-spaced so that each touches its six neighbours with overlaps of ~1e2 cm: the
-contact density of a settled pile, at any N.  Throughput is N^2 / time (pairs
-per second, every ordered pair evaluated once per force evaluation).
+The test system (``system``) is either a jittered cubic lattice of the paper's
+smallest spheres, spaced so that each touches its six neighbours with overlaps
+of ~1e2 cm (``lattice``: the tables of docs/benchmarks.md), or copies of the
+shipped settled target pile side by side (``piles``: the paper's three radii,
+a large grain touching up to ~27 small ones, as in a run).  Throughput is N^2 /
+time (pairs per second, every ordered pair evaluated once per force evaluation).
 """
 
 from __future__ import annotations
@@ -45,6 +47,12 @@ class BenchRow:
     fraction_of_limit: float | None
     systems: int = 1
     """Systems of n particles stepped together (an ensemble); pairs/s counts all of them."""
+    system: str = "lattice"
+    """The test system: ``lattice`` or ``piles`` (see the module's docstring)."""
+
+
+#: The test systems of :func:`bench_size`.
+TEST_SYSTEMS = ("lattice", "piles")
 
 
 def lattice_pile(n: int, seed: int = 0) -> State:
@@ -61,9 +69,37 @@ def lattice_pile(n: int, seed: int = 0) -> State:
     return State.from_arrays(positions, velocities, omegas, radii, masses)
 
 
-def lattice_ensemble(n: int, systems: int) -> State:
-    """``systems`` lattice piles of ``n`` spheres (different jitter), one after another: an ensemble."""
-    piles = [lattice_pile(n, seed=k) for k in range(systems)]
+def pile_mosaic(n: int, seed: int = 0) -> State:
+    """``n`` spheres from copies of the shipped settled target pile, each turned at random, on a
+    cubic grid with gaps between them (the last copy cut short): a pile's contacts at any N."""
+    from .io import load_pile
+    from .run import builtin_pile
+
+    pile = load_pile(builtin_pile("target"))
+    centred = pile.positions - pile.positions.mean(axis=0)
+    spacing = 2.0 * (np.linalg.norm(centred, axis=1).max() + 2.0 * pile.radii.max())
+    copies = math.ceil(n / pile.n)
+    side = math.ceil(copies ** (1.0 / 3.0))
+    rng = np.random.default_rng(seed)
+    parts = []
+    for k in range(copies):
+        turn, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        cell = np.array([k % side, (k // side) % side, k // side**2]) - (side - 1) / 2.0
+        parts.append(centred @ turn.T + cell * spacing)
+
+    def tiled(values: np.ndarray) -> np.ndarray:
+        return np.concatenate([values] * copies)[:n]
+
+    return State.from_arrays(np.concatenate(parts)[:n], tiled(pile.velocities), tiled(pile.omegas), tiled(pile.radii), tiled(pile.masses))
+
+
+def bench_system(kind: str, n: int, systems: int = 1) -> State:
+    """The bench's ``kind`` of system at ``n`` particles, or ``systems`` of them one after another
+    (an ensemble: each different)."""
+    if kind not in TEST_SYSTEMS:
+        raise ValueError(f"the test system must be one of {', '.join(TEST_SYSTEMS)}; got {kind!r}")
+    make = lattice_pile if kind == "lattice" else pile_mosaic
+    piles = [make(n, seed=k) for k in range(systems)]
 
     def joined(name: str) -> np.ndarray:
         return np.concatenate([getattr(p, name) for p in piles])
@@ -126,11 +162,12 @@ def bench_size(
     baseline: bool = True,
     gravity: str = "all-pairs",
     systems: int = 1,
+    system: str = "lattice",
 ) -> BenchRow:
     """One row: the force evaluation and the full step at ``n`` (pairs/s counts N^2 pairs, also
     for the tree, whose figure is then an equivalent rate), beside the one-thread-per-particle kernel.
     With ``systems`` > 1, that many systems of ``n`` stepped together, and pairs/s counts them all."""
-    state = lattice_ensemble(n, systems) if systems > 1 else lattice_pile(n)
+    state = bench_system(system, n, systems)
     sizes = [n] * systems
     params = Params(gravity=gravity)
     layout = layout or choose_layout(n, device)
@@ -160,6 +197,7 @@ def bench_size(
         speedup=baseline_seconds / force_seconds,
         fraction_of_limit=None if limit is None else (pairs / step_seconds) / limit,
         systems=systems,
+        system=system,
     )
 
 

@@ -470,9 +470,13 @@ def bench(
     ensemble: str = typer.Option(
         "", "--ensemble", help="Also time ensembles of this many systems of N stepped together, e.g. 2,4,8 (aggregate pairs/s, against one at a time)."
     ),
+    system: str = typer.Option(
+        "lattice", "--system", help="Test systems, side by side: lattice (equal spheres, 6 contacts each), piles (copies of the shipped pile: the paper's radii, up to ~27 contacts) or lattice,piles."
+    ),
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Pairs/s of the force kernel and of the full step, beside a one-thread-per-particle baseline."""
+    import itertools
     import json
 
     import warp as wp
@@ -500,6 +504,9 @@ def bench(
         ensembles = [0]
     if any(k < 2 for k in ensembles):
         fail(f"--ensemble must list system counts >= 2, e.g. 2,4,8; got {ensemble!r}")
+    kinds = [k.strip() for k in system.split(",") if k.strip()]
+    if not kinds or any(k not in benchmarks.TEST_SYSTEMS for k in kinds):
+        fail(f"--system must list {' and/or '.join(benchmarks.TEST_SYSTEMS)}; got {system!r}")
     default_sizes = "2048,10240,65536,131072" if chosen.startswith("cuda") else "256,1024"
     sizes = [int(v) for v in _floats(n or default_sizes, "--n")]
     if any(v < 2 for v in sizes) or steps < 1 or budget <= 0:
@@ -524,7 +531,7 @@ def bench(
     header = f"{'N':>8} {'force pairs/s':>14} {'step pairs/s':>13} {'step ms':>9} {'of limit':>9} {'baseline pairs/s':>17} {'speed-up':>9}  layout"
     typer.echo(header)
     rows = []
-    for size in sizes:
+    for size, kind in itertools.product(sizes, kinds):
         runs = [("all-pairs", layout) for layout in [None, *extra_layouts]] if "all-pairs" in solvers else []
         runs += [("tree", None)] if "tree" in solvers else []
         runs = [(solver, layout, 1) for solver, layout in runs]
@@ -532,7 +539,11 @@ def bench(
         alone = None
         for solver, layout, systems in runs:
             first = (solver, layout, systems) == runs[0]
-            row = benchmarks.bench_size(size, chosen, precision, layout, budget, steps, baseline=first, gravity=solver, systems=systems)
+            row = benchmarks.bench_size(
+                size, chosen, precision, layout, budget, steps, baseline=first, gravity=solver, systems=systems, system=kind
+            )
+            if len(kinds) > 1:
+                row.layout += f", {kind}"
             rows.append(row)
             if systems == 1 and layout is None and solver == "all-pairs":
                 alone = row

@@ -7,7 +7,8 @@ import sys
 import numpy as np
 
 import decco_warp as dw
-from decco_warp.bench import lattice_pile
+from decco_warp.bench import lattice_pile, pile_mosaic
+from decco_warp.run import builtin_pile
 
 
 def test_lattice_pile_touches_its_neighbours_lightly():
@@ -16,6 +17,29 @@ def test_lattice_pile_touches_its_neighbours_lightly():
     # 4 x 4 x 4 lattice: 3 * 4 * 4 * 3 = 144 neighbour contacts, overlaps of 300 +- 200 cm.
     assert d["number_of_contacts"] == 144
     assert 0 < d["max_overlap"] < 700
+
+
+def _subset(state, count):
+    return dw.State.from_arrays(*(values[:count] for values in (state.positions, state.velocities, state.omegas, state.radii, state.masses)))
+
+
+def test_pile_mosaic_repeats_the_shipped_pile_turned_and_apart():
+    """Two whole copies and a cut one: each copy keeps the pile's contacts (it is only turned and
+    moved) and no copy touches another, so the mosaic has exactly their contacts."""
+    pile = dw.load_pile(builtin_pile("target"))
+    n = 2 * pile.n + 50
+    state = pile_mosaic(n, seed=1)
+    assert state.n == n
+    np.testing.assert_array_equal(state.radii, np.concatenate([pile.radii, pile.radii, pile.radii[:50]]))
+    contacts = dw.diagnostics(pile, dw.Params())["number_of_contacts"]
+    cut = dw.diagnostics(_subset(pile, 50), dw.Params())["number_of_contacts"]
+    assert contacts > pile.n  # a settled pile: ~2.5 contacts per particle
+    assert dw.diagnostics(state, dw.Params())["number_of_contacts"] == 2 * contacts + cut
+    second = state.positions[pile.n : 2 * pile.n]
+    turned = np.linalg.norm(second[:, None] - second[None, :], axis=-1)
+    original = np.linalg.norm(pile.positions[:, None] - pile.positions[None, :], axis=-1)
+    np.testing.assert_allclose(turned, original, rtol=0, atol=1e-9 * original.max())
+    assert not np.allclose(second - second.mean(axis=0), pile.positions - pile.positions.mean(axis=0))
 
 
 def test_bench_cli_writes_a_table_with_its_baseline(tmp_path):
@@ -56,3 +80,23 @@ def test_bench_cli_rejects_bad_layouts():
         text=True,
     )
     assert result.returncode == 2 and "--ensemble must list system counts >= 2" in result.stderr
+    result = subprocess.run(
+        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", "bench", "--device", "cpu", "--system", "lattice,dust"],
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode == 2 and "--system must list lattice and/or piles" in result.stderr
+
+
+def test_bench_cli_times_both_test_systems_side_by_side(tmp_path):
+    out = tmp_path / "bench.json"
+    result = subprocess.run(
+        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", "bench", "--device", "cpu", "--n", "320",
+         "--seconds", "0.02", "--steps", "2", "--system", "lattice,piles", "--json", str(out)],
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode == 0, result.stderr
+    rows = json.loads(out.read_text())["rows"]
+    assert [(r["system"], r["layout"].split(", ")[-1]) for r in rows] == [("lattice", "lattice"), ("piles", "piles")]
+    assert all(r["baseline_pairs_per_s"] > 0 for r in rows)  # each system gets its own baseline
