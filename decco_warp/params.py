@@ -19,10 +19,11 @@ GRAVITY_SOLVERS = ("all-pairs", "tree")
 GRAVITY_CHOICES = (*GRAVITY_SOLVERS, "auto")
 
 #: From this many particles ``gravity = "auto"`` takes the tree, per device kind. CPU: measured
-#: (docs/benchmarks.md: the tree's step is the faster from ~3 500 particles). CUDA: provisional
+#: (docs/benchmarks.md: on copies of a settled pile the tree's step is the faster from ~1 150
+#: particles, since its hash grid notes only touching neighbours). CUDA: provisional
 #: until `decco-warp bench --gravity all-pairs,tree` has timed the tree on a GPU; all-pairs reaches
 #: 4.5e11 pairs/s there, 38 ms a step at 131 072 particles.
-TREE_FROM = {"cpu": 4096, "cuda": 131072}
+TREE_FROM = {"cpu": 1200, "cuda": 131072}
 
 
 def choose_gravity(n: int, device: str) -> str:
