@@ -37,7 +37,7 @@ import functools
 
 import warp as wp
 
-from .pair import CONTACT_FUNCTIONS, ContactModel, gravity, in_contact, overlap
+from .pair import CONTACT_FUNCTIONS, ContactModel, gravity, in_contact, inverse_sqrt_exact, inverse_sqrt_fast, overlap
 
 wp.set_module_options({"enable_backward": False})
 
@@ -117,6 +117,11 @@ def _real_types(precision: str):
     if precision not in BODY_TYPES:
         raise ValueError(f"precision must be one of {PRECISIONS}, got {precision!r}")
     return (wp.float32, wp.vec3f) if precision == "mixed" else (wp.float64, wp.vec3d)
+
+
+def _inverse_sqrt(precision: str):
+    """The sweep's 1/d: one rsqrt instruction on a GPU in the default precision, exact in float64."""
+    return inverse_sqrt_fast if precision == "mixed" else inverse_sqrt_exact
 
 
 # The deepest contact of each particle since the host last read it, as one int64 so that a
@@ -267,6 +272,7 @@ def pair_forces_tiled(
     contact code, which runs rarely, then spills instead of the sweep losing occupancy.
     """
     real, _ = _real_types(precision)
+    inverse_sqrt = _inverse_sqrt(precision)
     Body = BODY_TYPES[precision]
     contact_channels = contact_function(rolling)
     T, P, K = block_dim, particles_per_block, contact_slots
@@ -326,7 +332,7 @@ def pair_forces_tiled(
                     r = separation(bodies_i[p], body_j)
                     d2 = wp.dot(r, r)
                     if d2 > real(0.0):  # not the particle itself
-                        inv_d = real(1.0) / wp.sqrt(d2)
+                        inv_d = inverse_sqrt(d2)
                         fields[p] = fields[p] + (body_j[g_mass_at] * inv_d * inv_d * inv_d) * r
                         reach = bodies_i[p][radius_at] + body_j[radius_at]
                         if d2 < reach * reach * candidate:
@@ -442,6 +448,7 @@ def pair_gravity_tiled(block_dim: int, particles_per_block: int, precision: str 
     :func:`contact_pass` adds the contacts.
     """
     real, _ = _real_types(precision)
+    inverse_sqrt = _inverse_sqrt(precision)
     Body = BODY_TYPES[precision]
     T, P = block_dim, particles_per_block
     radius_at, g_mass_at = (6, 7) if precision == "mixed" else (3, 4)
@@ -481,7 +488,7 @@ def pair_gravity_tiled(block_dim: int, particles_per_block: int, precision: str 
                     r = separation(bodies_i[p], body_j)
                     d2 = wp.dot(r, r)
                     if d2 > real(0.0):  # not the particle itself
-                        inv_d = real(1.0) / wp.sqrt(d2)
+                        inv_d = inverse_sqrt(d2)
                         fields[p] = fields[p] + (body_j[g_mass_at] * inv_d * inv_d * inv_d) * r
                         reach = bodies_i[p][radius_at] + body_j[radius_at]
                         # Rows past the end repeat the last particle: they note nothing.

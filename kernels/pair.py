@@ -39,11 +39,34 @@ class ContactModel:
 # --- gravity (paper eq. 2) ---------------------------------------------------
 
 
+# 1/sqrt(d^2) in one instruction on a GPU: written as 1 / sqrt, fast math still issues two
+# special-function instructions (sqrt.approx, then div.approx), and these units, 16 per SM
+# against 128 float32 lanes, bound the all-pairs sweep.  rsqrt.approx is within 2^-22 relative;
+# the CPU keeps the correctly rounded 1 / sqrt.
+_INVERSE_SQRT = """
+#if defined(__CUDA_ARCH__)
+return rsqrtf(d2);
+#else
+return 1.0f / wp::sqrt(d2);
+#endif
+"""
+
+
+@wp.func_native(_INVERSE_SQRT)
+def inverse_sqrt_fast(d2: wp.float32) -> wp.float32: ...
+
+
+@wp.func
+def inverse_sqrt_exact(d2: wp.float64) -> wp.float64:
+    """1/sqrt(d^2) correctly rounded, for float64 sweeps."""
+    return f64(1.0) / wp.sqrt(d2)
+
+
 @wp.func
 def gravity(r_ij: wp.vec3f, g_mass_mass: wp.float32) -> wp.vec3f:
     """Gravity on i from j, -G m_i m_j / d^2 n, in float32 (the fast default)."""
     d2 = wp.dot(r_ij, r_ij)
-    inv_d = 1.0 / wp.sqrt(d2)
+    inv_d = inverse_sqrt_fast(d2)
     return (-g_mass_mass * inv_d * inv_d * inv_d) * r_ij
 
 
