@@ -188,6 +188,9 @@ class Engine:
             device=self.device,
         )
         self.max_radius = float(state.radii.max())
+        # The sweeps' per-i contact bound, in their arithmetic (float32 rounding of the largest
+        # radius is no smaller than that of any other radius, so the bound holds).
+        self._max_radius = (wp.float32 if precision == "mixed" else wp.float64)(self.max_radius)
         split = self.tree is not None or tiled and self.layout.contact_pass
         self.candidate_count = wp.zeros(self.count if split else 0, dtype=wp.int32, device=self.device)
         self.candidates = wp.zeros((self.count if split else 0, force_kernels.CANDIDATES), dtype=wp.int32, device=self.device)
@@ -239,24 +242,25 @@ class Engine:
         )
         tiled = {"dim": [self.blocks.shape[0]], "block_dim": self.layout.block_dim, "device": self.device}
         if not self.layout.contact_pass:
-            wp.launch_tiled(self._force_kernel, inputs=[self.model, self.blocks, *state, self.body], outputs=outputs, **tiled)
+            wp.launch_tiled(self._force_kernel, inputs=[self.model, self.blocks, *state, self.body, self._max_radius], outputs=outputs, **tiled)
             return
         # The split layout: a gravity sweep noting contact candidates, then the contacts.
         self.candidate_count.zero_()
         wp.launch_tiled(
             self._force_kernel,
-            inputs=[self.blocks, self.mass, self.body],
+            inputs=[self.blocks, self.mass, self.body, self._max_radius],
             outputs=[self.force, self.candidate_count, self.candidates],
             **tiled,
         )
         self._contacts(outputs)
 
-    def candidate_overflows(self) -> int:
-        """Particles whose contact candidates overflowed the list at the last force evaluation (the
-        split layout and the tree path; 0 otherwise): each costs a walk over its whole system."""
+    def candidate_overflows(self, first: int = 0, end: int | None = None) -> int:
+        """Particles (of rows [first, end)) whose contact candidates overflowed the list at the last
+        force evaluation (the split layout and the tree path; 0 otherwise): each costs a walk over
+        its whole system."""
         if self.candidates.shape[0] == 0:
             return 0
-        return int((self.candidate_count.numpy() > self.candidates.shape[1]).sum())
+        return int((self.candidate_count.numpy()[first:end] > self.candidates.shape[1]).sum())
 
     def _contacts(self, outputs: list) -> None:
         """The contact pass over the candidates noted by the sweep or the hash grid."""

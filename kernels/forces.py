@@ -34,6 +34,7 @@ Precision:
 """
 
 import functools
+from typing import Any
 
 import warp as wp
 
@@ -122,6 +123,22 @@ def _real_types(precision: str):
 def _inverse_sqrt(precision: str):
     """The sweep's 1/d: one rsqrt instruction on a GPU in the default precision, exact in float64."""
     return inverse_sqrt_fast if precision == "mixed" else inverse_sqrt_exact
+
+
+@wp.func
+def is_candidate(d2: Any, radius_i: Any, radius_j: Any, candidate: Any) -> bool:
+    """The sweep's contact test: d^2 < (R_i + R_j)^2 (1 + margin), confirmed later in float64."""
+    reach = radius_i + radius_j
+    return d2 < reach * reach * candidate
+
+
+@wp.func
+def near_bound(radius_i: Any, max_radius: Any, candidate: Any) -> Any:
+    """The same bound with R_max for R_j: computed once per i, it holds every candidate of i
+    (rounding is monotone, so R_j <= R_max gives a bound no smaller), and one comparison
+    per pair clears the others."""
+    reach = radius_i + max_radius
+    return reach * reach * candidate
 
 
 # The deepest contact of each particle since the host last read it, as one int64 so that a
@@ -279,6 +296,7 @@ def pair_forces_tiled(
     radius_at, g_mass_at = (6, 7) if precision == "mixed" else (3, 4)
     candidate = real(CONTACT_CANDIDATE if precision == "mixed" else 1.0)
     Bodies = wp.types.matrix(shape=(P, Body._length_), dtype=real)
+    Near = wp.types.vector(length=P, dtype=real)
     Fields = wp.types.matrix(shape=(P, 3), dtype=real)
     Slots = wp.types.matrix(shape=(P, K), dtype=wp.int32)
     Counts = wp.types.vector(length=P, dtype=wp.int32)
@@ -304,6 +322,7 @@ def pair_forces_tiled(
         velocity_in: wp.array(dtype=wp.vec3d),
         omega_in: wp.array(dtype=wp.vec3d),
         body_in: wp.array(dtype=Body),
+        max_radius: real,  # the largest radius: a per-i bound that spares most pairs the contact test
         # Out:
         force_out: wp.array(dtype=wp.vec3d),
         torque_out: wp.array(dtype=wp.vec3d),
@@ -316,8 +335,10 @@ def pair_forces_tiled(
         # The block's own particles stay in registers; rows past the end repeat the
         # last particle and are never written.
         bodies_i = Bodies()
+        near = Near()
         for p in range(wp.static(P)):
             bodies_i[p] = body_in[wp.min(first + p, end - 1)]
+            near[p] = near_bound(bodies_i[p][radius_at], max_radius, candidate)
 
         fields = Fields()
         slots = Slots()
@@ -334,12 +355,12 @@ def pair_forces_tiled(
                     if d2 > real(0.0):  # not the particle itself
                         inv_d = inverse_sqrt(d2)
                         fields[p] = fields[p] + (body_j[g_mass_at] * inv_d * inv_d * inv_d) * r
-                        reach = bodies_i[p][radius_at] + body_j[radius_at]
-                        if d2 < reach * reach * candidate:
-                            noted = candidates[p]
-                            if noted < wp.static(K):
-                                slots[p, noted] = j
-                            candidates[p] = noted + 1
+                        if d2 < near[p]:  # within R_i + R_max: rare, so the exact test costs little
+                            if is_candidate(d2, bodies_i[p][radius_at], body_j[radius_at], candidate):
+                                noted = candidates[p]
+                                if noted < wp.static(K):
+                                    slots[p, noted] = j
+                                candidates[p] = noted + 1
 
         # Contacts, in float64: the noted candidates, or after an overflow of the slots,
         # this thread's share of j looked at again; either way in increasing j.  The
@@ -454,6 +475,7 @@ def pair_gravity_tiled(block_dim: int, particles_per_block: int, precision: str 
     radius_at, g_mass_at = (6, 7) if precision == "mixed" else (3, 4)
     candidate = real(CONTACT_CANDIDATE if precision == "mixed" else 1.0)
     Bodies = wp.types.matrix(shape=(P, Body._length_), dtype=real)
+    Near = wp.types.vector(length=P, dtype=real)
     Fields = wp.types.matrix(shape=(P, 3), dtype=real)
 
     @wp.kernel(
@@ -468,6 +490,7 @@ def pair_gravity_tiled(block_dim: int, particles_per_block: int, precision: str 
         mass_in: wp.array(dtype=wp.float64),
         # State in:
         body_in: wp.array(dtype=Body),
+        max_radius: real,  # the largest radius: a per-i bound that spares most pairs the contact test
         # Out:
         force_out: wp.array(dtype=wp.vec3d),
         candidate_count: wp.array(dtype=wp.int32),
@@ -476,8 +499,10 @@ def pair_gravity_tiled(block_dim: int, particles_per_block: int, precision: str 
         block, lane = wp.tid()
         first, end, j_first, j_end = unpack_block(blocks[block])
         bodies_i = Bodies()
+        near = Near()
         for p in range(wp.static(P)):
             bodies_i[p] = body_in[wp.min(first + p, end - 1)]
+            near[p] = near_bound(bodies_i[p][radius_at], max_radius, candidate)
 
         fields = Fields()
         for start in range(j_first, j_end, wp.static(T)):
@@ -490,12 +515,12 @@ def pair_gravity_tiled(block_dim: int, particles_per_block: int, precision: str 
                     if d2 > real(0.0):  # not the particle itself
                         inv_d = inverse_sqrt(d2)
                         fields[p] = fields[p] + (body_j[g_mass_at] * inv_d * inv_d * inv_d) * r
-                        reach = bodies_i[p][radius_at] + body_j[radius_at]
                         # Rows past the end repeat the last particle: they note nothing.
-                        if d2 < reach * reach * candidate and first + p < end:
-                            slot = wp.atomic_add(candidate_count, first + p, 1)
-                            if slot < candidates.shape[1]:
-                                candidates[first + p, slot] = j
+                        if d2 < near[p] and first + p < end:  # within R_i + R_max: rare
+                            if is_candidate(d2, bodies_i[p][radius_at], body_j[radius_at], candidate):
+                                slot = wp.atomic_add(candidate_count, first + p, 1)
+                                if slot < candidates.shape[1]:
+                                    candidates[first + p, slot] = j
 
         total = wp.tile_sum(wp.tile(fields, preserve_type=True))[0]
         if lane == 0:
