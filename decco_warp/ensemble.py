@@ -147,6 +147,9 @@ class SystemView:
     def take_deepest_contact(self) -> dict:
         return self._ensemble.sim.engine.take_deepest_contact(self.first, self.end)
 
+    def candidate_overflows(self) -> int:
+        return self._ensemble.sim.engine.candidate_overflows(self.first, self.end)
+
     def snapshot(self) -> dict:
         """This system's part of the ensemble's snapshot: what a Simulation stepped alone would give."""
         whole = self._ensemble.sim.engine.snapshot()

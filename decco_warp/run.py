@@ -496,6 +496,7 @@ class RunDriver:
         # A frame's deepest overlap is the deepest since the previous frame, which a resumed run may
         # have written before it stopped (checkpoints of decco-warp 0.2 do not say: then its start).
         self.last_frame = int(extra.get("last_frame_step", self.first_step))
+        self.overflow_noted = False
 
     @property
     def done(self) -> bool:
@@ -532,6 +533,7 @@ class RunDriver:
                 raise BlowUp(f"{error}; likely cause: {likely_cause(sim.stability, self.overlaps, extra)}") from None
             warning = self.overlaps.see(step, observables, since=self.last_frame)
             self.last_frame = extra["last_frame_step"] = step
+            self.note_candidate_overflows(step)
             self.trajectory.append(step, sim.time, particles, observables)
             self.log(
                 f"frame: step {step}, t {sim.time:.6g} s, E {observables['total_energy']:.9g} erg, "
@@ -552,6 +554,18 @@ class RunDriver:
             self.checkpoint(step)
             self.log(f"stopped by {stop_signal} at step {step}; decco-warp resume {self.run_dir} continues")
             raise RunStopped(stop_signal, step, self.run_dir)
+
+    def note_candidate_overflows(self, step: int) -> None:
+        """Say once, at a frame, that some particles met more contact candidates than their list
+        holds: right, but each walks its whole system every step, so a run slows down."""
+        overflows = self.sim.candidate_overflows()
+        if overflows and not self.overflow_noted:
+            self.overflow_noted = True
+            self.log(
+                f"note: at step {step}, {overflows} of the particles met more contact candidates than a list holds; "
+                "their contacts are right, but each of them walks its whole system every step, which slows the run "
+                "(docs/benchmarks.md)"
+            )
 
     def failure(self, error: BaseException) -> BaseException:
         """What a BlowUp or OSError raised by :meth:`after_steps` means for the user, logged."""

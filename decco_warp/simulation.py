@@ -163,6 +163,10 @@ class Simulation:
         pairs = self.pair_observables() if pairs is None else pairs
         return state_diagnostics(state, pairs)
 
+    def candidate_overflows(self) -> int:
+        """Particles whose contact candidates overflowed their list at the last force evaluation."""
+        return self.engine.candidate_overflows()
+
     def take_deepest_contact(self) -> dict:
         """The deepest contact any step met since the last call (or since this simulation was made or
         restored): ``deepest_overlap`` (fraction of the smaller radius) and ``deepest_overlap_pair``."""

@@ -148,3 +148,31 @@ def test_tree_frames_give_the_all_pairs_observables_in_n_log_n(device, scene):
         if theta == dw.Params().theta_open:
             assert rms[theta] < 3e-4 and abs(tree["potential"].sum() / exact["potential"].sum() - 1) < 5e-5
     assert rms[0.2] < rms[0.4] < rms[0.7]
+
+
+def test_a_run_whose_contact_lists_overflow_says_so_once_in_its_log(tmp_path):
+    """A 75 km sphere touched by 150 small ones (more than a list holds): the run's contacts stay
+    right (the overflow walks the whole system), and run.log says, once, that this slows it."""
+    from helpers import cli
+    from scenes import sphere_mass
+
+    count = 150
+    k = np.arange(count) + 0.5
+    polar, azimuth = np.arccos(1 - 2 * k / count), np.pi * (1 + 5**0.5) * k  # a Fibonacci sphere
+    direction = np.stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), np.cos(polar)], axis=1)
+    radii = np.array([7.5e6] + [0.75e6] * count)
+    x = np.vstack([[0.0, 0.0, 0.0], direction * (7.5e6 + 0.75e6 - 100.0)])
+    pile = dw.State.from_arrays(x, np.zeros_like(x), np.zeros_like(x), radii, sphere_mass(radii))
+    from decco_warp.engine import Engine
+
+    engine = Engine(pile, dw.Params(gravity="tree"), "cpu")
+    engine.eval_forces()
+    assert engine.candidate_overflows() == 1  # the large sphere only
+    dw.save_pile(pile, tmp_path / "urchin.h5")
+    result = cli(
+        "simulate", "--target", str(tmp_path / "urchin.h5"), "--projectile", str(builtin_pile("projectile")), "--gravity", "tree",
+        "--steps", "20", "--output-every", "10", "--device", "cpu", "--out", str(tmp_path), "--name", "urchin",
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    notes = [line for line in (tmp_path / "urchin" / "run.log").read_text().splitlines() if "more contact candidates" in line]
+    assert len(notes) == 1 and "at step 10, 1 of the particles met" in notes[0]
