@@ -486,6 +486,8 @@ class RunDriver:
         self.wall_before = float(extra["wall_seconds"])
         self.stepping_before = float(extra.get("stepping_seconds", 0.0))  # runs of decco-warp 0.2 did not count it
         self.stepping = 0.0
+        # Where the time outside stepping goes (this session): frames' observables, trajectory writes, checkpoints.
+        self.outside = {"observables": 0.0, "trajectory": 0.0, "checkpoints": 0.0}
         self.started = _time.perf_counter()
         # Progress is reported about 200 times per run, never between graph blocks.
         self.report_every = max(50, self.total // 200)
@@ -509,10 +511,12 @@ class RunDriver:
         return min(min(stops) - step, self.report_every - step % self.report_every)
 
     def checkpoint(self, step: int) -> None:
-        self.extra["wall_seconds"] = self.wall_before + _time.perf_counter() - self.started
+        began = _time.perf_counter()
+        self.extra["wall_seconds"] = self.wall_before + began - self.started
         self.extra["stepping_seconds"] = self.stepping_before + self.stepping
         write_checkpoint(self.run_dir / CHECKPOINT_FILE, self.sim.snapshot(), self.sim.state, self.extra)
         self.log(f"checkpoint: step {step}")
+        self.outside["checkpoints"] += _time.perf_counter() - began
 
     def after_steps(self, seconds: float, stop_signal: str | None = None) -> None:
         """Count ``seconds`` of stepping, then do what is due at the step reached (nothing between
@@ -524,6 +528,7 @@ class RunDriver:
         frame = None
         warning = None
         if step % self.output_every == 0 or step == total:
+            began = _time.perf_counter()
             frame = particles, observables = record(sim, self.size_classes)
             observables.update(deepest_since(observables, sim.take_deepest_contact()))
             try:
@@ -534,7 +539,10 @@ class RunDriver:
             warning = self.overlaps.see(step, observables, since=self.last_frame)
             self.last_frame = extra["last_frame_step"] = step
             self.note_candidate_overflows(step)
+            written = _time.perf_counter()
+            self.outside["observables"] += written - began
             self.trajectory.append(step, sim.time, particles, observables)
+            self.outside["trajectory"] += _time.perf_counter() - written
             self.log(
                 f"frame: step {step}, t {sim.time:.6g} s, E {observables['total_energy']:.9g} erg, "
                 f"ledger closed to {ledger_closure(observables, self.start_energy, self.scale):.2g}, "
@@ -590,7 +598,9 @@ class RunDriver:
             outside = 100.0 * (self.wall - self.stepping) / self.wall if self.wall > 0 else 0.0
             self.log(
                 f"done: step {self.sim.step_count}, t {self.sim.time:.6g} s, {self.wall:.1f} s wall this session, "
-                f"{self.stepping:.1f} s of it stepping ({outside:.0f} % outside: frames, checkpoints, output); "
+                f"{self.stepping:.1f} s of it stepping ({outside:.0f} % outside: "
+                + ", ".join(f"{what} {seconds:.1f} s" for what, seconds in self.outside.items())
+                + "); "
                 f"{self.overlaps.summary()}"
             )
         self.log.close()

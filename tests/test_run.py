@@ -49,6 +49,10 @@ def test_default_simulate_writes_a_complete_run_folder(finished):
     assert done, (run_dir / "run.log").read_text()
     wall, stepping, outside = float(done[1]), float(done[2]), int(done[3])
     assert 0 < stepping <= wall and 0 <= outside <= 100
+    # The time outside stepping, by what took it: a part of wall - stepping (rounded to 0.1 s each).
+    parts = re.search(r"% outside: observables ([\d.]+) s, trajectory ([\d.]+) s, checkpoints ([\d.]+) s\)", (run_dir / "run.log").read_text())
+    assert parts, (run_dir / "run.log").read_text()
+    assert sum(float(v) for v in parts.groups()) <= wall - stepping + 0.2
     extra = read_checkpoint(run_dir / "checkpoint.h5")[2]
     assert 0 < extra["stepping_seconds"] < extra["wall_seconds"]
     assert f"{extra['stepping_seconds']:.1f} s of it stepping" in result.stdout
