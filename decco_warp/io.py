@@ -10,6 +10,7 @@ Nothing here imports Warp: these functions read and write NumPy snapshots.
   ``/parameters`` with the resolved run specification.  It is written in SWMR
   mode and flushed after every frame, so it can be read while the run goes on
   (open it with ``swmr=True``) and stays readable if the run is killed.
+  ``BackgroundFrames`` writes a run's frames on a worker thread while it steps on.
 * A checkpoint is replaced atomically (temporary file, fsync, rename).
 
 Piles and checkpoints are checked as they are read (decco_warp.checks): values that make
@@ -22,6 +23,7 @@ import contextlib
 import errno
 import os
 import tempfile
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import h5py
@@ -335,6 +337,39 @@ class Trajectory:
 
     def close(self) -> None:
         self.file.close()
+
+
+class BackgroundFrames:
+    """A trajectory whose frames are written by one worker thread, in order and one at a time, so
+    that writing a frame (~6 ms, mostly HDF5's cost per dataset) overlaps the next steps: the
+    stepping loop waits on the device or in Warp's kernels with the GIL released.  A frame's write
+    error comes back at the next ``append``, ``flush`` or ``close``; flush before anything that must
+    not be on disk before the frames (a checkpoint), so that a kill never leaves a checkpoint ahead
+    of its trajectory."""
+
+    def __init__(self, trajectory: Trajectory):
+        self.trajectory = trajectory
+        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="decco-frames")
+        self._pending: Future | None = None
+
+    def append(self, step: int, time: float, particles: dict, observables: dict) -> None:
+        """Queue one frame (its arrays must not change afterwards) once the previous one is written."""
+        self.flush()
+        self._pending = self._worker.submit(self.trajectory.append, step, time, particles, observables)
+
+    def flush(self) -> None:
+        """Wait until every queued frame is written and flushed; raises a write's error."""
+        pending, self._pending = self._pending, None
+        if pending is not None:
+            pending.result()
+
+    def close(self) -> None:
+        """Flush, then close the file (also when the flush fails, whose error is then raised)."""
+        try:
+            self.flush()
+        finally:
+            self._worker.shutdown(wait=True)
+            self.trajectory.close()
 
 
 def _complete_frames(element: h5py.Group, keep_through_step: int) -> int:

@@ -25,7 +25,7 @@ from .checks import MAX_REST_OVERLAP, InputError, check_destination, check_parti
 from .collision import setup_collision
 from .device import resolve_device
 from .diagnostics import energy_ledger, energy_scale, ledger_closure, stress_shares
-from .io import FileFormatError, Trajectory, load_pile, pause_point, read_checkpoint, read_frame, write_checkpoint
+from .io import BackgroundFrames, FileFormatError, Trajectory, load_pile, pause_point, read_checkpoint, read_frame, write_checkpoint
 from .lock import RunFolderLock
 from .simulation import Simulation
 from .stability import MIN_TIME_STEP_MARGIN, CompressionForecast, StabilityReport, check_stability, predict_compression
@@ -476,7 +476,8 @@ class RunDriver:
     (one run's, or an ensemble's shared by several drivers) belongs to the caller."""
 
     def __init__(self, sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, progress, observers=()):
-        self.sim, self.trajectory, self.run_dir, self.log, self.extra = sim, trajectory, run_dir, log, extra
+        self.sim, self.run_dir, self.log, self.extra = sim, run_dir, log, extra
+        self.trajectory = BackgroundFrames(trajectory)
         self.progress, self.observers = progress, list(observers)
         self.total = spec["run"]["steps"]
         self.output_every = spec["run"]["output_every"]
@@ -512,6 +513,7 @@ class RunDriver:
 
     def checkpoint(self, step: int) -> None:
         began = _time.perf_counter()
+        self.trajectory.flush()  # the frames up to this step are on disk before the checkpoint says so
         self.extra["wall_seconds"] = self.wall_before + began - self.started
         self.extra["stepping_seconds"] = self.stepping_before + self.stepping
         write_checkpoint(self.run_dir / CHECKPOINT_FILE, self.sim.snapshot(), self.sim.state, self.extra)
@@ -591,8 +593,11 @@ class RunDriver:
 
     def close(self) -> None:
         """Close the trajectory and the log (saying so when the run is done)."""
-        with contextlib.suppress(OSError):  # frames were flushed as written; a failed close loses nothing
+        try:  # a finished or stopped run's frames were flushed by its last checkpoint
             self.trajectory.close()
+        except OSError as error:
+            with contextlib.suppress(OSError):
+                self.log(f"output error: the last frame may be missing from the trajectory ({error})")
         self.wall = _time.perf_counter() - self.started
         if self.done:
             outside = 100.0 * (self.wall - self.stepping) / self.wall if self.wall > 0 else 0.0

@@ -277,3 +277,39 @@ def test_a_trajectory_with_damaged_metadata_is_refused_at_once(finished_run, tmp
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0 and "refused:" in done.stdout and "corrupted" in done.stdout, done.stdout + done.stderr
+
+
+def test_background_frames_keep_order_and_return_a_write_error_at_the_next_call(tmp_path, monkeypatch):
+    """Frames written on the worker thread land in order, each whole; a failed write (a full disk)
+    is raised by the next append, or by close, never lost, and close still closes the file."""
+    from decco_warp.io import BackgroundFrames, Trajectory
+
+    state = dw.load_pile(builtin_pile("projectile"))
+    observables = {"total_energy": 1.0, "momentum": np.zeros(3)}
+
+    def frame(k):
+        particles = {"position": state.positions + k, "velocity": state.velocities, "omega": state.omegas, "stress": state.radii * 0}
+        return k, 0.5 * k, particles, {**observables, "total_energy": float(k)}
+
+    frames = BackgroundFrames(Trajectory.create(tmp_path / "t.h5", state, observables, {}))
+    for k in range(1, 6):
+        frames.append(*frame(k))
+    monkeypatch.setenv("DECCO_TEST_FAIL", "trajectory-write@6")
+    frames.append(*frame(6))  # fails on the worker thread
+    with pytest.raises(OSError, match="No space left"):
+        frames.append(*frame(7))
+    frames.close()
+    written = dw.read_trajectory(tmp_path / "t.h5")
+    # Frames 1-5 whole and in order; frame 6 cut short before its step (0, as a kill leaves it); no 7.
+    assert list(written["step"]) == [1, 2, 3, 4, 5, 0]
+    for k in range(1, 6):
+        np.testing.assert_array_equal(written["particles"]["position"][k - 1], state.positions + k)
+    assert list(written["observables"]["total_energy"][:5]) == [1.0, 2.0, 3.0, 4.0, 5.0]
+
+    frames = BackgroundFrames(Trajectory.create(tmp_path / "u.h5", state, observables, {}))
+    monkeypatch.setenv("DECCO_TEST_FAIL", "trajectory-write@1")
+    frames.append(*frame(1))
+    with pytest.raises(OSError, match="No space left"):
+        frames.close()
+    with h5py.File(tmp_path / "u.h5", "r+"):  # closed all the same: it opens for writing
+        pass
