@@ -568,8 +568,10 @@ class RunDriver:
     def note_candidate_overflows(self, step: int) -> None:
         """Say once, at a frame, that some particles met more contact candidates than their list
         holds: right, but each walks its whole system every step, so a run slows down."""
+        if self.overflow_noted:
+            return  # said once: no more copies of the counts from the device
         overflows = self.sim.candidate_overflows()
-        if overflows and not self.overflow_noted:
+        if overflows:
             self.overflow_noted = True
             self.log(
                 f"note: at step {step}, {overflows} of the particles met more contact candidates than a list holds; "
