@@ -20,10 +20,10 @@ GRAVITY_CHOICES = (*GRAVITY_SOLVERS, "auto")
 
 #: From this many particles ``gravity = "auto"`` takes the tree, per device kind. CPU: measured
 #: (docs/benchmarks.md: on copies of a settled pile the tree's step is the faster from ~1 150
-#: particles, since its hash grid notes only touching neighbours). CUDA: provisional
-#: until `decco-warp bench --gravity all-pairs,tree` has timed the tree on a GPU; all-pairs reaches
-#: 4.5e11 pairs/s there, 38 ms a step at 131 072 particles.
-TREE_FROM = {"cpu": 1200, "cuda": 131072}
+#: particles, since its hash grid notes only touching neighbours). CUDA: measured on an H200
+#: (`bench --gravity all-pairs,tree --system piles`): all-pairs is 2.1x faster at 16 384 particles,
+#: the tree 2.4x faster at 65 536; the step times cross near 32 000.
+TREE_FROM = {"cpu": 1200, "cuda": 32768}
 
 
 def choose_gravity(n: int, device: str) -> str:
