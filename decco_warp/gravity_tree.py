@@ -34,8 +34,7 @@ class GravityTree:
         self.nodes.quadrupole = zeros(nodes, wp.mat33d)
         self.nodes.low = zeros(nodes, wp.vec3d)
         self.nodes.high = zeros(nodes, wp.vec3d)
-        self.parent = zeros(nodes, wp.int32)
-        self.height = zeros(1, wp.int32)
+        self.pending = zeros(1, wp.int32)  # 1 while the root's moments are unsummed: the levels' loop condition
         self.done = (zeros(nodes, wp.int32), zeros(nodes, wp.int32))
         self.points = zeros(count, wp.vec3)
         self.grid = wp.HashGrid(GRID_CELLS, GRID_CELLS, GRID_CELLS, device=device)
@@ -51,16 +50,19 @@ class GravityTree:
         self._launch(kernels.bounds, n, [position, self.box])
         self._launch(kernels.morton_codes, n, [position, self.box, self.keys, self.order])
         wp.utils.radix_sort_pairs(self.keys, self.order, n)
-        levels = 0
         if n > 1:
-            self._launch(kernels.build_nodes, n - 1, [self.keys, n, self.nodes, self.parent])
-            self.height.zero_()
-            self._launch(kernels.tree_height, n, [n, self.parent, self.height])
-            levels = int(self.height.numpy()[0])  # one small read: as many launches as the tree is high
+            self._launch(kernels.build_nodes, n - 1, [self.keys, n, self.nodes])
         self._launch(kernels.leaf_moments, n, [position, mass, self.order, n, self.nodes, *self.done])
-        for level in range(levels):
-            before, after = self.done[level % 2], self.done[1 - level % 2]
-            self._launch(kernels.node_moments, n - 1, [self.nodes, before, after])
+        if n > 1:
+            # Level by level until the root is summed, the loop's condition kept on the device: no
+            # read-back, so a step with the tree is captured in a CUDA graph like any other.
+            self.pending.fill_(1)
+            wp.capture_while(self.pending, self._two_levels)
+
+    def _two_levels(self) -> None:
+        before, after = self.done
+        self._launch(kernels.node_moments, self.count - 1, [self.nodes, before, after, self.pending])
+        self._launch(kernels.node_moments, self.count - 1, [self.nodes, after, before, self.pending])
 
     def gravity(self, G: float, theta_open: float, position: wp.array, mass: wp.array, force_out: wp.array) -> None:
         """force_out = gravity on every particle (call :meth:`build` first)."""

@@ -130,9 +130,9 @@ def common_prefix(keys: wp.array(dtype=wp.int32), count: int, i: int, j: int) ->
 
 
 @wp.kernel
-def build_nodes(keys: wp.array(dtype=wp.int32), count: int, nodes: TreeNodes, parent: wp.array(dtype=wp.int32)):
-    """Internal node i (of count - 1): its range [first, last] of sorted positions, its two
-    children (node indices; leaves are count - 1 + position) and, for them, their parent."""
+def build_nodes(keys: wp.array(dtype=wp.int32), count: int, nodes: TreeNodes):
+    """Internal node i (of count - 1): its range [first, last] of sorted positions and its two
+    children (node indices; leaves are count - 1 + position).  Node 0 is the root."""
     i = wp.tid()
     direction = int(1)
     if common_prefix(keys, count, i, i + 1) < common_prefix(keys, count, i, i - 1):
@@ -168,22 +168,6 @@ def build_nodes(keys: wp.array(dtype=wp.int32), count: int, nodes: TreeNodes, pa
     nodes.child[i, 1] = wp.int32(right)
     nodes.first[i] = wp.int32(low)
     nodes.last[i] = wp.int32(high)
-    parent[left] = wp.int32(i)
-    parent[right] = wp.int32(i)
-    if i == 0:
-        parent[0] = wp.int32(-1)
-
-
-@wp.kernel
-def tree_height(count: int, parent: wp.array(dtype=wp.int32), height: wp.array(dtype=wp.int32)):
-    """height[0] = the most internal nodes above any leaf: the levels the moments need."""
-    k = wp.tid()
-    node = int(parent[count - 1 + k])
-    levels = int(0)
-    while node >= 0:
-        levels += 1
-        node = int(parent[node])
-    wp.atomic_max(height, 0, wp.int32(levels))
 
 
 @wp.kernel
@@ -222,19 +206,29 @@ def shifted_quadrupole(quadrupole: wp.mat33d, mass: wp.float64, offset: wp.vec3d
 
 
 @wp.kernel
-def node_moments(nodes: TreeNodes, done_before: wp.array(dtype=wp.int32), done_after: wp.array(dtype=wp.int32)):
+def node_moments(
+    nodes: TreeNodes,
+    done_before: wp.array(dtype=wp.int32),
+    done_after: wp.array(dtype=wp.int32),
+    pending: wp.array(dtype=wp.int32),
+):
     """One level: an internal node whose children were both summed before this launch sums them.
     Flags are read from ``done_before`` and written to ``done_after`` only, so no thread reads
-    what another writes in the same launch."""
+    what another writes in the same launch.  pending[0] = 0 once the root (node 0) is summed: the
+    device-side loop condition, so that no launch count is read back to the host."""
     i = wp.tid()
     if done_before[i] != 0:
         done_after[i] = 1
+        if i == 0:
+            pending[0] = 0
         return
     a = int(nodes.child[i, 0])
     b = int(nodes.child[i, 1])
     if done_before[a] == 0 or done_before[b] == 0:
         done_after[i] = 0
         return
+    if i == 0:
+        pending[0] = 0
     mass = nodes.mass[a] + nodes.mass[b]
     centre = (nodes.mass[a] * nodes.centre[a] + nodes.mass[b] * nodes.centre[b]) / mass
     nodes.mass[i] = mass
