@@ -14,7 +14,8 @@ from .params import Params
 from .stability import StabilityError, StabilityReport, check_stability
 from .state import State
 
-#: Steps recorded into one CUDA graph and replayed as a unit.
+#: Steps recorded into one graph and replayed as a unit (CUDA graphs; on the CPU, Warp's recorded
+#: graphs replay the kernels without Python between them).
 GRAPH_STEPS = 50
 
 
@@ -106,15 +107,14 @@ class Simulation:
         return self._time_origin + self._step * self.params.dt
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` steps of ``params.dt``.  On CUDA, whole blocks of steps replay a graph."""
+        """Advance ``n`` steps of ``params.dt``: whole blocks of steps replay a recorded graph."""
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise ValueError(f"step count must be a non-negative integer; got {n!r}")
         n = int(n)
-        if self.engine.device.startswith("cuda") and self.engine.tree is None:  # the tree's sort and grid are not captured
-            while n >= GRAPH_STEPS:
-                wp.capture_launch(self._step_graph())
-                n -= GRAPH_STEPS
-                self._step += GRAPH_STEPS
+        while n >= GRAPH_STEPS:
+            wp.capture_launch(self._step_graph())
+            n -= GRAPH_STEPS
+            self._step += GRAPH_STEPS
         for _ in range(n):
             self.engine.step()
             self._step += 1

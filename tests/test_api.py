@@ -98,18 +98,23 @@ def test_simulation_bookkeeping_and_compute_forces_agree(device):
         dw.compute_forces(state, params, device=device, precision="half")
 
 
-def test_split_steps_equal_one_run(device):
-    """Steps are steps: 3 + 60 + 7 (graph replays on CUDA, launches elsewhere) equal 70 in one call."""
+@pytest.mark.parametrize("gravity", ["all-pairs", "tree"])
+def test_recorded_steps_equal_steps_launched_one_by_one(device, gravity):
+    """Steps are steps: 3 + 110 + 7 (blocks of 50 replay a recorded graph, on the CPU too) equal 120
+    steps launched one by one, bit for bit, the ledger's work included. The tree path's level loop
+    keeps its condition on the device, so its steps record like the others."""
     state = contact_cluster(30, seed=4)
-    a = dw.Simulation(state, dw.Params(), device=device)
-    a.step(70)
-    b = dw.Simulation(state, dw.Params(), device=device)
-    for n in (3, 60, 7):
+    params = dw.Params(gravity=gravity)
+    a = dw.Simulation(state, params, device=device, ledger=True)
+    for _ in range(120):
+        a.engine.step()
+    b = dw.Simulation(state, params, device=device, ledger=True)
+    for n in (3, 110, 7):
         b.step(n)
+    assert b.step_count == 120
     np.testing.assert_array_equal(a.state.positions, b.state.positions)
     np.testing.assert_array_equal(a.state.omegas, b.state.omegas)
-
-
+    np.testing.assert_array_equal(a.work(), b.work())
 
 
 def test_cli_version_and_info():
