@@ -55,6 +55,10 @@ class Simulation:
         self._time_origin = state.time - state.step * params.dt
         self._step = state.step
         self._graph = None
+        # A tree step's level loop is a conditional graph node on CUDA (driver and toolkit 12.4+);
+        # without them its steps are launched one by one, which gives the same numbers.
+        conditional_nodes = not self.engine.device.startswith("cuda") or wp.is_conditional_graph_supported()
+        self._record = self.engine.tree is None or conditional_nodes
         # Forces at x(0) with v(0): the first half kick needs them.
         self.engine.eval_forces()
         self.energy_start: dict | None = self.diagnostics() if ledger else None
@@ -111,7 +115,7 @@ class Simulation:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise ValueError(f"step count must be a non-negative integer; got {n!r}")
         n = int(n)
-        while n >= GRAPH_STEPS:
+        while self._record and n >= GRAPH_STEPS:
             wp.capture_launch(self._step_graph())
             n -= GRAPH_STEPS
             self._step += GRAPH_STEPS
