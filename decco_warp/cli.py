@@ -126,7 +126,7 @@ def _floats(text: str, what: str) -> tuple[float, ...]:
 #: Defaults of ``decco-warp pile``, also those of the entries of ``decco-warp piles``.
 PILE_DEFAULTS = {"particles": 5000, "seed": 1, "radii": "0.75e6,1.5e6,2.25e6", "density": 2.7, "ke_threshold": 1e-5,
                  "fill": 0.3, "max_steps": 5_000_000, "k_in": 1e18, "restitution": 0.9, "mu_k": 0.3, "mu_r": 1e-3,
-                 "dt": 0.04, "precision": "mixed", "gravity": "all-pairs"}  # fmt: skip
+                 "dt": 0.04, "precision": "mixed", "gravity": "auto"}  # fmt: skip
 
 
 @app.command()
@@ -145,7 +145,7 @@ def pile(
     mu_r: float = typer.Option(PILE_DEFAULTS["mu_r"], "--mu-r", help="Rolling friction coefficient."),
     dt: float = typer.Option(PILE_DEFAULTS["dt"], "--dt", help="Time step [s]."),
     precision: str = typer.Option(PILE_DEFAULTS["precision"], "--precision", help="mixed or float64."),
-    gravity: str = typer.Option(PILE_DEFAULTS["gravity"], "--gravity", help="all-pairs, tree for large piles, or auto (by size and device)."),
+    gravity: str = typer.Option(PILE_DEFAULTS["gravity"], "--gravity", help="all-pairs, tree, or auto: the tree from the size where it is the faster on this device (params.TREE_FROM)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing pile file."),
     device: Optional[str] = DeviceOption,
 ) -> None:
