@@ -21,7 +21,7 @@ from .diagnostics import diagnostics  # noqa: E402
 from .engine import Layout  # noqa: E402
 from .io import load_pile, read_trajectory, save_pile  # noqa: E402
 from .params import G_CGS, ROLLING_FRICTION_FORMS, Params  # noqa: E402
-from .pile import form_pile  # noqa: E402
+from .pile import Formation, form_pile  # noqa: E402
 from .simulation import Simulation, compute_forces  # noqa: E402
 from .stability import (  # noqa: E402
     CompressionForecast,
@@ -53,6 +53,7 @@ __all__ = [
     "choose_time_step",
     "compute_forces",
     "diagnostics",
+    "Formation",
     "form_pile",
     "load_pile",
     "predict_compression",

@@ -123,6 +123,162 @@ def remove_net_motion(state: State) -> State:
     return state
 
 
+class Formation:
+    """A pile forming: a seeded cloud collapsing under its own gravity, advanced one check at a time.
+
+    :func:`form_pile` runs one to the end; a caller that keeps long formations safe
+    (``decco-warp pile``) saves :meth:`snapshot` now and then and continues from it with
+    ``Formation(..., snapshot=...)``: the pile is the same, bit for bit, as one formed without a stop.
+
+    >>> formation = Formation(n_particles=300, seed=1, device="cpu")
+    >>> while not formation.settled: formation.advance()
+    >>> pile = formation.pile()
+    """
+
+    def __init__(
+        self,
+        n_particles: int = 300,
+        seed: int = 1,
+        device: str | None = None,
+        radii=PAPER_RADII,
+        density: float = PAPER_DENSITY,
+        params: Params | None = None,
+        ke_threshold: float = KE_THRESHOLD,
+        fill: float = 0.3,
+        check_every: int = 250,
+        max_steps: int = 5_000_000,
+        precision: str = "mixed",
+        snapshot: dict | None = None,
+    ):
+        params = params or Params()
+        radii = np.asarray(radii, dtype=float)
+        check_formation_inputs(n_particles, radii, density, ke_threshold, fill, check_every, max_steps)
+        self.params, self.precision, self.check_every, self.max_steps = params, precision, check_every, max_steps
+        self.settings = {
+            "seed": int(seed),
+            "n_particles": int(n_particles),
+            "size_radii": radii,
+            "density": float(density),
+            "ke_threshold": float(ke_threshold),
+            "fill": float(fill),
+            "check_every": int(check_every),
+            "precision": precision,
+            "params": params.to_dict(),
+        }
+        counts = size_class_counts(n_particles, radii)
+        size_class = np.repeat(np.arange(radii.size, dtype=np.int32), counts)
+        particle_radii = radii[size_class]
+        masses = 4.0 / 3.0 * math.pi * density * particle_radii**3
+        self.size_counts = counts
+        if snapshot is None:
+            positions, self.seed_radius = seed_cloud(particle_radii, np.random.default_rng(seed), fill)
+            zeros = np.zeros_like(positions)
+            cloud = State.from_arrays(positions, zeros, zeros, particle_radii, masses, size_class=size_class)
+            self.sim = Simulation(cloud, params, device=device, precision=precision)
+            self.history_time, self.history_ratio, self.peak, self.wall_before = [0.0], [0.0], 0.0, 0.0
+        else:
+            formation = snapshot["formation"]
+            _check_same_settings(formation["settings"], self.settings)
+            cloud = State.from_arrays(
+                snapshot["positions"], snapshot["velocities"], snapshot["omegas"], particle_radii, masses, size_class=size_class
+            )
+            self.sim = Simulation.from_snapshot(cloud, params, snapshot, device=device, precision=precision)
+            self.seed_radius = float(formation["seed_radius"])
+            self.history_time = [float(v) for v in formation["history_time"]]
+            self.history_ratio = [float(v) for v in formation["history_ke_over_u"]]
+            self.peak, self.wall_before = float(formation["peak"]), float(formation["wall_seconds"])
+        self._started = _time.perf_counter()
+        self.state = self.sim.state
+
+    @property
+    def settled(self) -> bool:
+        """Collapsed (KE/|U| peaked past COLLAPSE_PEAK) and calm again (below the threshold)."""
+        return self.peak >= COLLAPSE_PEAK and self.history_ratio[-1] < self.settings["ke_threshold"]
+
+    @property
+    def wall_seconds(self) -> float:
+        """Wall time of the formation so far, over all its sessions."""
+        return self.wall_before + _time.perf_counter() - self._started
+
+    def progress(self) -> FormationProgress:
+        return FormationProgress(
+            self.sim.step_count, self.sim.time, self.history_ratio[-1], self.peak, self.settings["ke_threshold"], self.wall_seconds
+        )
+
+    def advance(self) -> None:
+        """``check_every`` steps, then KE/|U|; raises FormationError past ``max_steps``."""
+        sim = self.sim
+        if sim.step_count >= self.max_steps:
+            raise FormationError(
+                f"the pile did not settle within {self.max_steps} steps: KE/|U| = {self.history_ratio[-1]:.3g} "
+                f"> {self.settings['ke_threshold']:g}; raise max_steps or ke_threshold"
+            )
+        sim.step(min(self.check_every, self.max_steps - sim.step_count))
+        self.state = sim.state
+        ratio = _kinetic_over_potential(sim, self.state)
+        self.peak = max(self.peak, ratio)
+        self.history_time.append(sim.time)
+        self.history_ratio.append(ratio)
+
+    def snapshot(self) -> dict:
+        """Everything :class:`Formation` needs to continue exactly (``snapshot=``): the simulation's
+        arrays plus a ``formation`` table (settings, KE/|U| history, peak, seed radius, wall time)."""
+        snap = self.sim.snapshot()
+        snap["formation"] = {
+            "settings": self.settings,
+            "seed_radius": self.seed_radius,
+            "history_time": np.array(self.history_time),
+            "history_ke_over_u": np.array(self.history_ratio),
+            "peak": self.peak,
+            "wall_seconds": self.wall_seconds,
+        }
+        return snap
+
+    def pile(self) -> State:
+        """The settled pile: net motion removed, centred, time 0, with its formation history."""
+        pile = remove_net_motion(self.state)
+        pile.time, pile.step = 0.0, 0
+        settled = self.sim.diagnostics(pile)
+        settings = self.settings
+        pile.metadata = {
+            "seed": settings["seed"],
+            "n_particles": settings["n_particles"],
+            "size_radii": settings["size_radii"],
+            "size_counts": self.size_counts,
+            "density": settings["density"],
+            "ke_threshold": settings["ke_threshold"],
+            "fill": settings["fill"],
+            "seed_radius": float(self.seed_radius),
+            "formation_steps": int(self.sim.step_count),
+            "formation_time": float(self.sim.time),
+            "formation_wall_seconds": float(self.wall_seconds),
+            "device": self.sim.device,
+            "precision": self.precision,
+            "history_time": np.array(self.history_time),
+            "history_ke_over_u": np.array(self.history_ratio),
+            "potential": settled["potential"],
+            "params": settings["params"],
+        }
+        return pile
+
+
+def _check_same_settings(saved: dict, asked: dict) -> None:
+    """A formation continues only with the settings it began with."""
+    for key, value in asked.items():
+        before = saved.get(key)
+        if key == "params":
+            differs = {k: v for k, v in value.items() if before is None or before.get(k) != v}
+        elif isinstance(value, np.ndarray):
+            differs = before is None or np.shape(before) != value.shape or not np.array_equal(before, value)
+        else:
+            differs = before != value
+        if differs:
+            raise ValueError(
+                f"the saved formation was begun with {key} = {before!r}, not {value!r}: "
+                "continue it with the same options, or delete its file to begin afresh"
+            )
+
+
 def form_pile(
     n_particles: int = 300,
     seed: int = 1,
@@ -141,65 +297,17 @@ def form_pile(
 
     Deterministic for a given ``seed`` on a given device.  The returned State has
     ``size_class`` (0 = smallest radius) and ``metadata`` with the formation
-    history (time, KE/|U|) and the settings used.
+    history (time, KE/|U|) and the settings used.  (:class:`Formation` does the
+    same one check at a time, and can stop and continue.)
 
     >>> pile = form_pile(n_particles=300, seed=1, device="cpu")
     """
-    params = params or Params()
-    radii = np.asarray(radii, dtype=float)
-    check_formation_inputs(n_particles, radii, density, ke_threshold, fill, check_every, max_steps)
-    rng = np.random.default_rng(seed)
-    counts = size_class_counts(n_particles, radii)
-    size_class = np.repeat(np.arange(radii.size, dtype=np.int32), counts)
-    particle_radii = radii[size_class]
-    masses = 4.0 / 3.0 * math.pi * density * particle_radii**3
-    positions, seed_radius = seed_cloud(particle_radii, rng, fill)
-    cloud = State.from_arrays(
-        positions, np.zeros_like(positions), np.zeros_like(positions), particle_radii, masses, size_class=size_class
-    )
-    sim = Simulation(cloud, params, device=device, precision=precision)
-    history_time, history_ratio = [0.0], [0.0]
-    peak = 0.0
-    started = _time.perf_counter()
-    while True:
-        if sim.step_count >= max_steps:
-            raise FormationError(
-                f"the pile did not settle within {max_steps} steps: KE/|U| = {history_ratio[-1]:.3g} "
-                f"> {ke_threshold:g}; raise max_steps or ke_threshold"
-            )
-        sim.step(min(check_every, max_steps - sim.step_count))
-        state = sim.state
-        ratio = _kinetic_over_potential(sim, state)
-        peak = max(peak, ratio)
-        history_time.append(sim.time)
-        history_ratio.append(ratio)
+    formation = Formation(n_particles, seed, device, radii, density, params, ke_threshold, fill, check_every, max_steps, precision)
+    while not formation.settled:
+        formation.advance()
         if progress is not None:
-            progress(FormationProgress(sim.step_count, sim.time, ratio, peak, ke_threshold, _time.perf_counter() - started))
-        if peak >= COLLAPSE_PEAK and ratio < ke_threshold:
-            break
-    pile = remove_net_motion(state)
-    pile.time, pile.step = 0.0, 0
-    settled = sim.diagnostics(pile)
-    pile.metadata = {
-        "seed": int(seed),
-        "n_particles": int(n_particles),
-        "size_radii": radii,
-        "size_counts": counts,
-        "density": float(density),
-        "ke_threshold": float(ke_threshold),
-        "fill": float(fill),
-        "seed_radius": float(seed_radius),
-        "formation_steps": int(sim.step_count),
-        "formation_time": float(sim.time),
-        "formation_wall_seconds": float(_time.perf_counter() - started),
-        "device": sim.device,
-        "precision": precision,
-        "history_time": np.array(history_time),
-        "history_ke_over_u": np.array(history_ratio),
-        "potential": settled["potential"],
-        "params": params.to_dict(),
-    }
-    return pile
+            progress(formation.progress())
+    return formation.pile()
 
 
 def _kinetic_over_potential(sim: Simulation, state: State) -> float:
