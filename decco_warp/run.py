@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import signal
-import threading
 import time as _time
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -28,6 +26,7 @@ from .diagnostics import energy_ledger, energy_scale, ledger_closure, stress_sha
 from .io import BackgroundFrames, FileFormatError, Trajectory, load_pile, pause_point, read_checkpoint, read_frame, write_checkpoint
 from .lock import RunFolderLock
 from .simulation import Simulation
+from .stops import StopRequests
 from .stability import MIN_TIME_STEP_MARGIN, CompressionForecast, StabilityReport, check_stability, predict_compression
 from .state import State
 
@@ -415,7 +414,7 @@ def execute_ensemble(runs: list[PreparedRun]) -> list[RunResult | BaseException]
                 drivers[k].log(f"ensemble: stepped together with {len(others)} other run(s) in one set of launches: {', '.join(others)}")
             except (RunError, OSError, FileFormatError) as error:
                 outcomes[k] = error
-        stop = _StopRequests()
+        stop = StopRequests()
         with stop:
             while active := [k for k, driver in drivers.items() if not driver.done and outcomes[k] is None]:
                 before = _time.perf_counter()
@@ -455,7 +454,7 @@ def _parse_toml(text: str) -> dict:
 
 
 def _advance(sim, driver: RunDriver) -> RunResult:
-    stop = _StopRequests()
+    stop = StopRequests()
     try:
         with stop:
             while not driver.done:
@@ -763,27 +762,6 @@ def check_energy(step: int, total_energy: float, start_energy: float, scale: flo
             f"step {step}: the total energy grew by {gain:.3g} erg ({gain / scale:.2g} of |U| + KE at the start), "
             "which friction and restitution cannot do"
         )
-
-
-class _StopRequests:
-    """While active, SIGINT and SIGTERM are noted instead of killing the process."""
-
-    def __init__(self):
-        self.signal: str | None = None
-        self._previous: dict = {}
-
-    def __enter__(self):
-        if threading.current_thread() is threading.main_thread():
-            for number in (signal.SIGINT, signal.SIGTERM):
-                self._previous[number] = signal.signal(number, self._note)
-        return self
-
-    def _note(self, number, frame) -> None:
-        self.signal = signal.Signals(number).name
-
-    def __exit__(self, *exc) -> None:
-        for number, handler in self._previous.items():
-            signal.signal(number, handler)
 
 
 def _next_multiple(step: int, every: int) -> int:
