@@ -152,9 +152,9 @@ def pile(
     """Build a rubble pile: seed spheres without overlaps, collapse under gravity until settled."""
     from .checks import InputError, check_destination
     from .device import DeviceError, resolve_device
-    from .io import save_pile
     from .params import GRAVITY_CHOICES, Params, choose_gravity
-    from .pile import FormationError, check_formation_inputs, form_pile
+    from .forming import FormationStopped, form_pile_file, partial_path
+    from .pile import FormationError, check_formation_inputs
 
     if out.exists() and not overwrite:
         fail(f"{out} already exists; use --overwrite to replace it")
@@ -184,9 +184,15 @@ def pile(
                 description="settling" if p.peak_ke_over_u >= 1e-3 else "collapsing",
             )
 
+        def resumed(step):
+            bar.console.print(f"continuing the formation saved in {partial_path(out)} at step {step}", soft_wrap=True, highlight=False)
+
         failed = None  # reported after the bar's last line
         try:
-            formed = form_pile(
+            formed = form_pile_file(
+                out,
+                progress=show,
+                on_resume=resumed,
                 n_particles=particles,
                 seed=seed,
                 device=chosen,
@@ -197,15 +203,17 @@ def pile(
                 fill=fill,
                 max_steps=max_steps,
                 precision=precision,
-                progress=show,
             )
         except ValueError as error:
             failed = (str(error), EXIT_INPUT)
         except FormationError as error:
-            failed = (str(error), 1)
+            failed = (f"{error}; saved in {partial_path(out)}: the same command with a larger --max-steps continues", 1)
+        except FormationStopped as error:
+            failed = (str(error), EXIT_STOPPED)
+        except OSError as error:  # a full disk, say: the last checkpoint (if any) is intact
+            failed = (f"could not write {out} or its checkpoint {partial_path(out)}: {error}", EXIT_OUTPUT)
     if failed:
         fail(*failed)
-    save_pile(formed, out)
     from .collision import pile_radius
 
     meta = formed.metadata

@@ -128,3 +128,62 @@ def test_bad_pile_files_are_refused_with_a_reason(small_pile, tmp_path):
         del f["pile/masses"]
     with pytest.raises(FileFormatError, match="lacks masses"):
         load_pile(gutted)
+
+
+#: A 12-particle pile that forms in ~50 000 steps in under a second (eq. 17 margin 11).
+QUICK = {"n_particles": 12, "seed": 9, "device": "cpu", "params": dw.Params(dt=0.2), "ke_threshold": 1e-4}
+
+
+def _same_pile(a, b):
+    for name in ("positions", "velocities", "omegas"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    np.testing.assert_array_equal(a.metadata["history_ke_over_u"], b.metadata["history_ke_over_u"])
+    assert a.metadata["formation_steps"] == b.metadata["formation_steps"]
+
+
+def test_a_formation_stopped_by_a_signal_or_its_step_limit_continues_to_the_same_pile(tmp_path):
+    import os
+    import signal
+
+    from decco_warp.forming import FormationStopped, form_pile_file, partial_path
+    from decco_warp.pile import FormationError
+
+    reference = dw.form_pile(**QUICK)
+    out = tmp_path / "pile.h5"
+    partial = partial_path(out)
+    checks = []
+
+    def ctrl_c_at_the_third_check(progress):
+        checks.append(progress.step)
+        if len(checks) == 3:
+            os.kill(os.getpid(), signal.SIGINT)  # noted, then the formation saves and stops
+
+    with pytest.raises(FormationStopped, match="SIGINT at step 750"):
+        form_pile_file(out, progress=ctrl_c_at_the_third_check, checkpoint_seconds=1e9, **QUICK)
+    assert partial.is_file() and not out.exists()
+    with pytest.raises(ValueError, match="seed = 9, not 10"):
+        form_pile_file(out, **{**QUICK, "seed": 10})
+    # Past its step limit a formation saves too; a larger limit continues it.
+    with pytest.raises(FormationError, match="did not settle within 20000 steps"):
+        form_pile_file(out, max_steps=20_000, **QUICK)
+    resumed_at = []
+    pile = form_pile_file(out, on_resume=resumed_at.append, checkpoint_seconds=0.0, **QUICK)
+    assert resumed_at == [20_000]
+    _same_pile(pile, reference)
+    _same_pile(load_pile(out), reference)
+    assert not partial.exists()
+
+
+def test_pile_command_continues_a_formation_past_its_step_limit(tmp_path):
+    from helpers import cli
+
+    out = tmp_path / "p.h5"
+    args = ["pile", "--particles", "12", "--seed", "9", "--dt", "0.2", "--ke-threshold", "1e-4", "--out", str(out), "--device", "cpu"]
+    first = cli(*args, "--max-steps", "10000")
+    assert first.returncode == 1 and "larger --max-steps continues" in first.stderr
+    assert (tmp_path / "p.h5.forming").is_file() and not out.exists()
+    second = cli(*args)
+    assert second.returncode == 0, second.stderr
+    assert "continuing the formation saved in" in second.stderr and "at step 10000" in second.stderr
+    _same_pile(load_pile(out), dw.form_pile(**QUICK))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.h5"]

@@ -1,0 +1,89 @@
+"""A pile formed into a file, safely: a checkpoint beside the file now and then, and a stop
+(Ctrl-C, SIGTERM) or a step limit that saves before it ends.  The same command continues from the
+checkpoint (``OUT.forming``), and the pile is then the same, bit for bit, as one formed in one go.
+Large piles need this: a 1e5-particle pile takes ~1.5e5 steps."""
+
+from __future__ import annotations
+
+import time as _time
+from pathlib import Path
+from typing import Callable
+
+from .io import FileFormatError, read_checkpoint, save_pile, write_checkpoint
+from .pile import Formation, FormationError, FormationProgress
+from .state import State
+from .stops import StopRequests
+
+#: A forming pile's checkpoint is its file's name plus this.
+FORMING_SUFFIX = ".forming"
+#: Wall seconds between checkpoints of a forming pile.
+CHECKPOINT_SECONDS = 60.0
+
+
+class FormationStopped(RuntimeError):
+    """SIGINT or SIGTERM arrived; the formation was saved and the same command continues it."""
+
+    def __init__(self, signal_name: str, step: int, partial: Path):
+        self.signal_name, self.step, self.partial = signal_name, step, partial
+        super().__init__(f"stopped by {signal_name} at step {step}; saved in {partial}: the same command continues")
+
+
+def partial_path(out: Path) -> Path:
+    """Where the pile bound for ``out`` keeps its checkpoint while it forms."""
+    return out.with_name(out.name + FORMING_SUFFIX)
+
+
+def read_partial(partial: Path) -> dict:
+    """A formation's snapshot saved by :func:`form_pile_file` (for ``Formation(..., snapshot=)``)."""
+    snapshot, _, extra = read_checkpoint(partial)
+    if "settings" not in extra:
+        raise FileFormatError(f"{partial} is a checkpoint, but not of a forming pile")
+    snapshot["formation"] = extra
+    return snapshot
+
+
+def _save(formation: Formation, partial: Path) -> None:
+    snapshot = formation.snapshot()
+    write_checkpoint(partial, {k: v for k, v in snapshot.items() if k != "formation"}, formation.sim.static, snapshot["formation"])
+
+
+def form_pile_file(
+    out: Path,
+    progress: Callable[[FormationProgress], None] | None = None,
+    checkpoint_seconds: float = CHECKPOINT_SECONDS,
+    on_resume: Callable[[int], None] | None = None,
+    **options,
+) -> State:
+    """Form a pile (``options`` as :class:`decco_warp.pile.Formation`'s) and write it to ``out``.
+
+    Continues from ``out``'s checkpoint when there is one (``on_resume(step)`` is told), saves one
+    every ``checkpoint_seconds`` of wall time, and on SIGINT/SIGTERM (:class:`FormationStopped`) or
+    past ``max_steps`` (:class:`FormationError`; a larger ``max_steps`` continues) before it raises.
+    The checkpoint is removed once the pile is written.
+    """
+    out = Path(out)
+    partial = partial_path(out)
+    snapshot = read_partial(partial) if partial.exists() else None
+    formation = Formation(**options, snapshot=snapshot)
+    if snapshot is not None and on_resume is not None:
+        on_resume(formation.sim.step_count)
+    saved = _time.perf_counter()
+    with StopRequests() as stop:
+        while not formation.settled:
+            try:
+                formation.advance()
+            except FormationError:
+                _save(formation, partial)
+                raise
+            if progress is not None:
+                progress(formation.progress())
+            if stop.signal is not None:
+                _save(formation, partial)
+                raise FormationStopped(stop.signal, formation.sim.step_count, partial)
+            if _time.perf_counter() - saved >= checkpoint_seconds:
+                _save(formation, partial)
+                saved = _time.perf_counter()
+    pile = formation.pile()
+    save_pile(pile, out)
+    partial.unlink(missing_ok=True)
+    return pile
