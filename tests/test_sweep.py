@@ -191,3 +191,15 @@ def test_a_sweep_packs_runs_into_ensembles_with_the_results_of_runs_alone(tmp_pa
     with pytest.raises(specs.SpecError, match="ensemble"):
         path.write_text(SWEEP.format(out=tmp_path).replace("analyse_every = 2", "ensemble = 0"))
         load_sweep(path)
+
+
+def test_shipped_large_pile_list_and_collision_are_valid():
+    """runs/large/: the 1e5-particle piles and their collision (built and run on a GPU, not here)."""
+    from decco_warp.spec import load_spec_file, resolve_spec
+
+    root = Path(__file__).parent.parent / "runs" / "large"
+    entries = load_spec_file(root / "piles.toml")["pile"]
+    assert sum(e["particles"] for e in entries) == 100_000
+    spec = resolve_spec(load_spec_file(root / "collision.toml"))
+    assert spec["params"]["gravity"] == "auto" and spec["collision"]["eta"] == 3.0
+    assert {spec["piles"]["target"], spec["piles"]["projectile"]} == {e["out"] for e in entries}
