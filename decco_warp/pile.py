@@ -77,20 +77,28 @@ def seed_cloud(radii: np.ndarray, rng: np.random.Generator, fill: float = 0.3) -
     Spheres are placed largest first, each at up to SEED_TRIES random spots; if
     one finds no free spot, the seeding sphere grows by the largest diameter and
     every sphere is placed again.  ``fill`` sets the first sphere's size from the
-    spheres' total volume.
+    spheres' total volume.  A spot is tested against the spheres already placed in
+    the 27 grid cells (of the largest diameter) around it, the only ones it can
+    touch: O(N) for the whole cloud, and the same spots as testing every sphere.
     """
     order = np.argsort(-radii, kind="stable")
     seed_radius = ((radii**3).sum() / fill) ** (1.0 / 3.0)
+    cell = 2.0 * radii.max()
     while True:
         positions = np.empty((radii.size, 3))
+        cells: dict[tuple[int, int, int], list[int]] = {}
         placed = 0
         for k in order:
             room = seed_radius - radii[k]
             for _ in range(SEED_TRIES):
                 candidate = _uniform_in_ball(rng, room)
-                gaps = np.linalg.norm(positions[order[:placed]] - candidate, axis=1) - radii[order[:placed]] - radii[k]
-                if placed == 0 or gaps.min() >= 0.0:
+                cx, cy, cz = (int(c) for c in np.floor(candidate / cell))
+                near = [j for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1) for j in cells.get((cx + dx, cy + dy, cz + dz), ())]
+                if near:
+                    gaps = np.linalg.norm(positions[near] - candidate, axis=1) - radii[near] - radii[k]
+                if not near or gaps.min() >= 0.0:
                     positions[k] = candidate
+                    cells.setdefault((cx, cy, cz), []).append(int(k))
                     placed += 1
                     break
             else:

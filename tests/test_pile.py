@@ -36,6 +36,36 @@ def test_seed_cloud_has_no_overlaps_and_grows_when_crowded():
     assert np.all(np.linalg.norm(positions, axis=1) + radii <= seed_radius * (1 + 1e-12))
 
 
+def test_seed_cloud_takes_the_spots_that_testing_every_placed_sphere_takes():
+    """The grid of cells only narrows which placed spheres a spot is tested against: a plain
+    placement, testing all of them with the same random draws, gives the same cloud."""
+    from decco_warp.pile import SEED_TRIES, _uniform_in_ball
+
+    radii = np.repeat([0.75e6, 1.5e6, 2.25e6], [1290, 160, 48])
+    fill = 0.4  # crowded: many tries fail, near spheres of every size
+    positions, seed_radius = seed_cloud(radii, np.random.default_rng(5), fill=fill)
+    rng = np.random.default_rng(5)
+    order = np.argsort(-radii, kind="stable")
+    plain_radius = ((radii**3).sum() / fill) ** (1 / 3)
+    while True:
+        plain = np.empty_like(positions)
+        placed = 0
+        for k in order:
+            for _ in range(SEED_TRIES):
+                spot = _uniform_in_ball(rng, plain_radius - radii[k])
+                if placed == 0 or (np.linalg.norm(plain[order[:placed]] - spot, axis=1) - radii[order[:placed]] - radii[k]).min() >= 0:
+                    plain[k] = spot
+                    placed += 1
+                    break
+            else:
+                break
+        if placed == radii.size:
+            break
+        plain_radius += 2.0 * radii.max()
+    assert seed_radius == plain_radius
+    np.testing.assert_array_equal(positions, plain)
+
+
 def test_remove_net_motion_zeroes_momentum_and_spin():
     rng = np.random.default_rng(1)
     n = 50
