@@ -206,6 +206,7 @@ def _describe(layout: Layout) -> str:
         f"{layout.block_dim} threads x {layout.particles_per_block} per block, "
         + ("contacts in their own pass" if layout.contact_pass else f"{layout.contact_slots} slots")
         + (f", <= {layout.max_registers} registers" if layout.max_registers else "")
+        + (", j a tile ahead" if layout.prefetch else "")
     )
 
 

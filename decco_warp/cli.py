@@ -471,7 +471,7 @@ def bench(
     budget: float = typer.Option(1.0, "--seconds", help="Seconds of timing per measurement."),
     precision: str = typer.Option("mixed", "--precision", help="mixed or float64."),
     layouts: str = typer.Option(
-        "", "--layouts", help="Also time these layouts, BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]][:split],... (e.g. 128:1,128:4:4:96,128:4:4:0:split; split: contacts in their own pass)."
+        "", "--layouts", help="Also time these layouts, BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]][:split][:prefetch],... (e.g. 128:1,128:4:4:96,128:4:4:0:split,128:4:4:128:prefetch; split: contacts in their own pass; prefetch: j loaded a tile ahead)."
     ),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the table as JSON here."),
     gravity: str = typer.Option("all-pairs", "--gravity", help="Gravity solvers to time, side by side: all-pairs, tree or all-pairs,tree."),
@@ -523,14 +523,16 @@ def bench(
     for item in filter(None, (part.strip() for part in layouts.split(","))):
         try:
             parts = item.split(":")
-            split = parts[-1] == "split"
-            values = [int(v) for v in parts[: len(parts) - split]]
+            flags = []
+            while parts and parts[-1] in ("split", "prefetch") and parts[-1] not in flags:
+                flags.append(parts.pop())
+            values = [int(v) for v in parts]
             if len(values) not in (2, 3, 4) or (not chosen.startswith("cuda") and values[0] != 1):
                 raise ValueError
-            extra_layouts.append(Layout(*values, contact_pass=split))
+            extra_layouts.append(Layout(*values, contact_pass="split" in flags, prefetch="prefetch" in flags))
         except ValueError:
             fail(
-                f"--layouts entries must be BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]][:split], BLOCK_DIM 1 on CPU; got {item!r}"
+                f"--layouts entries must be BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]][:split][:prefetch], BLOCK_DIM 1 on CPU; got {item!r}"
             )
     limit, how = benchmarks.device_limit_pairs_per_s(chosen)
     d = wp.get_device(chosen)

@@ -55,6 +55,8 @@ class Layout:
     contact_pass: bool = False
     """Split the step's forces in two launches: a gravity-only sweep noting contact candidates,
     then the contacts one thread per particle (kernels/forces.py).  ``contact_slots`` is unused."""
+    prefetch: bool = False
+    """Load each tile of j one tile ahead, while the tile before is swept (kernels/forces.py)."""
 
     def __post_init__(self):
         for name in ("block_dim", "particles_per_block", "contact_slots"):
@@ -63,8 +65,9 @@ class Layout:
                 raise ValueError(f"Layout.{name} must be a positive integer; got {value!r}")
         if not isinstance(self.max_registers, int) or self.max_registers < 0:
             raise ValueError(f"Layout.max_registers must be an integer >= 0; got {self.max_registers!r}")
-        if not isinstance(self.contact_pass, bool):
-            raise ValueError(f"Layout.contact_pass must be true or false; got {self.contact_pass!r}")
+        for name in ("contact_pass", "prefetch"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"Layout.{name} must be true or false; got {getattr(self, name)!r}")
 
 
 def choose_layout(n: int, device: str) -> Layout:
@@ -200,7 +203,7 @@ class Engine:
             self._contact_kernel = force_kernels.contact_pass(params.rolling_friction)
         elif split:
             self._force_kernel = force_kernels.pair_gravity_tiled(
-                self.layout.block_dim, self.layout.particles_per_block, precision, self.layout.max_registers
+                self.layout.block_dim, self.layout.particles_per_block, precision, self.layout.max_registers, self.layout.prefetch
             )
             self._contact_kernel = force_kernels.contact_pass(params.rolling_friction)
         elif tiled:
@@ -212,6 +215,7 @@ class Engine:
                 params.rolling_friction,
                 ledger,
                 self.layout.max_registers,
+                self.layout.prefetch,
             )
         else:
             self._force_kernel = force_kernels.pair_forces_reference(precision, params.rolling_friction)

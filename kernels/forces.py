@@ -277,6 +277,7 @@ def pair_forces_tiled(
     rolling: str = "couple",
     ledger: bool = False,
     max_registers: int = 0,
+    prefetch: bool = False,
 ):
     """Build the tiled all-pairs kernel for a layout; launch with ``wp.launch_tiled``.
 
@@ -287,6 +288,7 @@ def pair_forces_tiled(
     again after the sweep, so any number of contacts is handled.  ``max_registers``
     (CUDA, 0 = the compiler's choice) caps registers per thread: the float64
     contact code, which runs rarely, then spills instead of the sweep losing occupancy.
+    ``prefetch`` loads each tile of j one tile ahead.
     """
     real, _ = _real_types(precision)
     inverse_sqrt = _inverse_sqrt(precision)
@@ -343,10 +345,19 @@ def pair_forces_tiled(
         fields = Fields()
         slots = Slots()
         candidates = Counts()
+        # With prefetch each tile of j is loaded one tile ahead, so that the load is in flight
+        # while the tile before is swept (latency hidden at low occupancy); past the array a
+        # tile holds zeros, never used.
+        if wp.static(prefetch):
+            body_next = wp.untile(wp.tile_load(body_in, shape=wp.static(T), offset=j_first, storage="register"))
         for start in range(j_first, j_end, wp.static(T)):
             # One j per thread (counted from the system's first, so that a system's sums do not
             # depend on where it sits among others); elements past its end are skipped.
-            body_j = wp.untile(wp.tile_load(body_in, shape=wp.static(T), offset=start, storage="register"))
+            if wp.static(prefetch):
+                body_j = body_next
+                body_next = wp.untile(wp.tile_load(body_in, shape=wp.static(T), offset=start + wp.static(T), storage="register"))
+            else:
+                body_j = wp.untile(wp.tile_load(body_in, shape=wp.static(T), offset=start, storage="register"))
             j = start + lane
             if j < j_end:
                 for p in range(wp.static(P)):
@@ -461,7 +472,7 @@ def next_candidate(i: int, listed: bool, candidates: wp.array2d(dtype=wp.int32),
 
 
 @functools.cache
-def pair_gravity_tiled(block_dim: int, particles_per_block: int, precision: str = "mixed", max_registers: int = 0):
+def pair_gravity_tiled(block_dim: int, particles_per_block: int, precision: str = "mixed", max_registers: int = 0, prefetch: bool = False):
     """Build the sweep of the split layout: gravity between every pair, and each particle's contact
     candidates appended to ``candidates`` (counted in ``candidate_count``, zeroed by the caller).
 
@@ -505,8 +516,14 @@ def pair_gravity_tiled(block_dim: int, particles_per_block: int, precision: str 
             near[p] = near_bound(bodies_i[p][radius_at], max_radius, candidate)
 
         fields = Fields()
+        if wp.static(prefetch):  # as in pair_forces_tiled
+            body_next = wp.untile(wp.tile_load(body_in, shape=wp.static(T), offset=j_first, storage="register"))
         for start in range(j_first, j_end, wp.static(T)):
-            body_j = wp.untile(wp.tile_load(body_in, shape=wp.static(T), offset=start, storage="register"))
+            if wp.static(prefetch):
+                body_j = body_next
+                body_next = wp.untile(wp.tile_load(body_in, shape=wp.static(T), offset=start + wp.static(T), storage="register"))
+            else:
+                body_j = wp.untile(wp.tile_load(body_in, shape=wp.static(T), offset=start, storage="register"))
             j = start + lane
             if j < j_end:
                 for p in range(wp.static(P)):
