@@ -287,30 +287,19 @@ def _check_same_settings(saved: dict, asked: dict) -> None:
             )
 
 
-def form_pile(
-    n_particles: int = 300,
-    seed: int = 1,
-    device: str | None = None,
-    radii=PAPER_RADII,
-    density: float = PAPER_DENSITY,
-    params: Params | None = None,
-    ke_threshold: float = KE_THRESHOLD,
-    fill: float = 0.3,
-    check_every: int = 250,
-    max_steps: int = 5_000_000,
-    precision: str = "mixed",
-    progress: Callable[[FormationProgress], None] | None = None,
-) -> State:
+def form_pile(*args, progress: Callable[[FormationProgress], None] | None = None, **options) -> State:
     """Build a rubble pile: seed, collapse until KE < ke_threshold |U|, remove net motion, centre.
 
-    Deterministic for a given ``seed`` on a given device.  The returned State has
-    ``size_class`` (0 = smallest radius) and ``metadata`` with the formation
-    history (time, KE/|U|) and the settings used.  (:class:`Formation` does the
-    same one check at a time, and can stop and continue.)
+    The arguments are :class:`Formation`'s (n_particles, seed, device, radii, density,
+    params, ke_threshold, fill, check_every, max_steps, precision); ``progress`` is told
+    after each check.  Deterministic for a given ``seed`` on a given device.  The
+    returned State has ``size_class`` (0 = smallest radius) and ``metadata`` with the
+    formation history (time, KE/|U|) and the settings used.  (:class:`Formation` does
+    the same one check at a time, and can stop and continue.)
 
     >>> pile = form_pile(n_particles=300, seed=1, device="cpu")
     """
-    formation = Formation(n_particles, seed, device, radii, density, params, ke_threshold, fill, check_every, max_steps, precision)
+    formation = Formation(*args, **options)
     while not formation.settled:
         formation.advance()
         if progress is not None:
