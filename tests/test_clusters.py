@@ -126,3 +126,19 @@ def test_result_does_not_depend_on_particle_order(piles):
     for ca, cb in zip(a, b):
         assert sorted(order[cb.members].tolist()) == ca.members.tolist()
         assert ca.mass == pytest.approx(cb.mass, rel=1e-12)
+
+
+def test_smoothed_density_equals_the_plain_gaussian_sum_in_any_block_size(piles, monkeypatch):
+    """sum_j m_j N(y - x_j; sigma_j), written out pair by pair in float64, at the particles and at
+    other points; blocks of a few rows (forced small here) change nothing but the order of work."""
+    from decco_warp.analysis import clusters
+
+    target, _ = piles
+    x, m, sigma = target.positions + 3e8, target.masses, 10.0 * target.radii  # far from the origin: the centring matters
+    at = x[:37] + np.array([1e6, -2e6, 5e5])
+    d2 = ((at[:, None, :] - x[None, :, :]) ** 2).sum(axis=2)
+    plain = (m / ((2 * np.pi) ** 1.5 * sigma**3) * np.exp(-d2 / (2 * sigma**2))).sum(axis=1)
+    for elements in (clusters._CHUNK_ELEMENTS, 7 * target.n):
+        monkeypatch.setattr(clusters, "_CHUNK_ELEMENTS", elements)
+        np.testing.assert_allclose(clusters.smoothed_density(x, m, sigma, at=at), plain, rtol=1e-9)
+        np.testing.assert_allclose(clusters.smoothed_density(x, m, sigma)[:37], clusters.smoothed_density(x, m, sigma, at=x[:37]), rtol=1e-12)
