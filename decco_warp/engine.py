@@ -34,6 +34,8 @@ PAIR_OBSERVABLES = {
     "overlap_depth": wp.float64,
     "overlap_partner": wp.int32,
 }
+#: Threads per particle of the observables kernel on a GPU.
+OBSERVABLES_BLOCK = 128
 
 
 @dataclass(frozen=True)
@@ -309,11 +311,14 @@ class Engine:
         overlap [cm], and its deepest contact as a fraction of the pair's smaller radius with that partner."""
         outputs = {name: wp.zeros(self.count, dtype=dtype, device=self.device) for name, dtype in PAIR_OBSERVABLES.items()}
         if self.tree is None:
-            wp.launch(
-                observables.pair_observables,
-                dim=self.count,
+            # A block per particle on a GPU (N threads alone would leave most of it idle).
+            block_dim = OBSERVABLES_BLOCK if self.device.startswith("cuda") else 1
+            wp.launch_tiled(
+                observables.pair_observables_tiled(block_dim),
+                dim=[self.count],
                 inputs=[self.model, self.ranges, self.radius, self.mass, self.position, self.velocity],
                 outputs=list(outputs.values()),
+                block_dim=block_dim,
                 device=self.device,
             )
         else:  # O(N log N): the potential from the tree, the contacts from the hash grid's candidates

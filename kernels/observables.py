@@ -1,9 +1,13 @@
 """Per-particle pair observables for diagnostics and output, in float64.
 
-Not on the hot path: launched only when diagnostics or output are due, one
-thread per particle over all j (or, on the tree path, over its contact candidates, the
-potential coming from the tree: kernels/tree.py ``tree_potential``).
+Not on the hot path: launched only when diagnostics or output are due.  All pairs:
+``pair_observables_tiled``, a block of threads per particle striding over j, then reduced in a
+fixed order (``pair_observables``, one thread per particle, is its plain yardstick); on the tree
+path, one thread per particle over its contact candidates, the potential coming from the tree
+(kernels/tree.py ``tree_potential``).
 """
+
+import functools
 
 import warp as wp
 
@@ -104,6 +108,76 @@ def pair_observables(
             total = add_contact_observables(model, total, i, j, d2, r_ij, radius_in, velocity_in)
     potential_out[i] = potential
     write_contact_observables(total, i, elastic_out, contacts_out, max_overlap_out, overlap_depth_out, overlap_partner_out)
+
+
+#: No partner: larger than any particle index, so that a minimum over lanes ignores it.
+NO_PARTNER = 2147483647
+
+
+@wp.func
+def deeper(a: wp.vec2d, b: wp.vec2d) -> wp.vec2d:
+    """Of two (depth, -partner): the deeper contact, and of equally deep ones the lower partner
+    (a total order, so a block's reduction gives the plain loop's first-found deepest)."""
+    if b[0] > a[0] or (b[0] == a[0] and b[1] > a[1]):
+        return b
+    return a
+
+
+@functools.cache
+def pair_observables_tiled(block_dim: int):
+    """:func:`pair_observables` with a block of ``block_dim`` threads per particle (1 on the CPU,
+    where it sums in the plain kernel's order): each thread takes every block_dim-th j, then the
+    block reduces its sums, largest overlaps and deepest contact (the smallest j among equally
+    deep ones, as the plain loop keeps the first).  Launch with ``wp.launch_tiled``, dim [N]."""
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def pair_observables_tiled_kernel(
+        model: ContactModel,
+        ranges: wp.array(dtype=wp.vec2i),
+        radius_in: wp.array(dtype=wp.float64),
+        mass_in: wp.array(dtype=wp.float64),
+        position_in: wp.array(dtype=wp.vec3d),
+        velocity_in: wp.array(dtype=wp.vec3d),
+        potential_out: wp.array(dtype=wp.float64),
+        elastic_out: wp.array(dtype=wp.float64),
+        contacts_out: wp.array(dtype=wp.int32),
+        max_overlap_out: wp.array(dtype=wp.float64),
+        overlap_depth_out: wp.array(dtype=wp.float64),
+        overlap_partner_out: wp.array(dtype=wp.int32),
+    ):
+        i, lane = wp.tid()
+        position_i = position_in[i]
+        g_mass_i = model.G * mass_in[i]
+        potential = wp.float64(0.0)
+        total = no_contacts()
+        for j in range(ranges[i][0] + lane, ranges[i][1], wp.block_dim()):
+            r_ij = position_i - position_in[j]
+            d2 = wp.dot(r_ij, r_ij)
+            if d2 > wp.float64(0.0):
+                potential -= wp.float64(0.5) * g_mass_i * mass_in[j] / wp.sqrt(d2)
+                total = add_contact_observables(model, total, i, j, d2, r_ij, radius_in, velocity_in)
+        # (Struct fields are copied into values first: a tile is made of values.)
+        elastic = wp.tile_sum(wp.tile(wp.float64(total.elastic)))
+        contacts = wp.tile_sum(wp.tile(int(total.contacts)))
+        max_overlap = wp.tile_max(wp.tile(wp.float64(total.max_overlap)))
+        partner = wp.float64(-NO_PARTNER)
+        if total.partner >= 0:
+            partner = -wp.float64(total.partner)
+        deepest = wp.tile_reduce(deeper, wp.tile(wp.vec2d(total.depth, partner), preserve_type=True))
+        potential_sum = wp.tile_sum(wp.tile(potential))
+        if lane == 0:  # the reductions' results are read by the lane that writes
+            block = no_contacts()
+            block.elastic = elastic[0]
+            block.contacts = contacts[0]
+            block.max_overlap = max_overlap[0]
+            found = deepest[0]
+            block.depth = found[0]
+            if found[1] != wp.float64(-NO_PARTNER):
+                block.partner = -int(found[1])
+            potential_out[i] = potential_sum[0]
+            write_contact_observables(block, i, elastic_out, contacts_out, max_overlap_out, overlap_depth_out, overlap_partner_out)
+
+    return pair_observables_tiled_kernel
 
 
 @wp.kernel
