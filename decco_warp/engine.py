@@ -199,7 +199,9 @@ class Engine:
         split = self.tree is not None or tiled and self.layout.contact_pass
         self.candidate_count = wp.zeros(self.count if split else 0, dtype=wp.int32, device=self.device)
         self.candidates = wp.zeros((self.count if split else 0, force_kernels.CANDIDATES), dtype=wp.int32, device=self.device)
-        if tiled and not self.device.startswith("cuda") and self.layout.block_dim != 1:
+        # (Warp's CPU blocks, wp.config.enable_cpu_blocks, run every lane: tests use them to check
+        # the GPU layouts' reductions on a CPU.)
+        if tiled and not self.device.startswith("cuda") and self.layout.block_dim != 1 and not wp.config.enable_cpu_blocks:
             raise ValueError("on the CPU a layout's block_dim must be 1 (Warp runs one thread per block)")
         if self.tree is not None:
             self._contact_kernel = force_kernels.contact_pass(params.rolling_friction)
