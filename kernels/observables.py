@@ -73,6 +73,25 @@ def no_contacts() -> ContactObservables:
     return total
 
 
+@wp.func
+def pair_sums(
+    model: ContactModel, i: int, first: int, end: int, stride: int, radius_in: wp.array(dtype=wp.float64),
+    mass_in: wp.array(dtype=wp.float64), position_in: wp.array(dtype=wp.vec3d), velocity_in: wp.array(dtype=wp.vec3d),
+):  # fmt: skip
+    """Half of i's pair potential and its contacts' observables over j = first, first + stride, ... < end."""
+    position_i = position_in[i]
+    g_mass_i = model.G * mass_in[i]
+    potential = wp.float64(0.0)
+    total = no_contacts()
+    for j in range(first, end, stride):
+        r_ij = position_i - position_in[j]
+        d2 = wp.dot(r_ij, r_ij)
+        if d2 > wp.float64(0.0):
+            potential -= wp.float64(0.5) * g_mass_i * mass_in[j] / wp.sqrt(d2)
+            total = add_contact_observables(model, total, i, j, d2, r_ij, radius_in, velocity_in)
+    return potential, total
+
+
 @wp.kernel
 def pair_observables(
     # Model:
@@ -96,16 +115,7 @@ def pair_observables(
     deepest contact as a fraction of the smaller radius of the pair, with that partner
     (-1 without contacts)."""
     i = wp.tid()
-    position_i = position_in[i]
-    g_mass_i = model.G * mass_in[i]
-    potential = wp.float64(0.0)
-    total = no_contacts()
-    for j in range(ranges[i][0], ranges[i][1]):
-        r_ij = position_i - position_in[j]
-        d2 = wp.dot(r_ij, r_ij)
-        if d2 > wp.float64(0.0):
-            potential -= wp.float64(0.5) * g_mass_i * mass_in[j] / wp.sqrt(d2)
-            total = add_contact_observables(model, total, i, j, d2, r_ij, radius_in, velocity_in)
+    potential, total = pair_sums(model, i, ranges[i][0], ranges[i][1], 1, radius_in, mass_in, position_in, velocity_in)
     potential_out[i] = potential
     write_contact_observables(total, i, elastic_out, contacts_out, max_overlap_out, overlap_depth_out, overlap_partner_out)
 
@@ -146,16 +156,9 @@ def pair_observables_tiled(block_dim: int):
         overlap_partner_out: wp.array(dtype=wp.int32),
     ):
         i, lane = wp.tid()
-        position_i = position_in[i]
-        g_mass_i = model.G * mass_in[i]
-        potential = wp.float64(0.0)
-        total = no_contacts()
-        for j in range(ranges[i][0] + lane, ranges[i][1], wp.block_dim()):
-            r_ij = position_i - position_in[j]
-            d2 = wp.dot(r_ij, r_ij)
-            if d2 > wp.float64(0.0):
-                potential -= wp.float64(0.5) * g_mass_i * mass_in[j] / wp.sqrt(d2)
-                total = add_contact_observables(model, total, i, j, d2, r_ij, radius_in, velocity_in)
+        potential, total = pair_sums(
+            model, i, ranges[i][0] + lane, ranges[i][1], wp.block_dim(), radius_in, mass_in, position_in, velocity_in
+        )
         # (Struct fields are copied into values first: a tile is made of values.)
         elastic = wp.tile_sum(wp.tile(wp.float64(total.elastic)))
         contacts = wp.tile_sum(wp.tile(int(total.contacts)))
