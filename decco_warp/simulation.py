@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import replace
 
@@ -116,7 +117,10 @@ class Simulation:
             raise ValueError(f"step count must be a non-negative integer; got {n!r}")
         n = int(n)
         while self._record and n >= GRAPH_STEPS:
-            wp.capture_launch(self._step_graph())
+            graph = self._step_graph()
+            if graph is None:
+                break
+            wp.capture_launch(graph)
             n -= GRAPH_STEPS
             self._step += GRAPH_STEPS
         for _ in range(n):
@@ -128,10 +132,17 @@ class Simulation:
         wp.synchronize_device(self.engine.device)
 
     def _step_graph(self):
+        """The recorded block of steps, recorded at the first call; None if recording failed (a
+        recording only records: nothing was stepped, and steps go on one launch at a time)."""
         if self._graph is None:
-            with wp.ScopedCapture(device=self.engine.device) as capture:
-                for _ in range(GRAPH_STEPS):
-                    self.engine.step()
+            try:
+                with wp.ScopedCapture(device=self.engine.device) as capture:
+                    for _ in range(GRAPH_STEPS):
+                        self.engine.step()
+            except Exception as error:  # e.g. a driver without conditional graph nodes for the tree
+                warnings.warn(f"steps are launched one by one: recording them in a graph failed ({error})", stacklevel=3)
+                self._record = False
+                return None
             self._graph = capture.graph
         return self._graph
 

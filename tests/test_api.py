@@ -117,6 +117,35 @@ def test_recorded_steps_equal_steps_launched_one_by_one(device, gravity):
     np.testing.assert_array_equal(a.work(), b.work())
 
 
+def test_steps_go_on_one_by_one_when_recording_fails(monkeypatch):
+    """A device that cannot record a block of steps (a graph capture raising) still steps, one
+    launch at a time, to the same numbers, and says so once."""
+    import warp as wp
+
+    state = contact_cluster(30, seed=4)
+    a = dw.Simulation(state, dw.Params(), device="cpu")
+    a.step(60)
+
+    class Refused:
+        def __init__(self, *args, **kwargs):
+            pass
+
+        def __enter__(self):
+            raise RuntimeError("no graphs here")
+
+        def __exit__(self, *exc):
+            return False
+
+    monkeypatch.setattr(wp, "ScopedCapture", Refused)
+    b = dw.Simulation(state, dw.Params(), device="cpu")
+    with pytest.warns(UserWarning, match="launched one by one.*no graphs here"):
+        b.step(60)
+    b.step(60)  # no second warning, no second try
+    a.step(60)
+    assert b.step_count == 120
+    np.testing.assert_array_equal(a.state.positions, b.state.positions)
+
+
 def test_cli_version_and_info():
     out = cli("--version")
     assert out.returncode == 0 and out.stdout.strip() == f"decco-warp {dw.__version__}"
