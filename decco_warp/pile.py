@@ -161,7 +161,7 @@ class Formation:
         params = params or Params()
         radii = np.asarray(radii, dtype=float)
         check_formation_inputs(n_particles, radii, density, ke_threshold, fill, check_every, max_steps)
-        self.params, self.precision, self.check_every, self.max_steps = params, precision, check_every, max_steps
+        self.precision, self.check_every, self.max_steps = precision, check_every, max_steps
         self.settings = {
             "seed": int(seed),
             "n_particles": int(n_particles),
