@@ -75,7 +75,7 @@ def largest_fragment(sets):
         ax.set_xscale("log")
         ax.set_xlabel("eta = KE / |U|")
         ax.set_title(title)
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=8, loc="lower left")  # merged runs sit top left, the law's tail bottom right
     axes[0][0].set_ylabel("m_lf / m_t")
     return fig
 
