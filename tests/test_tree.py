@@ -133,7 +133,9 @@ def test_auto_gravity_takes_the_tree_from_the_crossover_and_the_spec_records_it(
 def test_tree_frames_give_the_all_pairs_observables_in_n_log_n(device, scene):
     """A frame on the tree path costs O(N log N): the potential from the tree walk (per particle
     within 3e-4 rms of all-pairs at the default theta_open, falling with theta; the total within
-    5e-5), and the contact observables from the hash grid's candidates, identical to all-pairs."""
+    5e-5), and the contact observables from the hash grid's candidates, identical to all-pairs
+    (the elastic energy to round-off on CUDA, where all-pairs sums each particle's pairs in a
+    block's reduction order)."""
     state = dw.load_pile(builtin_pile("target")) if scene == "pile" else overlapping_cloud(300, seed=2, fill=0.7)
     exact = dw.Simulation(state, dw.Params(), device=device, allow_unstable=True).pair_observables()
     assert exact["contacts"].sum() > 500
@@ -142,7 +144,10 @@ def test_tree_frames_give_the_all_pairs_observables_in_n_log_n(device, scene):
         params = dw.Params(gravity="tree", theta_open=theta)
         tree = dw.Simulation(state, params, device=device, allow_unstable=True).pair_observables()
         for key in ("elastic", "contacts", "max_overlap", "overlap_depth", "overlap_partner"):
-            assert np.array_equal(tree[key], exact[key]), key
+            if key == "elastic" and device.startswith("cuda"):
+                np.testing.assert_allclose(tree[key], exact[key], rtol=1e-12, atol=0)
+            else:
+                assert np.array_equal(tree[key], exact[key]), key
         error = (tree["potential"] - exact["potential"]) / np.abs(exact["potential"])
         rms[theta] = float(np.sqrt(np.mean(error**2)))
         if theta == dw.Params().theta_open:
