@@ -282,9 +282,16 @@ def prepare_resume(run_dir, steps: int | None = None, device: str | None = None)
     """Check a run folder and load its checkpoint; ``steps`` raises the total to run."""
     run_dir = Path(run_dir)
     spec_path, checkpoint_path, trajectory_path = (run_dir / n for n in (SPEC_FILE, CHECKPOINT_FILE, TRAJECTORY_FILE))
-    for path in (spec_path, checkpoint_path, trajectory_path):
+    for path in (spec_path, checkpoint_path):
         if not path.is_file():
             raise RunError(f"{run_dir} is not a run folder: {path.name} is missing")
+    if not trajectory_path.is_file():
+        # A resumed run appends to its own trajectory; starting a new one would leave a run whose
+        # frames begin mid-collision, which analysis would take for the whole run.
+        raise RunError(
+            f"{run_dir}: {trajectory_path.name} is missing, and a run continues its own trajectory; "
+            "put it back to resume, or delete the folder to run it again from the start"
+        )
     check_writable(run_dir)
     lock = RunFolderLock(run_dir).acquire()
     try:

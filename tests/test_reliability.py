@@ -261,6 +261,19 @@ def test_damaged_run_folders_are_refused_on_resume_with_a_reason(finished_run, t
     assert sorted(p.name for p in run_dir.iterdir()) == before  # nothing written
 
 
+def test_a_run_folder_without_its_trajectory_says_how_to_go_on(finished_run, tmp_path):
+    """A folder copied without trajectory.h5 (it is the large file) is refused with what to do."""
+    import shutil
+
+    from decco_warp.run import prepare_resume
+
+    run_dir = tmp_path / "run"
+    shutil.copytree(finished_run, run_dir)
+    (run_dir / "trajectory.h5").unlink()
+    with pytest.raises(RunError, match="trajectory.h5 is missing.*put it back to resume, or delete the folder"):
+        prepare_resume(run_dir, device="cpu")
+
+
 @pytest.mark.parametrize("offset", [48, 1000])
 def test_a_trajectory_with_damaged_metadata_is_refused_at_once(finished_run, tmp_path, offset):
     """Bytes flipped in a finished trajectory's metadata: read at once as a FileFormatError (a SWMR
