@@ -188,11 +188,13 @@ def pile(
             bar.console.print(f"continuing the formation saved in {partial_path(out)} at step {step}", soft_wrap=True, highlight=False)
 
         failed = None  # reported after the bar's last line
+        timing = []
         try:
             formed = form_pile_file(
                 out,
                 progress=show,
                 on_resume=resumed,
+                on_done=timing.append,
                 n_particles=particles,
                 seed=seed,
                 device=chosen,
@@ -221,7 +223,7 @@ def pile(
         f"wrote {out}: {formed.n} particles {tuple(int(c) for c in meta['size_counts'])}, "
         f"mass {formed.total_mass:.4g} g, radius {pile_radius(formed) / 1e5:.4g} km, U {meta['potential']:.4g} erg; "
         f"{meta['formation_steps']} steps ({meta['formation_time']:.4g} s simulated) in "
-        f"{meta['formation_wall_seconds']:.1f} s"
+        f"{meta['formation_wall_seconds']:.1f} s (this session: {timing[0]})"
     )
 
 

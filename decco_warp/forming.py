@@ -23,9 +23,10 @@ CHECKPOINT_SECONDS = 60.0
 class FormationStopped(RuntimeError):
     """SIGINT or SIGTERM arrived; the formation was saved and the same command continues it."""
 
-    def __init__(self, signal_name: str, step: int, partial: Path):
-        self.signal_name, self.step, self.partial = signal_name, step, partial
-        super().__init__(f"stopped by {signal_name} at step {step}; saved in {partial}: the same command continues")
+    def __init__(self, signal_name: str, step: int, partial: Path, timing: str = ""):
+        self.signal_name, self.step, self.partial, self.timing = signal_name, step, partial, timing
+        spent = f" (this session: {timing})" if timing else ""
+        super().__init__(f"stopped by {signal_name} at step {step}; saved in {partial}: the same command continues{spent}")
 
 
 def partial_path(out: Path) -> Path:
@@ -43,8 +44,10 @@ def read_partial(partial: Path) -> dict:
 
 
 def _save(formation: Formation, partial: Path) -> None:
+    started = _time.perf_counter()
     snapshot = formation.snapshot()
     write_checkpoint(partial, {k: v for k, v in snapshot.items() if k != "formation"}, formation.sim.static, snapshot["formation"])
+    formation.seconds["saves"] += _time.perf_counter() - started
 
 
 def form_pile_file(
@@ -52,11 +55,13 @@ def form_pile_file(
     progress: Callable[[FormationProgress], None] | None = None,
     checkpoint_seconds: float = CHECKPOINT_SECONDS,
     on_resume: Callable[[int], None] | None = None,
+    on_done: Callable[[str], None] | None = None,
     **options,
 ) -> State:
     """Form a pile (``options`` as :class:`decco_warp.pile.Formation`'s) and write it to ``out``.
 
-    Continues from ``out``'s checkpoint when there is one (``on_resume(step)`` is told), saves one
+    Continues from ``out``'s checkpoint when there is one (``on_resume(step)`` is told; ``on_done``
+    is told this session's wall time, itemised, once the pile is written), saves one
     every ``checkpoint_seconds`` of wall time, and on SIGINT/SIGTERM (:class:`FormationStopped`) or
     past ``max_steps`` (:class:`FormationError`; a larger ``max_steps`` continues) before it raises.
     The checkpoint is removed once the pile is written.
@@ -79,11 +84,13 @@ def form_pile_file(
                 progress(formation.progress())
             if stop.signal is not None:
                 _save(formation, partial)
-                raise FormationStopped(stop.signal, formation.sim.step_count, partial)
+                raise FormationStopped(stop.signal, formation.sim.step_count, partial, formation.timing())
             if _time.perf_counter() - saved >= checkpoint_seconds:
                 _save(formation, partial)
                 saved = _time.perf_counter()
     pile = formation.pile()
     save_pile(pile, out)
     partial.unlink(missing_ok=True)
+    if on_done is not None:
+        on_done(formation.timing())
     return pile

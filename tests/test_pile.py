@@ -1,5 +1,7 @@
 """Rubble-pile formation and pile files."""
 
+import re
+
 import h5py
 import numpy as np
 import pytest
@@ -188,7 +190,7 @@ def test_a_formation_stopped_by_a_signal_or_its_step_limit_continues_to_the_same
         if len(checks) == 3:
             os.kill(os.getpid(), signal.SIGINT)  # noted, then the formation saves and stops
 
-    with pytest.raises(FormationStopped, match="SIGINT at step 750"):
+    with pytest.raises(FormationStopped, match=r"SIGINT at step 750; .* \(this session: set-up .* over 750 steps\), checks"):
         form_pile_file(out, progress=ctrl_c_at_the_third_check, checkpoint_seconds=1e9, **QUICK)
     assert partial.is_file() and not out.exists()
     with pytest.raises(ValueError, match="seed = 9, not 10"):
@@ -215,5 +217,10 @@ def test_pile_command_continues_a_formation_past_its_step_limit(tmp_path):
     second = cli(*args)
     assert second.returncode == 0, second.stderr
     assert "continuing the formation saved in" in second.stderr and "at step 10000" in second.stderr
+    # The wall time of the session, itemised: only the steps of this session are counted.
+    spent = re.search(r"this session: set-up [0-9.]+ s, stepping ([0-9.]+) s \(([0-9.]+) ms a step over (\d+) steps\), checks [0-9.]+ s, saves [0-9.]+ s", second.stdout)
+    assert spent, second.stdout
+    formed = load_pile(out).metadata["formation_steps"]
+    assert int(spent[3]) == formed - 10000
     _same_pile(load_pile(out), dw.form_pile(**QUICK))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["p.h5"]
