@@ -8,7 +8,9 @@ A sweep specification is a run specification plus a ``[sweep]`` table:
     min_members = 50               # for the analysis of each run
     analyse_every = 1              # analyse every Nth frame of a run (the last one always)
     keep_trajectory = true         # false: delete trajectory.h5 once the run is analysed
-    ensemble = 1                   # runs handed to a worker at a time; those sharing Params step together
+    ensemble = "auto"              # runs handed to a worker at a time; those sharing Params step together
+                                   # (auto: 4 at a time on a GPU, runs of the same particle count up to
+                                   # 8 000 particles stepped together, larger ones alone; 1 on a CPU)
     [sweep.grid]                   # the cartesian product of these lists
     "collision.eta" = [0.5, 1.0, 2.0]
     "collision.theta_deg" = [0.0, 22.0]
@@ -37,6 +39,11 @@ from pathlib import Path
 from . import spec as specs
 from ._version import __version__
 
+#: ``ensemble = "auto"`` on a GPU: runs go to a worker 4 at a time, and those of the same particle
+#: count up to 8 000 are stepped together (on an H100, 4 systems of 5 500 to 6 250 particles step
+#: 1.35 to 1.47 times as fast as one at a time; at 10 000 one run nearly fills the GPU: 1.07x for 2).
+AUTO_ENSEMBLE = 4
+ENSEMBLE_MAX_PARTICLES = 8_000
 SWEEP_KEYS = {"name", "out", "min_members", "analyse_every", "keep_trajectory", "ensemble", "grid"}
 SUMMARY_FIELDS = [
     "run", "status", "reason", "n_particles", "mass_ratio", "theta_deg", "eta", "speed", "k_in", "dt", "steps",
@@ -67,12 +74,15 @@ def load_sweep(path) -> tuple[dict, list[dict]]:
         "min_members": sweep.get("min_members", 50),
         "analyse_every": sweep.get("analyse_every", 1),
         "keep_trajectory": sweep.get("keep_trajectory", True),
-        "ensemble": sweep.get("ensemble", 1),
+        "ensemble": sweep.get("ensemble", "auto"),
     }
     for key in ("min_members", "analyse_every", "ensemble"):
         value = settings[key]
+        if key == "ensemble" and value == "auto":
+            continue
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise specs.SpecError(f"[sweep] {key} = {value!r}: must be an integer >= 1")
+            also = ' or "auto"' if key == "ensemble" else ""
+            raise specs.SpecError(f"[sweep] {key} = {value!r}: must be an integer >= 1{also}")
     if not isinstance(settings["keep_trajectory"], bool):
         raise specs.SpecError(f"[sweep] keep_trajectory = {settings['keep_trajectory']!r}: must be true or false")
     grid = sweep.get("grid", {})
@@ -124,10 +134,19 @@ def simulate_one(spec: dict) -> dict:
     return simulate_batch([spec])[0]
 
 
-def simulate_batch(batch: list[dict]) -> list[dict]:
+def ensemble_plan(setting, gpus: int) -> tuple[int, int | None]:
+    """``[sweep] ensemble`` as (runs handed to a worker at a time, the largest particle count
+    stepped with others, None for any): ``"auto"`` packs the small runs on a GPU only."""
+    if setting != "auto":
+        return int(setting), None
+    return (AUTO_ENSEMBLE, ENSEMBLE_MAX_PARTICLES) if gpus > 0 else (1, None)
+
+
+def simulate_batch(batch: list[dict], max_particles: int | None = None) -> list[dict]:
     """Run (or resume, or skip) several runs of a sweep on one Dask worker, those that share their
     Params and step advanced together as one ensemble (decco_warp/ensemble.py: each writes what it
-    would alone); never raises.  One row per run, as :func:`simulate_one` gives."""
+    would alone); never raises.  One row per run, as :func:`simulate_one` gives.  With
+    ``max_particles`` only runs of the same particle count, up to that many, go together."""
     from .run import RUN_FAILURES, execute, execute_ensemble
 
     device = _worker_device()
@@ -139,6 +158,9 @@ def simulate_batch(batch: list[dict]) -> list[dict]:
             params = specs.params_of(run.spec)
             # The tree steps one system at a time: its runs go alone.
             key = (params, run.sim.step_count) if params.gravity == "all-pairs" else (k,)
+            if max_particles is not None:
+                count = run.sim.engine.count
+                key = (*key, count) if count <= max_particles else (k,)
             groups.setdefault(key, []).append(k)
     for members in groups.values():
         try:
@@ -313,9 +335,9 @@ def run_sweep(
     try:
         # Runs in grid order, `ensemble` at a time to a worker (neighbours in a grid mostly share
         # their piles and Params, and those are stepped together).
-        size = settings.get("ensemble", 1)
+        size, max_particles = ensemble_plan(settings.get("ensemble", 1), gpus)
         batches = [list(range(k, min(k + size, len(runs)))) for k in range(0, len(runs), size)]
-        futures = {client.submit(simulate_batch, [runs[k] for k in batch], pure=False): batch for batch in batches}
+        futures = {client.submit(simulate_batch, [runs[k] for k in batch], max_particles, pure=False): batch for batch in batches}
         simulations = as_completed(futures)
         while not simulations.is_empty() or pending:
             # Poll both kinds of work, so that each run is reported as soon as its analysis ends.

@@ -193,6 +193,30 @@ def test_a_sweep_packs_runs_into_ensembles_with_the_results_of_runs_alone(tmp_pa
         load_sweep(path)
 
 
+def test_ensemble_auto_packs_small_runs_on_a_gpu_only_and_alike_in_size(tmp_path):
+    """[sweep] ensemble defaults to "auto": one run at a time on a CPU; on a GPU 4 to a worker,
+    stepped together only when they have the same particle count, up to 8 000."""
+    from decco_warp.sweep import ENSEMBLE_MAX_PARTICLES, ensemble_plan, simulate_batch
+
+    path = tmp_path / "s.toml"
+    path.write_text(SWEEP.format(out=tmp_path))
+    settings, runs = load_sweep(path)
+    assert settings["ensemble"] == "auto"
+    assert ensemble_plan("auto", 0) == (1, None)
+    assert ensemble_plan("auto", 2) == (4, ENSEMBLE_MAX_PARTICLES)
+    assert ensemble_plan(3, 0) == (3, None)
+    for bad in ("many", 0, 2.5, True):
+        path.write_text(SWEEP.format(out=tmp_path).replace("analyse_every = 2", f"ensemble = {json.dumps(bad)}"))
+        with pytest.raises(specs.SpecError, match='ensemble = .*"auto"'):
+            load_sweep(path)
+    # Two runs alike in all but eta: together when small enough, each alone past the limit.
+    pair = [r for r in runs if r["params"]["dt"] == 0.04]
+    together = simulate_batch([{**r, "run": {**r["run"], "out": str(tmp_path / "a")}} for r in pair], max_particles=10**6)
+    alone = simulate_batch([{**r, "run": {**r["run"], "out": str(tmp_path / "b")}} for r in pair], max_particles=10)
+    assert [row["ensemble"] for row in together] == [2, 2] and [row["ensemble"] for row in alone] == [1, 1]
+    assert all(row["status"] == "ok" for row in together + alone)
+
+
 def test_shipped_large_pile_list_and_collision_are_valid():
     """runs/large/: the 1e5-particle piles and their collision (built and run on a GPU, not here)."""
     from decco_warp.spec import load_spec_file, resolve_spec
