@@ -368,6 +368,9 @@ def simulate(
     output_every: Optional[int] = typer.Option(None, "--output-every", help="Steps between trajectory frames."),
     checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Steps between checkpoints."),
     precision: Optional[str] = typer.Option(None, "--precision", help="mixed or float64."),
+    layout: Optional[str] = typer.Option(
+        None, "--layout", help="Force kernel layout: auto, split (contacts in their own pass), prefetch or split+prefetch."
+    ),
     out: Optional[str] = typer.Option(None, "--out", help="Parent folder of run folders (default runs/out)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing run folder."),
     rerun: Optional[str] = RerunOption,
@@ -383,7 +386,7 @@ def simulate(
         if steps is not None and duration is not None:
             raise specs.SpecError("give --steps or --duration, not both")
         run_overrides = {"name": name, "output_every": output_every, "checkpoint_every": checkpoint_every}
-        run_overrides.update(precision=precision, out=out, device=device, max_overlap=max_overlap)
+        run_overrides.update(precision=precision, layout=layout, out=out, device=device, max_overlap=max_overlap)
         if steps is not None or duration is not None:  # a command-line length replaces the file's
             raw.get("run", {}).pop("steps", None)
             raw.get("run", {}).pop("duration", None)

@@ -9,7 +9,7 @@ are built on it.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import warp as wp
@@ -87,6 +87,26 @@ def choose_layout(n: int, device: str) -> Layout:
         per_block = 128 if n >= 4096 else 64
         return Layout(block_dim=per_block, particles_per_block=4, contact_slots=4, max_registers=128)
     return Layout(block_dim=1, particles_per_block=4, contact_slots=16)
+
+
+#: ``[run] layout``: the force kernel's layout for a run.  "auto" is :func:`choose_layout`; "split"
+#: puts the contacts in their own pass and "prefetch" loads each tile of j a tile ahead, as
+#: ``decco-warp bench --layouts ...:split:prefetch`` times them (docs/benchmarks.md).  They change
+#: the order of float operations, so the motion differs from "auto" at round-off only.
+LAYOUT_CHOICES = ("auto", "split", "prefetch", "split+prefetch")
+
+
+def layout_for(choice: str, n: int, device: str) -> Layout | None:
+    """The :class:`Layout` a run's ``layout`` choice names for ``n`` particles on ``device``
+    (None for "auto": the engine's own choice)."""
+    if choice not in LAYOUT_CHOICES:
+        raise ValueError(f"layout must be one of {', '.join(LAYOUT_CHOICES)}; got {choice!r}")
+    if choice == "auto":
+        return None
+    base = choose_layout(n, device)
+    split = "split" in choice
+    # The split sweep fits its registers uncapped (79 to 92 on sm_90), as benched.
+    return replace(base, contact_pass=split, prefetch="prefetch" in choice, max_registers=0 if split else base.max_registers)
 
 
 def system_sizes(systems: Sequence[int] | None, count: int) -> np.ndarray:

@@ -23,6 +23,7 @@ from .checks import MAX_REST_OVERLAP, InputError, check_destination, check_parti
 from .collision import setup_collision
 from .device import resolve_device
 from .diagnostics import energy_ledger, energy_scale, ledger_closure, stress_shares
+from .engine import Layout, layout_for
 from .io import BackgroundFrames, FileFormatError, Trajectory, load_pile, pause_point, read_checkpoint, read_frame, write_checkpoint
 from .lock import RunFolderLock
 from .simulation import Simulation
@@ -191,6 +192,10 @@ def _device(spec: dict, override: str | None) -> str | None:
     return None if spec["run"]["device"] == "auto" else spec["run"]["device"]
 
 
+def _layout(spec: dict, n: int, override: str | None) -> Layout | None:
+    return layout_for(spec["run"]["layout"], n, resolve_device(_device(spec, override)))
+
+
 @dataclass
 class PreparedRun:
     """A run checked and set up, nothing written yet: what :func:`execute` needs."""
@@ -229,7 +234,8 @@ class Plan:
             f"theta {meta['theta_deg']:g} deg, b {meta['impact_parameter']:.6g} cm",
             *self.notes,
             f"parameters: k_in {params['k_in']:.6g} dyne/cm, dt {params['dt']:.6g} s, {self.spec['run']['steps']} steps "
-            f"({self.spec['run']['steps'] * params['dt']:.6g} s)",
+            f"({self.spec['run']['steps'] * params['dt']:.6g} s)"
+            + (f", force layout {self.spec['run']['layout']}" if self.spec["run"]["layout"] != "auto" else ""),
             f"stability: {self.stability.summary()}",
             f"compression: {self.forecast.summary()}",
         ]
@@ -261,6 +267,7 @@ def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None
             specs.params_of(spec),
             device=_device(spec, device),
             precision=spec["run"]["precision"],
+            layout=_layout(spec, plan.state.n, device),
             allow_unstable=spec["run"]["allow_unstable"],
             ledger=True,
         )
@@ -319,7 +326,12 @@ def _prepare_resume(run_dir, spec_path, checkpoint_path, trajectory_path, steps,
             raise RunError(f"steps {steps} is below the {int(snapshot['step'])} already taken")
         spec["run"]["steps"] = steps
     sim = Simulation.from_snapshot(
-        static, specs.params_of(spec), snapshot, device=_device(spec, device), precision=spec["run"]["precision"]
+        static,
+        specs.params_of(spec),
+        snapshot,
+        device=_device(spec, device),
+        precision=spec["run"]["precision"],
+        layout=_layout(spec, static.n, device),
     )
     return PreparedRun(sim, spec, run_dir, extra, resume=True, lock=lock)
 

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from .collision import SPIN_AXES
-from .engine import PRECISIONS
+from .engine import LAYOUT_CHOICES, PRECISIONS
 from .params import GRAVITY_CHOICES, ROLLING_FRICTION_FORMS, Params, choose_gravity
 from .stability import DEFAULT_MAX_COMPRESSION, choose_stiffness, choose_time_step
 
@@ -76,6 +76,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "checkpoint_every": Key(int, 10_000, _positive, "an integer >= 1 (steps)"),
         "device": Key(str, "auto", lambda v: bool(_DEVICE.fullmatch(v)), "auto, cpu, cuda or cuda:N"),
         "precision": Key(str, "mixed", lambda v: v in PRECISIONS, " or ".join(PRECISIONS)),
+        "layout": Key(str, "auto", lambda v: v in LAYOUT_CHOICES, ", ".join(LAYOUT_CHOICES) + " (the force kernel's layout)"),
         "out": Key(str, "runs/out", lambda v: bool(v.strip()), "a folder path"),
         "allow_unstable": Key(bool, False, _any, "true or false"),
         "max_overlap": Key(
