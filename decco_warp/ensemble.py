@@ -35,6 +35,11 @@ class Ensemble:
                 raise ValueError("the members of an ensemble must share their Params")
             if sim.step_count != first.step_count or sim.device != first.device:
                 raise ValueError("the members of an ensemble must be at the same step on the same device")
+            # One layout and precision for all: a member stepped otherwise would not move as it would alone.
+            if sim.engine.layout != first.engine.layout or sim.engine.precision != first.engine.precision:
+                raise ValueError("the members of an ensemble must share their force layout and precision")
+        if precision != first.engine.precision:
+            raise ValueError(f"precision {precision!r} is not the members' ({first.engine.precision!r})")
         if not all(sim.engine.ledger for sim in members):
             raise ValueError("the members of an ensemble keep the energy ledger (ledger=True)")
         snapshots = [sim.snapshot() for sim in members]

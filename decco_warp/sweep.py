@@ -157,7 +157,9 @@ def simulate_batch(batch: list[dict], max_particles: int | None = None) -> list[
         if run is not None:
             params = specs.params_of(run.spec)
             # The tree steps one system at a time: its runs go alone.
-            key = (params, run.spec["run"]["layout"], run.sim.step_count) if params.gravity == "all-pairs" else (k,)
+            # Only runs that would be stepped alone with the same kernels go together.
+            engine = run.sim.engine
+            key = (params, engine.precision, engine.layout, run.sim.step_count) if params.gravity == "all-pairs" else (k,)
             if max_particles is not None:
                 count = run.sim.engine.count
                 key = (*key, count) if count <= max_particles else (k,)

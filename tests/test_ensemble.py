@@ -69,6 +69,20 @@ def test_ensemble_sizes_are_checked_and_the_tree_steps_one_system():
         dw.Simulation(state, dw.Params(gravity="tree"), device="cpu", systems=SIZES)
 
 
+def test_members_of_another_layout_or_precision_are_refused():
+    """A member stepped with another layout or precision would not move as it would alone."""
+    from decco_warp.ensemble import Ensemble
+
+    one, two = _systems()[:2]
+    base = dw.Simulation(one, dw.Params(), device="cpu", allow_unstable=True, ledger=True)
+    for options in ({"layout": dw.Layout(1, 3, contact_pass=True)}, {"precision": "float64"}):
+        other = dw.Simulation(two, dw.Params(), device="cpu", allow_unstable=True, ledger=True, **options)
+        with pytest.raises(ValueError, match="share their force layout and precision"):
+            Ensemble([base, other])
+    with pytest.raises(ValueError, match="not the members'"):
+        Ensemble([base, dw.Simulation(two, dw.Params(), device="cpu", allow_unstable=True, ledger=True)], precision="float64")
+
+
 def _spec(out, name, **run):
     from decco_warp import spec as specs
 
