@@ -236,13 +236,12 @@ def _device_name(device: str) -> str:
 
 def analyse_one(run_dir: str, min_members: int, analyse_every: int, keep_trajectory: bool) -> dict:
     """Analyse a finished run (unless its summary.json is current), draw its figures, and
-    drop its trajectory if asked; returns its summary.  Runs in a process of this machine."""
+    drop its trajectory if asked; returns its summary (``analysis_seconds``: what the analysis
+    took when it ran, also for a run found analysed).  Runs in a process of this machine."""
     from .lock import RunFolderLock
 
-    started = time.perf_counter()
     with RunFolderLock(run_dir):  # the run has finished: no one else should be writing there
-        summary = _analyse(Path(run_dir), min_members, analyse_every, keep_trajectory)
-    return {**summary, "analysis_seconds": round(time.perf_counter() - started, 3)}
+        return _analyse(Path(run_dir), min_members, analyse_every, keep_trajectory)
 
 
 def _analyse(run_dir: Path, min_members: int, analyse_every: int, keep_trajectory: bool) -> dict:

@@ -75,11 +75,15 @@ def test_sweep_runs_on_two_workers_reports_failures_and_resumes(tmp_path):
         assert 0 < float(row["stepping_seconds"]) < float(row["wall_seconds"])
     record = json.loads((tmp_path / "grid" / "sweep.json").read_text())
     assert record["runs"] == {"failed": 2, "ok": 2} and record["decco_warp"] == dw.__version__
-    # Again: the finished runs are skipped, the failed ones tried again (and fail the same way).
+    took = {row["run"]: row["analysis_seconds"] for row in good}
+    assert all(float(value) > 0 for value in took.values())
+    # Again: the finished runs are skipped, the failed ones tried again (and fail the same way);
+    # the skipped runs report what their analysis took when it ran, not the time to read it back.
     again = cli("sweep", str(path), "--workers", "2")
     assert again.returncode == 0, again.stderr
     rows = _rows(tmp_path / "grid" / "summary.csv")
     assert sorted(r["status"] for r in rows.values()) == ["failed", "failed", "skipped (complete)", "skipped (complete)"]
+    assert {name: rows[name]["analysis_seconds"] for name in took} == took
 
 
 def test_bad_sweep_files_are_exit_2(tmp_path):

@@ -7,6 +7,7 @@ Reads ``trajectory.h5`` (never the simulation) and writes ``analysis.h5`` and
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import h5py
@@ -83,6 +84,7 @@ def analyse_snapshot(state: State, target_mass: float, min_members: int = 50, G:
 
 def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None) -> dict:
     """Analyse every ``every``-th frame of a run (and always the last); write analysis.h5 and summary.json."""
+    started = time.perf_counter()
     run_dir = Path(run_dir)
     data = read_trajectory(run_dir / "trajectory.h5")
     static = data["static"]
@@ -176,6 +178,8 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None) -
         "analyse_every": int(every),
     }
     summary = {k: (float(v) if isinstance(v, np.floating) else v) for k, v in summary.items()}
+    # Kept with the summary, so that a sweep that finds the run analysed reports what it took then.
+    summary["analysis_seconds"] = round(time.perf_counter() - started, 3)
     analysis["summary"] = summary
     write_analysis(run_dir / "analysis.h5", analysis)
     (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
