@@ -26,7 +26,7 @@ class Ensemble:
     exactly where each would have; the members' own Simulations are no longer stepped.
     """
 
-    def __init__(self, members: list[Simulation], precision: str = "mixed"):
+    def __init__(self, members: list[Simulation]):
         if not members:
             raise ValueError("an ensemble needs at least one member")
         first = members[0]
@@ -38,8 +38,6 @@ class Ensemble:
             # One layout and precision for all: a member stepped otherwise would not move as it would alone.
             if sim.engine.layout != first.engine.layout or sim.engine.precision != first.engine.precision:
                 raise ValueError("the members of an ensemble must share their force layout and precision")
-        if precision != first.engine.precision:
-            raise ValueError(f"precision {precision!r} is not the members' ({first.engine.precision!r})")
         if not all(sim.engine.ledger for sim in members):
             raise ValueError("the members of an ensemble keep the energy ledger (ledger=True)")
         snapshots = [sim.snapshot() for sim in members]
@@ -56,7 +54,7 @@ class Ensemble:
         # At the members' step (each view keeps its own clock's origin).
         state = replace(state, step=first.step_count, time=first.step_count * first.params.dt)
         self.sim = Simulation(
-            state, first.params, device=first.device, precision=precision, allow_unstable=True, ledger=True, systems=sizes.tolist(),
+            state, first.params, device=first.device, precision=first.engine.precision, allow_unstable=True, ledger=True, systems=sizes.tolist(),
             force_kernel=first.engine.force_kernel, layout=first.engine.layout,
         )  # fmt: skip
         self.sim.engine.restore(joined)

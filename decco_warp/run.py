@@ -416,7 +416,7 @@ def execute_ensemble(runs: list[PreparedRun]) -> list[RunResult | BaseException]
     from .ensemble import Ensemble
 
     outcomes: list[RunResult | BaseException | None] = [None] * len(runs)
-    ensemble = Ensemble([run.sim for run in runs], precision=runs[0].spec["run"]["precision"])
+    ensemble = Ensemble([run.sim for run in runs])
     drivers: dict[int, RunDriver] = {}
     locks = []
     try:
