@@ -198,7 +198,7 @@ class Engine:
         self.body = wp.zeros(self.count if tiled else 0, dtype=force_kernels.BODY_TYPES[precision], device=self.device)
         # The tree path: gravity from a radix tree, contacts from a hash grid, both into the contact pass.
         # (A "reference" engine is the all-pairs yardstick, also for diagnostics: it never builds a tree.)
-        self.tree = GravityTree(self.count, self.device) if params.gravity == "tree" and tiled else None
+        self.tree = GravityTree(self.count, self.device, precision) if params.gravity == "tree" and tiled else None
         if self.tree is not None and len(self.systems) > 1:
             raise ValueError("the tree path steps one system at a time; an ensemble needs gravity = \"all-pairs\"")
         # Each particle's own system, [first, end), and for the tiled kernels each block's rows (a block

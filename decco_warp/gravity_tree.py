@@ -14,8 +14,9 @@ GRID_CELLS = 128
 class GravityTree:
     """Arrays for ``count`` particles on ``device``; rebuilt from the positions at every evaluation."""
 
-    def __init__(self, count: int, device: str):
+    def __init__(self, count: int, device: str, precision: str = "mixed"):
         self.count, self.device = count, device
+        self._gravity_kernel = kernels.tree_gravity(precision)
         nodes = max(2 * count - 1, 1)
         internal = max(count - 1, 1)
 
@@ -34,6 +35,8 @@ class GravityTree:
         self.nodes.quadrupole = zeros(nodes, wp.mat33d)
         self.nodes.low = zeros(nodes, wp.vec3d)
         self.nodes.high = zeros(nodes, wp.vec3d)
+        self.nodes.size = zeros(nodes, wp.float64)
+        self.nodes.offset = zeros(nodes, wp.float64)
         self.pending = zeros(1, wp.int32)  # 1 while the root's moments are unsummed: the levels' loop condition
         self.done = (zeros(nodes, wp.int32), zeros(nodes, wp.int32))
         self.points = zeros(count, wp.vec3)
@@ -67,9 +70,9 @@ class GravityTree:
     def gravity(self, G: float, theta_open: float, position: wp.array, mass: wp.array, force_out: wp.array) -> None:
         """force_out = gravity on every particle (call :meth:`build` first)."""
         self._launch(
-            kernels.tree_gravity,
+            self._gravity_kernel,
             self.count,
-            [wp.float64(G), wp.float64(theta_open), position, mass, self.order, self.count, self.nodes, force_out],
+            [wp.float64(G), wp.float64(1.0 / theta_open), position, mass, self.order, self.count, self.nodes, force_out],
         )
 
     def potential(self, G: float, theta_open: float, position: wp.array, mass: wp.array, potential_out: wp.array) -> None:
@@ -77,7 +80,7 @@ class GravityTree:
         self._launch(
             kernels.tree_potential,
             self.count,
-            [wp.float64(G), wp.float64(theta_open), position, mass, self.order, self.count, self.nodes, potential_out],
+            [wp.float64(G), wp.float64(1.0 / theta_open), position, mass, self.order, self.count, self.nodes, potential_out],
         )
 
     def contact_candidates(self, position, radius, max_radius: float, candidate_count, candidates) -> None:

@@ -17,14 +17,21 @@ trees") is built every evaluation, all on the device:
    particle is not one of its own, else it is opened; leaves are summed directly.
    ``tree_potential`` walks the same way for the potential energy of frames.
 
-Everything is float64 and deterministic: the sort is stable, each node's sum has a fixed order, and
-each particle's walk is sequential.  Contacts do not use the tree: ``grid_candidates`` lists each
+The tree is built in float64 and deterministically: the sort is stable, each node's sum has a fixed
+order, and each particle's walk is sequential.  The gravity walk evaluates nodes and pairs in the
+run's precision (``tree_gravity(precision)``: float32 terms by default), the potential walk of
+frames in float64.  Contacts do not use the tree: ``grid_candidates`` lists each
 particle's neighbours that may touch it (searched within R_i + R_max of a ``wp.HashGrid``,
 noted within R_i + R_j), and the contact pass of
 :mod:`.forces` evaluates them with the same pair functions as the all-pairs path.
 """
 
+import functools
+from typing import Any
+
 import warp as wp
+
+from .pair import inverse_sqrt_exact, inverse_sqrt_fast
 
 wp.set_module_options({"enable_backward": False})
 
@@ -46,6 +53,8 @@ class TreeNodes:
     quadrupole: wp.array(dtype=wp.mat33d)  # traceless, about the centre of mass
     low: wp.array(dtype=wp.vec3d)  # box of the centres it holds
     high: wp.array(dtype=wp.vec3d)
+    size: wp.array(dtype=wp.float64)  # the box's longest side
+    offset: wp.array(dtype=wp.float64)  # distance from the box's centre to the centre of mass
 
 
 @wp.kernel
@@ -190,6 +199,8 @@ def leaf_moments(
     nodes.quadrupole[leaf] = wp.mat33d()
     nodes.low[leaf] = x
     nodes.high[leaf] = x
+    nodes.size[leaf] = wp.float64(0.0)
+    nodes.offset[leaf] = wp.float64(0.0)
     done_a[leaf] = 1
     done_b[leaf] = 1
     if k < count - 1:
@@ -236,103 +247,130 @@ def node_moments(
     nodes.quadrupole[i] = shifted_quadrupole(nodes.quadrupole[a], nodes.mass[a], nodes.centre[a] - centre) + shifted_quadrupole(
         nodes.quadrupole[b], nodes.mass[b], nodes.centre[b] - centre
     )
-    nodes.low[i] = wp.min(nodes.low[a], nodes.low[b])
-    nodes.high[i] = wp.max(nodes.high[a], nodes.high[b])
+    low = wp.min(nodes.low[a], nodes.low[b])
+    high = wp.max(nodes.high[a], nodes.high[b])
+    extent = high - low
+    nodes.low[i] = low
+    nodes.high[i] = high
+    # What the walk's opening test needs, once per node rather than once per visit.
+    nodes.size[i] = wp.max(wp.max(extent[0], extent[1]), extent[2])
+    nodes.offset[i] = wp.length(centre - wp.float64(0.5) * (high + low))
     done_after[i] = 1
 
 
 @wp.func
-def multipole_field(r: wp.vec3d, mass: wp.float64, quadrupole: wp.mat33d) -> wp.vec3d:
-    """Acceleration / G at separation r from a node's centre: -M r/r^3 + Q r/r^5 - 5/2 (r.Q r) r/r^7."""
-    d2 = wp.dot(r, r)
-    inv_d = wp.float64(1.0) / wp.sqrt(d2)
+def multipole_field(unit: Any, inv_d: Any, g_mass: Any, g_quadrupole: Any):
+    """Acceleration at distance 1/inv_d along ``unit`` from a node's centre, with G folded into its
+    mass and traceless quadrupole: -GM r^/r^2 + (GQ r^ - 5/2 (r^.GQ r^) r^)/r^4.  Written in unit
+    vectors, each factor stays within float32's range for piles of 1e24 g and more."""
     inv_d2 = inv_d * inv_d
-    inv_d3 = inv_d * inv_d2
-    inv_d5 = inv_d3 * inv_d2
-    qr = quadrupole * r
-    return -mass * inv_d3 * r + inv_d5 * qr - wp.float64(2.5) * wp.dot(r, qr) * inv_d5 * inv_d2 * r
+    q_unit = g_quadrupole * unit
+    return inv_d2 * (-g_mass * unit + inv_d2 * (q_unit - type(inv_d)(2.5) * wp.dot(unit, q_unit) * unit))
 
 
 @wp.func
-def multipole_potential(r: wp.vec3d, mass: wp.float64, quadrupole: wp.mat33d) -> wp.float64:
-    """Potential / G at separation r from a node's centre: -M/r - (r.Q r)/(2 r^5), whose gradient
-    is :func:`multipole_field` (with the opposite sign)."""
-    d2 = wp.dot(r, r)
-    inv_d = wp.float64(1.0) / wp.sqrt(d2)
-    return -mass * inv_d - wp.float64(0.5) * wp.dot(r, quadrupole * r) * inv_d * inv_d * inv_d * inv_d * inv_d
+def multipole_potential(unit: Any, inv_d: Any, g_mass: Any, g_quadrupole: Any):
+    """Potential (per unit mass) at the same point: -GM/r - (r^.GQ r^)/(2 r^3), whose gradient is
+    :func:`multipole_field` (with the opposite sign)."""
+    return -inv_d * (g_mass + type(inv_d)(0.5) * inv_d * inv_d * wp.dot(unit, g_quadrupole * unit))
 
 
-@wp.func
-def tree_walk(
-    k: int,
-    theta_open: wp.float64,
-    position_in: wp.array(dtype=wp.vec3d),
-    order: wp.array(dtype=wp.int32),
-    count: int,
-    nodes: TreeNodes,
-):
-    """Field / G and potential / G at the particle at sorted position k, from every other particle
-    (neighbours in space walk alike); a kernel that uses one of them lets the compiler drop the other."""
-    i = int(order[k])
-    x = position_in[i]
-    field = wp.vec3d()
-    potential = wp.float64(0.0)
-    stack = Stack()
-    top = int(0)
-    if count > 1:
-        stack[0] = wp.int32(0)
-        top = 1
-    while top > 0:
-        top -= 1
-        node = int(stack[top])
-        if node >= count - 1:  # a leaf: one particle, summed directly
-            j = int(order[node - (count - 1)])
-            if j != i:
-                r = x - position_in[j]
-                d2 = wp.dot(r, r)
-                if d2 > wp.float64(0.0):
-                    inv_d = wp.float64(1.0) / wp.sqrt(d2)
-                    field -= nodes.mass[node] * inv_d * inv_d * inv_d * r
-                    potential -= nodes.mass[node] * inv_d
-            continue
-        extent = nodes.high[node] - nodes.low[node]
-        size = wp.max(wp.max(extent[0], extent[1]), extent[2])
-        r = x - nodes.centre[node]
-        # Used whole only beyond size / theta_open plus the offset of its centre of mass from
-        # its box's centre (Barnes & Hut's guard against a lopsided node), never for its own members.
-        offset = wp.length(nodes.centre[node] - wp.float64(0.5) * (nodes.high[node] + nodes.low[node]))
-        reach = size / theta_open + offset
-        own = k >= int(nodes.first[node]) and k <= int(nodes.last[node])
-        if not own and reach * reach < wp.dot(r, r):
-            field += multipole_field(r, nodes.mass[node], nodes.quadrupole[node])
-            potential += multipole_potential(r, nodes.mass[node], nodes.quadrupole[node])
-        else:
-            stack[top] = nodes.child[node, 1]
-            stack[top + 1] = nodes.child[node, 0]
-            top += 2
-    return i, field, potential
+@functools.cache
+def tree_walk_function(precision: str):
+    """The walk in a precision's arithmetic: ``"mixed"`` takes each separation in float64 and
+    evaluates the node or pair in float32 (one rsqrt instruction on a GPU; the float32 error,
+    ~1e-7, is far below the tree's), ``"float64"`` evaluates everything in float64."""
+    real, vec, mat = (wp.float32, wp.vec3f, wp.mat33f) if precision == "mixed" else (wp.float64, wp.vec3d, wp.mat33d)
+    inverse_sqrt = inverse_sqrt_fast if precision == "mixed" else inverse_sqrt_exact
+
+    @wp.func
+    def tree_walk(
+        k: int,
+        G: wp.float64,
+        inv_theta: wp.float64,
+        position_in: wp.array(dtype=wp.vec3d),
+        order: wp.array(dtype=wp.int32),
+        count: int,
+        nodes: TreeNodes,
+    ):
+        """Acceleration and potential (per unit mass) at the particle at sorted position k, from every
+        other particle (neighbours in space walk alike); a kernel that uses one of them lets the
+        compiler drop the other."""
+        i = int(order[k])
+        x = position_in[i]
+        field = vec()
+        potential = real(0.0)
+        stack = Stack()
+        top = int(0)
+        if count > 1:
+            stack[0] = wp.int32(0)
+            top = 1
+        while top > 0:
+            top -= 1
+            node = int(stack[top])
+            if node >= count - 1:  # a leaf: one particle, summed directly
+                j = int(order[node - (count - 1)])
+                if j != i:
+                    r = vec(x - position_in[j])
+                    d2 = wp.dot(r, r)
+                    if d2 > real(0.0):
+                        inv_d = inverse_sqrt(d2)
+                        g_mass = real(G * nodes.mass[node])
+                        field -= (g_mass * inv_d * inv_d) * (r * inv_d)
+                        potential -= g_mass * inv_d
+                continue
+            r = vec(x - nodes.centre[node])
+            d2 = wp.dot(r, r)
+            # Used whole only beyond size / theta_open plus the offset of its centre of mass from
+            # its box's centre (Barnes & Hut's guard against a lopsided node), never for its own members.
+            reach = real(nodes.size[node] * inv_theta + nodes.offset[node])
+            own = k >= int(nodes.first[node]) and k <= int(nodes.last[node])
+            if not own and reach * reach < d2:
+                inv_d = inverse_sqrt(d2)
+                unit = r * inv_d
+                g_mass = real(G * nodes.mass[node])
+                g_quadrupole = mat(G * nodes.quadrupole[node])
+                field += multipole_field(unit, inv_d, g_mass, g_quadrupole)
+                potential += multipole_potential(unit, inv_d, g_mass, g_quadrupole)
+            else:
+                stack[top] = nodes.child[node, 1]
+                stack[top + 1] = nodes.child[node, 0]
+                top += 2
+        return i, wp.vec3d(field), wp.float64(potential)
+
+    return tree_walk
 
 
-@wp.kernel
-def tree_gravity(
-    G: wp.float64,
-    theta_open: wp.float64,
-    position_in: wp.array(dtype=wp.vec3d),
-    mass_in: wp.array(dtype=wp.float64),
-    order: wp.array(dtype=wp.int32),
-    count: int,
-    nodes: TreeNodes,
-    force_out: wp.array(dtype=wp.vec3d),
-):
-    """Gravity on each particle, one thread per sorted position."""
-    i, field, potential = tree_walk(wp.tid(), theta_open, position_in, order, count, nodes)
-    force_out[i] = G * mass_in[i] * field
+@functools.cache
+def tree_gravity(precision: str = "mixed"):
+    """Build the gravity kernel of the tree path in a precision's arithmetic (launch with dim=N)."""
+    tree_walk = tree_walk_function(precision)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def tree_gravity_kernel(
+        G: wp.float64,
+        inv_theta: wp.float64,
+        position_in: wp.array(dtype=wp.vec3d),
+        mass_in: wp.array(dtype=wp.float64),
+        order: wp.array(dtype=wp.int32),
+        count: int,
+        nodes: TreeNodes,
+        force_out: wp.array(dtype=wp.vec3d),
+    ):
+        """Gravity on each particle, one thread per sorted position."""
+        i, field, potential = tree_walk(wp.tid(), G, inv_theta, position_in, order, count, nodes)
+        force_out[i] = mass_in[i] * field
+
+    return tree_gravity_kernel
+
+
+_walk_float64 = tree_walk_function("float64")
 
 
 @wp.kernel
 def tree_potential(
     G: wp.float64,
-    theta_open: wp.float64,
+    inv_theta: wp.float64,
     position_in: wp.array(dtype=wp.vec3d),
     mass_in: wp.array(dtype=wp.float64),
     order: wp.array(dtype=wp.int32),
@@ -341,9 +379,10 @@ def tree_potential(
     potential_out: wp.array(dtype=wp.float64),
 ):
     """Half of each particle's gravitational energy with all others (summed over particles, the
-    potential energy), for frames on the tree path."""
-    i, field, potential = tree_walk(wp.tid(), theta_open, position_in, order, count, nodes)
-    potential_out[i] = wp.float64(0.5) * G * mass_in[i] * potential
+    potential energy), for frames on the tree path: always float64, so that the energy ledger
+    closes to round-off."""
+    i, field, potential = _walk_float64(wp.tid(), G, inv_theta, position_in, order, count, nodes)
+    potential_out[i] = wp.float64(0.5) * mass_in[i] * potential
 
 
 @wp.kernel
