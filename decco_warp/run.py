@@ -26,7 +26,7 @@ from .diagnostics import energy_ledger, energy_scale, ledger_closure, stress_sha
 from .engine import Layout, layout_for
 from .io import BackgroundFrames, FileFormatError, Trajectory, load_pile, pause_point, read_checkpoint, read_frame, write_checkpoint
 from .lock import RunFolderLock
-from .simulation import Simulation
+from .simulation import GRAPH_STEPS, Simulation
 from .stops import StopRequests
 from .stability import MIN_TIME_STEP_MARGIN, CompressionForecast, StabilityReport, check_stability, predict_compression
 from .state import State
@@ -35,6 +35,8 @@ SPEC_FILE = "spec.toml"
 TRAJECTORY_FILE = "trajectory.h5"
 CHECKPOINT_FILE = "checkpoint.h5"
 LOG_FILE = "run.log"
+#: Seconds of stepping between two looks at the stop requests (Ctrl-C, SIGTERM), whatever the pace.
+STOP_LATENCY = 2.0
 BUILTIN_PREFIX = "builtin:"
 
 
@@ -527,7 +529,16 @@ class RunDriver:
         step = self.sim.step_count
         stops = [self.total, _next_multiple(step, self.output_every), _next_multiple(step, self.checkpoint_every)]
         stops += [_next_multiple(step, every) for every, _ in self.observers]
-        return min(min(stops) - step, self.report_every - step % self.report_every)
+        due = min(min(stops) - step, self.report_every - step % self.report_every)
+        return min(due, self._steps_within(STOP_LATENCY))
+
+    def _steps_within(self, seconds: float) -> int:
+        """Whole graph blocks of steps that take about ``seconds`` at this session's pace: a stop
+        asked for (Ctrl-C, SIGTERM) is answered that soon, however far apart the run's reports are."""
+        done = self.sim.step_count - self.first_step
+        if done == 0 or self.stepping <= 0.0:
+            return GRAPH_STEPS
+        return max(GRAPH_STEPS, int(seconds * done / self.stepping) // GRAPH_STEPS * GRAPH_STEPS)
 
     def checkpoint(self, step: int) -> None:
         began = _time.perf_counter()

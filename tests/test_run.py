@@ -296,6 +296,33 @@ def test_signal_stops_cleanly_and_resume_equals_an_uninterrupted_run(signal_numb
     assert_same_run(_frames(straight.run_dir), _frames(tmp_path / "stopped"))
 
 
+def test_a_long_run_answers_a_signal_within_seconds_not_at_its_next_report(tmp_path, monkeypatch):
+    """A 1e6-step run reports every 5 000 steps (minutes at paper scale): a signal is still answered
+    after about STOP_LATENCY seconds of stepping, with a checkpoint at the step reached."""
+    import signal
+
+    from decco_warp import run as runs
+
+    real_pause = runs.pause_point
+    seen = []
+
+    def interrupt(phase, step):
+        seen.append(step)
+        if phase == "step" and len(seen) == 3:
+            signal.raise_signal(signal.SIGINT)
+        real_pause(phase, step)
+
+    monkeypatch.setattr(runs, "STOP_LATENCY", 0.2)
+    monkeypatch.setattr(runs, "pause_point", interrupt)
+    prepared = runs.prepare_start(_spec(tmp_path, "long", steps=1_000_000, output_every=100_000, checkpoint_every=100_000))
+    with pytest.raises(runs.RunStopped) as stopped:
+        runs.execute(prepared)
+    assert stopped.value.step == seen[-1] < 5000  # stopped at the third look, long before the first report
+    chunks = np.diff([0] + seen)
+    assert (chunks % 50 == 0).all() and chunks[0] == 50  # whole graph blocks, the first one alone
+    assert read_checkpoint(tmp_path / "long" / "checkpoint.h5")[0]["step"] == stopped.value.step
+
+
 def test_a_run_written_before_the_deepest_overlap_series_resumes_and_gains_them(tmp_path):
     """Trajectories of decco-warp 0.1 lack deepest_overlap: resume adds the series, with NaN (and -1 -1)
     for the frames written before, so every series keeps one value per frame."""
