@@ -72,7 +72,7 @@ class GravityTree:
         self._launch(
             self._gravity_kernel,
             self.count,
-            [wp.float64(G), wp.float64(1.0 / theta_open), position, mass, self.order, self.count, self.nodes, force_out],
+            [*self._walk_inputs(G, theta_open, position, mass), force_out],
         )
 
     def potential(self, G: float, theta_open: float, position: wp.array, mass: wp.array, potential_out: wp.array) -> None:
@@ -80,8 +80,12 @@ class GravityTree:
         self._launch(
             kernels.tree_potential,
             self.count,
-            [wp.float64(G), wp.float64(1.0 / theta_open), position, mass, self.order, self.count, self.nodes, potential_out],
+            [*self._walk_inputs(G, theta_open, position, mass), potential_out],
         )
+
+    def _walk_inputs(self, G: float, theta_open: float, position: wp.array, mass: wp.array) -> list:
+        """The inputs both walks take, before their output."""
+        return [wp.float64(G), wp.float64(1.0 / theta_open), position, mass, self.order, self.count, self.nodes]
 
     def contact_candidates(self, position, radius, max_radius: float, candidate_count, candidates) -> None:
         """Each particle's contact candidates (neighbours within R_i + R_j, plus a margin), from the hash grid."""
