@@ -186,7 +186,7 @@ def bench_size(
     return BenchRow(
         n=n,
         device=device,
-        layout=(_describe(layout) if gravity == "all-pairs" else f"tree (theta_open {params.theta_open:g}), hash-grid contacts")
+        layout=(layout.describe() if gravity == "all-pairs" else f"tree (theta_open {params.theta_open:g}), hash-grid contacts")
         + (f", {systems} systems together" if systems > 1 else ""),
         force_seconds=force_seconds,
         force_pairs_per_s=pairs / force_seconds,
@@ -198,15 +198,6 @@ def bench_size(
         fraction_of_limit=None if limit is None else (pairs / step_seconds) / limit,
         systems=systems,
         system=system,
-    )
-
-
-def _describe(layout: Layout) -> str:
-    return (
-        f"{layout.block_dim} threads x {layout.particles_per_block} per block, "
-        + ("contacts in their own pass" if layout.contact_pass else f"{layout.contact_slots} slots")
-        + (f", <= {layout.max_registers} registers" if layout.max_registers else "")
-        + (", j a tile ahead" if layout.prefetch else "")
     )
 
 

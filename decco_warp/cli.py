@@ -90,10 +90,7 @@ def info(device: Optional[str] = DeviceOption) -> None:
         typer.echo(f"  {marker} {entry['name']:<8} {entry['description']}")
     layout = choose_layout(10_240, chosen)
     typer.echo(f"would use: {chosen}")
-    typer.echo(
-        f"force kernel layout at N = 10 240: {layout.block_dim} thread(s) per block, "
-        f"{layout.particles_per_block} particle(s) per block, {layout.contact_slots} contact slots"
-    )
+    typer.echo(f"force kernel layout at N = 10 240: {layout.describe()}")
 
 
 # --- progress displays -----------------------------------------------------------------
@@ -369,7 +366,7 @@ def simulate(
     checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Steps between checkpoints."),
     precision: Optional[str] = typer.Option(None, "--precision", help="mixed or float64."),
     layout: Optional[str] = typer.Option(
-        None, "--layout", help="Force kernel layout: auto, split (contacts in their own pass), prefetch or split+prefetch."
+        None, "--layout", help="Force kernel layout: auto, split (contacts in their own pass), prefetch, split+prefetch or newton (each pair once)."
     ),
     out: Optional[str] = typer.Option(None, "--out", help="Parent folder of run folders (default runs/out)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing run folder."),
@@ -476,7 +473,7 @@ def bench(
     budget: float = typer.Option(1.0, "--seconds", help="Seconds of timing per measurement."),
     precision: str = typer.Option("mixed", "--precision", help="mixed or float64."),
     layouts: str = typer.Option(
-        "", "--layouts", help="Also time these layouts, BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]][:split][:prefetch],... (e.g. 128:1,128:4:4:96,128:4:4:0:split,128:4:4:128:prefetch; split: contacts in their own pass; prefetch: j loaded a tile ahead)."
+        "", "--layouts", help="Also time these layouts, BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]][:split][:prefetch][:newton],... (e.g. 128:1,128:4:4:96,128:4:4:0:split,128:4:4:128:prefetch,32:128:newton; split: contacts in their own pass; prefetch: j loaded a tile ahead; newton: each pair once, a warp meeting two tiles of PER_BLOCK)."
     ),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the table as JSON here."),
     gravity: str = typer.Option("all-pairs", "--gravity", help="Gravity solvers to time, side by side: all-pairs, tree or all-pairs,tree."),
@@ -529,15 +526,18 @@ def bench(
         try:
             parts = item.split(":")
             flags = []
-            while parts and parts[-1] in ("split", "prefetch") and parts[-1] not in flags:
+            while parts and parts[-1] in ("split", "prefetch", "newton") and parts[-1] not in flags:
                 flags.append(parts.pop())
             values = [int(v) for v in parts]
             if len(values) not in (2, 3, 4) or (not chosen.startswith("cuda") and values[0] != 1):
                 raise ValueError
-            extra_layouts.append(Layout(*values, contact_pass="split" in flags, prefetch="prefetch" in flags))
+            if "newton" in flags and chosen.startswith("cuda") and values[0] != 32:
+                raise ValueError
+            extra_layouts.append(Layout(*values, contact_pass="split" in flags, prefetch="prefetch" in flags, newton="newton" in flags))
         except ValueError:
             fail(
-                f"--layouts entries must be BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]][:split][:prefetch], BLOCK_DIM 1 on CPU; got {item!r}"
+                "--layouts entries must be BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]][:split][:prefetch] or "
+                f"BLOCK_DIM:TILE[:SLOTS[:MAX_REGISTERS]]:newton (BLOCK_DIM 32, TILE a multiple of it; SLOTS unused), BLOCK_DIM 1 on CPU; got {item!r}"
             )
     limit, how = benchmarks.device_limit_pairs_per_s(chosen)
     d = wp.get_device(chosen)

@@ -59,6 +59,11 @@ class Layout:
     then the contacts one thread per particle (kernels/forces.py).  ``contact_slots`` is unused."""
     prefetch: bool = False
     """Load each tile of j one tile ahead, while the tile before is swept (kernels/forces.py)."""
+    newton: bool = False
+    """Each pair once (Newton's third law, kernels/forces.py ``pair_gravity_newton``): a block is one
+    warp (``block_dim`` 32 on a GPU, 1 on the CPU) meeting two tiles of ``particles_per_block``
+    particles, gravity given to both sides, then the contacts in their own pass as with
+    ``contact_pass``.  ``contact_slots`` and ``prefetch`` are unused."""
 
     def __post_init__(self):
         for name in ("block_dim", "particles_per_block", "contact_slots"):
@@ -67,21 +72,45 @@ class Layout:
                 raise ValueError(f"Layout.{name} must be a positive integer; got {value!r}")
         if not isinstance(self.max_registers, int) or self.max_registers < 0:
             raise ValueError(f"Layout.max_registers must be an integer >= 0; got {self.max_registers!r}")
-        for name in ("contact_pass", "prefetch"):
+        for name in ("contact_pass", "prefetch", "newton"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"Layout.{name} must be true or false; got {getattr(self, name)!r}")
+        if self.newton and (self.particles_per_block % self.block_dim or self.contact_pass or self.prefetch):
+            raise ValueError(
+                "a Newton layout's particles_per_block must be a multiple of its block_dim (each lane keeps "
+                f"as many particles), without contact_pass or prefetch; got {self}"
+            )
 
 
-def choose_layout(n: int, device: str) -> Layout:
-    """The force-kernel layout for ``n`` particles on ``device`` (measured with ``decco-warp bench --layouts``).
+    def describe(self) -> str:
+        """In words, for ``decco-warp bench`` and ``info``."""
+        registers = f", <= {self.max_registers} registers" if self.max_registers else ""
+        if self.newton:
+            return f"each pair once: a warp of {self.block_dim} meets tiles of {self.particles_per_block}" + registers
+        return (
+            f"{self.block_dim} threads x {self.particles_per_block} per block, "
+            + ("contacts in their own pass" if self.contact_pass else f"{self.contact_slots} slots")
+            + registers
+            + (", j a tile ahead" if self.prefetch else "")
+        )
 
-    CUDA (H100, docs/benchmarks.md): 128 threads per block, 4 particles per
-    block sharing each j load; 64 threads below 4096 particles, for more blocks.
-    A thread meets a given particle's few contacts rarely, so 4 slots suffice.
-    Registers capped at 128: the rare float64 contact code spills a little and
-    the sweep keeps its occupancy (+20 % at N = 65 536).
-    CPU: the one thread of a block sees every contact of its particles, up to
-    ~15 in a pile.
+
+#: Systems up to this many particles take the Newton layout's tiles of 64 on CUDA, larger ones
+#: tiles of 128 (half the partials rows: N^2 / 128 vectors, 1.6 GB at 131 072 particles) up to
+#: NEWTON_MAX, past which all-pairs takes the fused layout, which needs no partials.
+NEWTON_SMALL_TILES = 16_384
+NEWTON_MAX = 131_072
+
+
+def fused_layout(n: int, device: str) -> Layout:
+    """The fused layout (one kernel: gravity of every ordered pair and the contacts) for ``n``
+    particles on ``device``.
+
+    CUDA (H100, docs/benchmarks.md): 128 threads per block, 4 particles per block sharing each j
+    load; 64 threads below 4096 particles, for more blocks.  A thread meets a given particle's few
+    contacts rarely, so 4 slots suffice.  Registers capped at 128: the rare float64 contact code
+    spills a little and the sweep keeps its occupancy (+20 % at N = 65 536).
+    CPU: the one thread of a block sees every contact of its particles, up to ~15 in a pile.
     """
     if device.startswith("cuda"):
         per_block = 128 if n >= 4096 else 64
@@ -89,11 +118,35 @@ def choose_layout(n: int, device: str) -> Layout:
     return Layout(block_dim=1, particles_per_block=4, contact_slots=16)
 
 
+def choose_layout(n: int, device: str) -> Layout:
+    """The force-kernel layout for ``n`` particles on ``device`` (measured with ``decco-warp bench --layouts``).
+
+    CUDA (H100, docs/benchmarks.md): each pair once (Newton's third law), a warp meeting two tiles
+    of 64 particles (128 from 16 384 particles, registers capped at 128): 1.7x to 3x the fused
+    layout's full step from 6 250 to 65 536 particles.  Past ``NEWTON_MAX`` particles, and on the
+    CPU (where it gains only ~20 %), the :func:`fused_layout`.
+    """
+    if device.startswith("cuda") and n <= NEWTON_MAX:
+        if n <= NEWTON_SMALL_TILES:
+            return Layout(block_dim=32, particles_per_block=64, newton=True)
+        return Layout(block_dim=32, particles_per_block=128, max_registers=128, newton=True)
+    return fused_layout(n, device)
+
+
 #: ``[run] layout``: the force kernel's layout for a run.  "auto" is :func:`choose_layout`; "split"
-#: puts the contacts in their own pass and "prefetch" loads each tile of j a tile ahead, as
+#: puts the contacts of the fused layout in their own pass, "prefetch" loads each tile of j a tile
+#: ahead and "newton" computes each pair once (the CUDA default up to NEWTON_MAX), as
 #: ``decco-warp bench --layouts ...:split:prefetch`` times them (docs/benchmarks.md).  They change
 #: the order of float operations, so the motion differs from "auto" at round-off only.
-LAYOUT_CHOICES = ("auto", "split", "prefetch", "split+prefetch")
+LAYOUT_CHOICES = ("auto", "split", "prefetch", "split+prefetch", "newton")
+
+
+def newton_layout(n: int, device: str) -> Layout:
+    """The Newton layout (each pair once, kernels/forces.py ``pair_gravity_newton``) for ``n``
+    particles on ``device``: on CUDA as :func:`choose_layout` takes it, on the CPU tiles of 4."""
+    if device.startswith("cuda"):
+        return choose_layout(min(n, NEWTON_MAX), device)
+    return Layout(block_dim=1, particles_per_block=4, newton=True)
 
 
 def layout_for(choice: str, n: int, device: str) -> Layout | None:
@@ -103,7 +156,9 @@ def layout_for(choice: str, n: int, device: str) -> Layout | None:
         raise ValueError(f"layout must be one of {', '.join(LAYOUT_CHOICES)}; got {choice!r}")
     if choice == "auto":
         return None
-    base = choose_layout(n, device)
+    if choice == "newton":
+        return newton_layout(n, device)
+    base = fused_layout(n, device)
     split = "split" in choice
     # The split sweep fits its registers uncapped (79 to 92 on sm_90), as benched.
     return replace(base, contact_pass=split, prefetch="prefetch" in choice, max_registers=0 if split else base.max_registers)
@@ -125,6 +180,25 @@ def tiled_blocks(starts: np.ndarray, ends: np.ndarray, per_block: int) -> np.nda
         for first in range(int(start), int(end), per_block)
     ]
     return np.array(rows, dtype=np.int32).reshape(-1, 4)
+
+
+def newton_tiles(starts: np.ndarray, ends: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """The Newton layout's tile pairs (kernels/forces.py ``TilePair``), each particle's partials rows
+    (first row, how many, its column) and the number of rows.  A system's particles are cut into
+    tiles of ``size``; its tile pairs (a, b), a <= b, each meet once; row a * n + b (after the rows
+    of the systems before) holds what tile a receives from tile b."""
+    tiles, gather, rows = [], [], 0
+    for start, end in zip(starts.tolist(), ends.tolist()):
+        firsts = np.arange(start, end, size)
+        n = len(firsts)
+        a, b = np.triu_indices(n)
+        tile_ends = np.minimum(firsts + size, end)
+        tiles.append(np.stack([firsts[a], tile_ends[a], firsts[b], tile_ends[b], rows + a * n + b, np.where(a < b, rows + b * n + a, -1)], axis=1))
+        index = np.arange(start, end)
+        tile = (index - start) // size
+        gather.append(np.stack([rows + tile * n, np.full_like(index, n), index - firsts[tile]], axis=1))
+        rows += n * n
+    return np.concatenate(tiles).astype(np.int32), np.concatenate(gather).astype(np.int32), rows
 
 
 def contact_model(params: Params) -> ContactModel:
@@ -216,14 +290,29 @@ class Engine:
         # The sweeps' per-i contact bound, in their arithmetic (float32 rounding of the largest
         # radius is no smaller than that of any other radius, so the bound holds).
         self._max_radius = (wp.float32 if precision == "mixed" else wp.float64)(self.max_radius)
-        split = self.tree is not None or tiled and self.layout.contact_pass
+        newton = tiled and self.layout.newton
+        split = self.tree is not None or tiled and (self.layout.contact_pass or newton)
+        if newton:
+            tiles, gather, rows = newton_tiles(starts, ends, self.layout.particles_per_block)
+            self.tiles = wp.array(tiles, dtype=force_kernels.TilePair, device=self.device)
+            self.gather = wp.array(gather, dtype=wp.vec3i, device=self.device)
+            vector = wp.vec3f if precision == "mixed" else wp.vec3d
+            self.partials = wp.zeros((rows, self.layout.particles_per_block), dtype=vector, device=self.device)
         self.candidate_count = wp.zeros(self.count if split else 0, dtype=wp.int32, device=self.device)
         self.candidates = wp.zeros((self.count if split else 0, force_kernels.CANDIDATES), dtype=wp.int32, device=self.device)
         # (Warp's CPU blocks, wp.config.enable_cpu_blocks, run every lane: tests use them to check
         # the GPU layouts' reductions on a CPU.)
-        if tiled and not self.device.startswith("cuda") and self.layout.block_dim != 1 and not wp.config.enable_cpu_blocks:
+        if tiled and not self.device.startswith("cuda") and self.layout.block_dim != 1 and (newton or not wp.config.enable_cpu_blocks):
             raise ValueError("on the CPU a layout's block_dim must be 1 (Warp runs one thread per block)")
+        if newton and self.device.startswith("cuda") and self.layout.block_dim != 32:
+            raise ValueError(f"a Newton layout's block is one warp: block_dim must be 32 on CUDA; got {self.layout.block_dim}")
         if self.tree is not None:
+            self._contact_kernel = force_kernels.contact_pass(params.rolling_friction)
+        elif newton:
+            lanes = self.layout.block_dim
+            self._force_kernel = force_kernels.pair_gravity_newton(self.layout.particles_per_block // lanes, precision, self.layout.max_registers)
+            self._gather_block = lanes  # a warp per particle on a GPU
+            self._gather_kernel = force_kernels.gather_gravity(lanes, precision)
             self._contact_kernel = force_kernels.contact_pass(params.rolling_friction)
         elif split:
             self._force_kernel = force_kernels.pair_gravity_tiled(
@@ -268,6 +357,27 @@ class Engine:
             outputs=[self.body],
             device=self.device,
         )
+        if self.layout.newton:
+            # Each pair once, into per-tile-pair partials; each particle's rows added in a fixed order.
+            self.candidate_count.zero_()
+            wp.launch_tiled(
+                self._force_kernel,
+                dim=[self.tiles.shape[0]],
+                block_dim=self.layout.block_dim,
+                inputs=[self.tiles, self.radius, self.body, self._max_radius],
+                outputs=[self.partials, self.candidate_count, self.candidates],
+                device=self.device,
+            )
+            wp.launch_tiled(
+                self._gather_kernel,
+                dim=[self.count],
+                block_dim=self._gather_block,
+                inputs=[self.gather, self.mass, self.partials],
+                outputs=[self.force],
+                device=self.device,
+            )
+            self._contacts(outputs)
+            return
         tiled = {"dim": [self.blocks.shape[0]], "block_dim": self.layout.block_dim, "device": self.device}
         if not self.layout.contact_pass:
             wp.launch_tiled(self._force_kernel, inputs=[self.model, self.blocks, *state, self.body, self._max_radius], outputs=outputs, **tiled)

@@ -588,6 +588,210 @@ def contact_pass(rolling: str = "couple"):
     return contact_pass_kernel
 
 
+# --- Newton's third law: each pair once ------------------------------------------------------
+
+#: A tile-pair block of the Newton layout: its i tile [i_first, i_end), its j tile [j_first, j_end),
+#: the partials row its i tile's sums go to and the row its j tile's go to (-1 on the diagonal,
+#: where i and j are the same tile and every pair is met from both sides).
+TilePair = wp.types.vector(length=6, dtype=wp.int32)
+
+# One lane's value from lane ``source`` of its warp (a warp is one block of the Newton layout).
+# On the CPU a block has one lane, which holds every value itself.
+_LANE_VALUE = """
+#if defined(__CUDA_ARCH__)
+return __shfl_sync(0xffffffffu, value, source);
+#else
+return value;
+#endif
+"""
+
+
+@wp.func_native(_LANE_VALUE)
+def lane_value_f32(value: wp.float32, source: int) -> wp.float32: ...
+
+
+@wp.func_native(_LANE_VALUE)
+def lane_value_f64(value: wp.float64, source: int) -> wp.float64: ...
+
+
+#: Where an absent particle of a tile (past its system's end) sits: far from everything (d^2 ~ 1e36
+#: stays finite in float32), massless and of no size, so that it adds nothing and notes no contact.
+ABSENT = 1.0e18
+
+
+@wp.func
+def absent_body(like: BodyMixed) -> BodyMixed:
+    a = wp.float32(ABSENT)
+    return BodyMixed(a, a, a, wp.float32(0.0), wp.float32(0.0), wp.float32(0.0), wp.float32(0.0), wp.float32(0.0))
+
+
+@wp.func
+def absent_body(like: BodyDouble) -> BodyDouble:
+    a = wp.float64(ABSENT)
+    return BodyDouble(a, a, a, wp.float64(0.0), wp.float64(0.0))
+
+
+@wp.func
+def body_from_lane(body: BodyMixed, source: int) -> BodyMixed:
+    """The body held by lane ``source``: position and G m (its radius is left out, read when needed)."""
+    return BodyMixed(
+        lane_value_f32(body[0], source), lane_value_f32(body[1], source), lane_value_f32(body[2], source),
+        lane_value_f32(body[3], source), lane_value_f32(body[4], source), lane_value_f32(body[5], source),
+        wp.float32(0.0), lane_value_f32(body[7], source),
+    )  # fmt: skip
+
+
+@wp.func
+def body_from_lane(body: BodyDouble, source: int) -> BodyDouble:
+    return BodyDouble(
+        lane_value_f64(body[0], source), lane_value_f64(body[1], source), lane_value_f64(body[2], source),
+        wp.float64(0.0), lane_value_f64(body[4], source),
+    )  # fmt: skip
+
+
+@wp.func
+def field_from_lane(field: wp.vec3f, source: int) -> wp.vec3f:
+    return wp.vec3f(lane_value_f32(field[0], source), lane_value_f32(field[1], source), lane_value_f32(field[2], source))
+
+
+@wp.func
+def field_from_lane(field: wp.vec3d, source: int) -> wp.vec3d:
+    return wp.vec3d(lane_value_f64(field[0], source), lane_value_f64(field[1], source), lane_value_f64(field[2], source))
+
+
+@wp.func
+def note_candidate(i: int, j: int, candidate_count: wp.array(dtype=wp.int32), candidates: wp.array2d(dtype=wp.int32)):
+    """Append j to i's contact candidates (counted past the list's width: an overflow)."""
+    slot = wp.atomic_add(candidate_count, i, 1)
+    if slot < candidates.shape[1]:
+        candidates[i, slot] = j
+
+
+@functools.cache
+def pair_gravity_newton(particles_per_lane: int, precision: str = "mixed", max_registers: int = 0):
+    """Build the Newton-layout sweep: gravity of each pair computed once and given to both sides,
+    and each pair's contact candidates noted in both particles' lists, as in :func:`pair_gravity_tiled`.
+
+    One block is one warp (``wp.block_dim()`` lanes: 32 on a GPU, 1 on the CPU) and meets two tiles
+    of ``lanes * particles_per_lane`` particles, i and j (``TilePair``).  Each lane keeps its
+    particles of the i tile and, in turn, every lane's particles of the j tile: after each round
+    the j particles and their field sums move one lane on (a register shuffle), so that a lane only
+    ever adds to the sums it holds.  The order of every sum is fixed, so the motion does not depend
+    on scheduling.  The i tile's field sums go to row ``row_i`` of ``partial_out``, the j tile's to
+    ``row_j``; :func:`gather_gravity` adds a particle's rows in a fixed order.
+    """
+    real, vec_real = _real_types(precision)
+    inverse_sqrt = _inverse_sqrt(precision)
+    Body = BODY_TYPES[precision]
+    K = particles_per_lane
+    radius_at, g_mass_at = (6, 7) if precision == "mixed" else (3, 4)
+    candidate = real(CONTACT_CANDIDATE if precision == "mixed" else 1.0)
+    Bodies = wp.types.matrix(shape=(K, Body._length_), dtype=real)
+    Near = wp.types.vector(length=K, dtype=real)
+    Fields = wp.types.matrix(shape=(K, 3), dtype=real)
+
+    @wp.func
+    def tile_body(body_in: wp.array(dtype=Body), index: int, end: int) -> Body:
+        """A particle of a tile, or past its system's end an absent one."""
+        if index < end:
+            return body_in[index]
+        return absent_body(Body())
+
+    @wp.kernel(
+        module="unique",
+        enable_backward=False,
+        module_options={"fast_math": precision == "mixed"},
+        cuda_max_registers=max_registers or None,
+    )
+    def pair_gravity_newton_kernel(
+        # Model:
+        tiles: wp.array(dtype=TilePair),
+        radius_in: wp.array(dtype=wp.float64),
+        # State in:
+        body_in: wp.array(dtype=Body),
+        max_radius: real,  # the largest radius: a per-i bound that spares most pairs the contact test
+        # Out:
+        partial_out: wp.array2d(dtype=vec_real),  # per row, per particle of its tile: a field sum
+        candidate_count: wp.array(dtype=wp.int32),
+        candidates: wp.array2d(dtype=wp.int32),
+    ):
+        block, lane = wp.tid()
+        lanes = wp.block_dim()
+        tile = tiles[block]
+        i_first, i_end, j_first, j_end, row_i, row_j = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5]
+        diagonal = row_j < 0
+        source = (lane + 1) % lanes  # each round a lane takes its neighbour's j particles
+
+        bodies_i = Bodies()
+        bodies_j = Bodies()
+        near = Near()
+        for k in range(wp.static(K)):
+            bodies_i[k] = tile_body(body_in, i_first + k * lanes + lane, i_end)
+            bodies_j[k] = tile_body(body_in, j_first + k * lanes + lane, j_end)
+            near[k] = near_bound(bodies_i[k][radius_at], max_radius, candidate)
+        fields_i = Fields()
+        fields_j = Fields()  # the sums of the j particles this lane holds, moving with them
+
+        for held in range(lanes):  # a round: this lane holds the j particles of lane (lane + held) % lanes
+            for a in range(wp.static(K)):
+                for b in range(wp.static(K)):
+                    r = separation(bodies_i[a], bodies_j[b])
+                    d2 = wp.dot(r, r)
+                    if d2 > real(0.0):  # not the particle itself (on the diagonal), nor two absent ones
+                        inv_d = inverse_sqrt(d2)
+                        inv_d3 = inv_d * inv_d * inv_d
+                        fields_i[a] = fields_i[a] + (bodies_j[b][g_mass_at] * inv_d3) * r
+                        fields_j[b] = fields_j[b] - (bodies_i[a][g_mass_at] * inv_d3) * r
+                        if d2 < near[a]:  # within R_i + R_max: rare
+                            i = i_first + a * lanes + lane
+                            j = j_first + b * lanes + (lane + held) % lanes
+                            if is_candidate(d2, bodies_i[a][radius_at], real(radius_in[j]), candidate):
+                                note_candidate(i, j, candidate_count, candidates)
+                                if not diagonal:  # on the diagonal j meets i from its own side
+                                    note_candidate(j, i, candidate_count, candidates)
+            for b in range(wp.static(K)):
+                bodies_j[b] = body_from_lane(bodies_j[b], source)
+                fields_j[b] = field_from_lane(fields_j[b], source)
+
+        # After a full turn every lane holds its own j particles again.
+        for k in range(wp.static(K)):
+            partial_out[row_i, k * lanes + lane] = fields_i[k]
+            if not diagonal:
+                partial_out[row_j, k * lanes + lane] = fields_j[k]
+
+    return pair_gravity_newton_kernel
+
+
+@functools.cache
+def gather_gravity(block_dim: int, precision: str = "mixed"):
+    """Build the kernel that gives each particle its gravity from the Newton sweep's partials: a
+    block per particle (``block_dim`` lanes: a particle's rows, ~N / tile of them, are too many for
+    one thread to wait on), each lane adding every ``block_dim``-th of its rows in float64, the
+    lanes then reduced in a fixed order; launch with ``wp.launch_tiled(dim=[N])``."""
+    _, vec_real = _real_types(precision)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def gather_gravity_kernel(
+        # Model:
+        gather: wp.array(dtype=wp.vec3i),  # per particle: its first partials row, how many, its column
+        mass_in: wp.array(dtype=wp.float64),
+        # In:
+        partial_in: wp.array2d(dtype=vec_real),
+        # Out:
+        force_out: wp.array(dtype=wp.vec3d),
+    ):
+        i, lane = wp.tid()
+        rows = gather[i]
+        field = wp.vec3d()
+        for r in range(lane, rows[1], wp.block_dim()):
+            field += wp.vec3d(partial_in[rows[0] + r, rows[2]])
+        total = wp.tile_sum(wp.tile(field, preserve_type=True))[0]
+        if lane == 0:
+            force_out[i] = -mass_in[i] * total
+
+    return gather_gravity_kernel
+
+
 @functools.cache
 def pair_forces_reference(precision: str = "mixed", rolling: str = "couple"):
     """Build the one-thread-per-particle kernel of the same physics; launch with ``dim=N``.

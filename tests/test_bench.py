@@ -46,7 +46,7 @@ def test_bench_cli_writes_a_table_with_its_baseline(tmp_path):
     out = tmp_path / "bench.json"
     result = subprocess.run(
         [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", "bench", "--device", "cpu", "--n", "64,100",
-         "--seconds", "0.05", "--steps", "5", "--layouts", "1:2:8", "--ensemble", "3", "--json", str(out)],
+         "--seconds", "0.05", "--steps", "5", "--layouts", "1:2:8,1:4:4:0:newton", "--ensemble", "3", "--json", str(out)],
         capture_output=True,
         text=True,
     )
@@ -55,25 +55,26 @@ def test_bench_cli_writes_a_table_with_its_baseline(tmp_path):
     table = json.loads(out.read_text())
     assert table["device"] == "cpu" and table["limit_pairs_per_s"] is None
     rows = table["rows"]
-    assert [r["n"] for r in rows] == [64, 64, 64, 100, 100, 100]
-    assert [r["systems"] for r in rows] == [1, 1, 3, 1, 1, 3]
+    assert [r["n"] for r in rows] == [64] * 4 + [100] * 4
+    assert [r["systems"] for r in rows] == [1, 1, 1, 3] * 2
     for row in rows:
         assert row["force_pairs_per_s"] > 0 and row["step_pairs_per_s"] > 0
         # An ensemble's pairs/s counts the pairs of all its systems.
         assert np.isclose(row["force_pairs_per_s"], row["systems"] * row["n"] ** 2 / row["force_seconds"])
     assert np.isclose(rows[0]["speedup"], rows[0]["baseline_seconds"] / rows[0]["force_seconds"])
-    assert "2 per block" in rows[1]["layout"]
-    ratio = float(rows[2]["layout"].split(": ")[-1].split("x")[0])
-    assert "3 systems together" in rows[2]["layout"] and ratio == round(rows[2]["step_pairs_per_s"] / rows[0]["step_pairs_per_s"], 2)
+    assert "2 per block" in rows[1]["layout"] and "each pair once" in rows[2]["layout"]
+    ratio = float(rows[3]["layout"].split(": ")[-1].split("x")[0])
+    assert "3 systems together" in rows[3]["layout"] and ratio == round(rows[3]["step_pairs_per_s"] / rows[0]["step_pairs_per_s"], 2)
 
 
 def test_bench_cli_rejects_bad_layouts():
-    result = subprocess.run(
-        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", "bench", "--device", "cpu", "--layouts", "128:4"],
-        capture_output=True,
-        text=True,
-    )
-    assert result.returncode == 2 and "BLOCK_DIM 1 on CPU" in result.stderr
+    for layouts in ("128:4", "1:4:4:0:split:newton"):
+        result = subprocess.run(
+            [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", "bench", "--device", "cpu", "--layouts", layouts],
+            capture_output=True,
+            text=True,
+        )
+        assert result.returncode == 2 and "BLOCK_DIM 1 on CPU" in result.stderr and "newton" in result.stderr
     result = subprocess.run(
         [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", "bench", "--device", "cpu", "--ensemble", "1,x"],
         capture_output=True,

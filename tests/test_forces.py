@@ -64,6 +64,8 @@ LAYOUTS = [
     ("cpu", dw.Layout(block_dim=1, particles_per_block=3, contact_pass=True)),
     ("cpu", dw.Layout(block_dim=1, particles_per_block=3, contact_slots=1, prefetch=True)),
     ("cpu", dw.Layout(block_dim=1, particles_per_block=3, contact_pass=True, prefetch=True)),
+    ("cpu", dw.Layout(block_dim=1, particles_per_block=3, newton=True)),
+    ("cpu", dw.Layout(block_dim=1, particles_per_block=1, newton=True)),
 ] + [
     (device, layout)
     for device in DEVICES
@@ -72,13 +74,14 @@ LAYOUTS = [
         dw.Layout(128, 4, 4), dw.Layout(32, 3, 1), dw.Layout(64, 1, 2),
         dw.Layout(128, 4, contact_pass=True), dw.Layout(32, 3, contact_pass=True),
         dw.Layout(32, 3, 1, prefetch=True), dw.Layout(32, 3, contact_pass=True, prefetch=True),
+        dw.Layout(32, 128, newton=True), dw.Layout(32, 96, newton=True), dw.Layout(32, 32, newton=True),
     )  # fmt: skip
 ]
 
 
 def _layout_id(case):
     device, layout = case
-    contacts = "contact-pass" if layout.contact_pass else f"{layout.contact_slots}slots"
+    contacts = "newton" if layout.newton else "contact-pass" if layout.contact_pass else f"{layout.contact_slots}slots"
     return f"{device}-{layout.block_dim}x{layout.particles_per_block}-{contacts}" + ("-prefetch" if layout.prefetch else "")
 
 
@@ -138,7 +141,7 @@ def test_pair_forces_are_exactly_opposite(device):
         assert np.array_equal(force[0], -force[1])
 
 
-@pytest.mark.parametrize("case", [c for c in LAYOUTS if c[1].contact_pass], ids=_layout_id)
+@pytest.mark.parametrize("case", [c for c in LAYOUTS if c[1].contact_pass or c[1].newton], ids=_layout_id)
 def test_contact_pass_handles_more_candidates_than_its_list_holds(case):
     """A 22.5 km sphere touched by more small ones than the list holds (they overlap each other
     too): the contact pass looks at every j for it; forces still equal the plain loop's, and the
@@ -163,6 +166,39 @@ def test_contact_pass_handles_more_candidates_than_its_list_holds(case):
             np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
 
 
+@pytest.mark.parametrize("precision", ["mixed", "float64"])
+def test_each_pair_once_gives_both_sides_and_repeats_bit_for_bit(precision, device):
+    """The Newton layout meets each pair once and hands its gravity to both particles: the forces
+    equal the plain loop's, several systems stepped together each move as alone, and a step
+    repeated from the same state gives the same bits (its sums have a fixed order)."""
+    from scenes import contact_cluster
+
+    layout = dw.Layout(32, 64, newton=True) if device.startswith("cuda") else dw.Layout(1, 4, newton=True)
+    clouds = [overlapping_cloud(150, seed=21), contact_cluster(97, seed=22)]
+    joined = dw.State.from_arrays(*[np.concatenate([getattr(c, name) for c in clouds])
+                                    for name in ("positions", "velocities", "omegas", "radii", "masses")])  # fmt: skip
+    params = dw.Params()
+    tolerance = 1e-12 if precision == "float64" else 1e-5
+    engine = Engine(joined, params, device, precision, layout=layout, systems=[150, 97])
+    engine.eval_forces()
+    together = engine.read_forces()
+    first = 0
+    for cloud in clouds:
+        want = dw.compute_forces(cloud, params, device=device, precision="float64", force_kernel="reference")
+        for got, expected in zip(together, want):
+            part = got[first : first + cloud.n]
+            assert np.abs(part - expected).max() <= tolerance * np.abs(expected).max()
+        first += cloud.n
+    runs = []
+    for _ in range(2):
+        sim = dw.Simulation(joined, params, device=device, precision=precision, layout=layout, ledger=True,
+                            allow_unstable=True, systems=[150, 97])  # fmt: skip
+        sim.step(5)
+        runs.append((sim.state.positions, sim.state.omegas, sim.work()))
+    for got, want in zip(*runs):
+        np.testing.assert_array_equal(got, want)
+
+
 def _contact_counts(state, margin):
     """Per particle, how many others lie closer than (R_i + R_j) * margin (float64 NumPy)."""
     r = state.positions[:, None, :] - state.positions[None, :, :]
@@ -172,7 +208,7 @@ def _contact_counts(state, margin):
     return (distance < reach).sum(axis=1)
 
 
-@pytest.mark.parametrize("gravity", ["all-pairs", "tree"])
+@pytest.mark.parametrize("gravity", ["all-pairs", "tree", "newton"])
 def test_a_squeezed_pile_notes_its_contacts_and_no_list_overflows(gravity, device):
     """The shipped target pile squeezed by 6 %: overlaps to ~0.25 of a radius, and its large grains
     touch ~30 small ones (a list of 24 overflowed here, and a merged pile stepped 10x slower).
@@ -181,7 +217,9 @@ def test_a_squeezed_pile_notes_its_contacts_and_no_list_overflows(gravity, devic
     centre = pile.positions.mean(axis=0)
     state = dw.State.from_arrays(centre + 0.94 * (pile.positions - centre), pile.velocities, pile.omegas, pile.radii, pile.masses)
     layout = dw.Layout(128, 4, contact_pass=True) if device.startswith("cuda") else dw.Layout(1, 3, contact_pass=True)
-    engine = Engine(state, dw.Params(gravity=gravity), device, layout=layout)
+    if gravity == "newton":  # each pair met once, noted for both particles
+        layout = dw.Layout(32, 128, newton=True) if device.startswith("cuda") else dw.Layout(1, 4, newton=True)
+    engine = Engine(state, dw.Params(gravity="all-pairs" if gravity == "newton" else gravity), device, layout=layout)
     engine.eval_forces()
     noted = engine.candidate_count.numpy()
     contacts = _contact_counts(state, 1.0)

@@ -136,7 +136,9 @@ def test_a_run_in_another_force_layout_keeps_it_through_resume_and_differs_at_ro
 
     assert layout_for("auto", 500, "cpu") is None
     chosen = layout_for("split+prefetch", 500, "cuda:0")
-    assert chosen.contact_pass and chosen.prefetch and chosen.max_registers == 0
+    assert chosen.contact_pass and chosen.prefetch and chosen.max_registers == 0 and not chosen.newton
+    # On CUDA the default is the Newton layout; "newton" names it on the CPU too.
+    assert layout_for("newton", 500, "cpu").newton and layout_for("newton", 500, "cuda:0").newton
     straight = start_run(_spec(tmp_path, "straight", layout="split+prefetch"))
     start_run(_spec(tmp_path, "parts", layout="split+prefetch", steps=300))
     resume_run(tmp_path / "parts", steps=600)
