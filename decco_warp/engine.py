@@ -23,6 +23,7 @@ from .params import Params
 from .state import State
 
 PRECISIONS = force_kernels.PRECISIONS
+NEWTON_TILE_MAX = force_kernels.NEWTON_TILE_MAX
 FORCE_KERNELS = ("tiled", "reference")
 
 #: Per-particle outputs of kernels/observables.py, in the kernel's order.
@@ -36,6 +37,9 @@ PAIR_OBSERVABLES = {
 }
 #: Threads per particle of the observables kernel on a GPU.
 OBSERVABLES_BLOCK = 128
+#: Lanes per particle of the contact pass on a GPU (one on the CPU): its candidates, at most
+#: force_kernels.CANDIDATES, two a lane.
+CONTACT_BLOCK = 32
 
 
 @dataclass(frozen=True)
@@ -75,10 +79,12 @@ class Layout:
         for name in ("contact_pass", "prefetch", "newton"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"Layout.{name} must be true or false; got {getattr(self, name)!r}")
-        if self.newton and (self.particles_per_block % self.block_dim or self.contact_pass or self.prefetch):
+        if self.newton and (
+            self.particles_per_block % self.block_dim or self.particles_per_block > NEWTON_TILE_MAX or self.contact_pass or self.prefetch
+        ):
             raise ValueError(
                 "a Newton layout's particles_per_block must be a multiple of its block_dim (each lane keeps "
-                f"as many particles), without contact_pass or prefetch; got {self}"
+                f"as many particles) and at most {NEWTON_TILE_MAX}, without contact_pass or prefetch; got {self}"
             )
 
 
@@ -95,11 +101,10 @@ class Layout:
         )
 
 
-#: Systems up to this many particles take the Newton layout's tiles of 64 on CUDA, larger ones
-#: tiles of 128 (half the partials rows: N^2 / 128 vectors, 1.6 GB at 131 072 particles) up to
-#: NEWTON_MAX, past which all-pairs takes the fused layout, which needs no partials.
-NEWTON_SMALL_TILES = 16_384
-NEWTON_MAX = 131_072
+#: Systems up to this many particles take the Newton layout on CUDA, which keeps a field sum and
+#: a candidate word per particle and tile of 64 (N^2 / 64 x 20 bytes: 1.3 GB at 65 536 particles);
+#: past it all-pairs takes the fused layout, which keeps nothing.
+NEWTON_MAX = 65_536
 
 
 def fused_layout(n: int, device: str) -> Layout:
@@ -122,14 +127,11 @@ def choose_layout(n: int, device: str) -> Layout:
     """The force-kernel layout for ``n`` particles on ``device`` (measured with ``decco-warp bench --layouts``).
 
     CUDA (H100, docs/benchmarks.md): each pair once (Newton's third law), a warp meeting two tiles
-    of 64 particles (128 from 16 384 particles, registers capped at 128): 1.7x to 3x the fused
-    layout's full step from 6 250 to 65 536 particles.  Past ``NEWTON_MAX`` particles, and on the
-    CPU (where it gains only ~20 %), the :func:`fused_layout`.
+    of 64 particles: 1.7x to 3x the fused layout's full step from 6 250 to 65 536 particles.  Past
+    ``NEWTON_MAX`` particles, and on the CPU (where it gains only ~20 %), the :func:`fused_layout`.
     """
     if device.startswith("cuda") and n <= NEWTON_MAX:
-        if n <= NEWTON_SMALL_TILES:
-            return Layout(block_dim=32, particles_per_block=64, newton=True)
-        return Layout(block_dim=32, particles_per_block=128, max_registers=128, newton=True)
+        return Layout(block_dim=32, particles_per_block=NEWTON_TILE_MAX, newton=True)
     return fused_layout(n, device)
 
 
@@ -183,22 +185,20 @@ def tiled_blocks(starts: np.ndarray, ends: np.ndarray, per_block: int) -> np.nda
 
 
 def newton_tiles(starts: np.ndarray, ends: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """The Newton layout's tile pairs (kernels/forces.py ``TilePair``), each particle's partials rows
-    (first row, how many, its column) and the number of rows.  A system's particles are cut into
-    tiles of ``size``; its tile pairs (a, b), a <= b, each meet once; row a * n + b (after the rows
-    of the systems before) holds what tile a receives from tile b."""
-    tiles, gather, rows = [], [], 0
+    """The Newton layout's tile pairs (kernels/forces.py ``TilePair``), each particle's gather entry
+    (its system's number of tiles, its system's first particle, the tile size) and the most tiles of a
+    system.  A system's particles are cut into tiles of ``size``; its tile pairs (a, b), a <= b, each
+    meet once."""
+    tiles, gather, most = [], [], 0
     for start, end in zip(starts.tolist(), ends.tolist()):
         firsts = np.arange(start, end, size)
         n = len(firsts)
         a, b = np.triu_indices(n)
         tile_ends = np.minimum(firsts + size, end)
-        tiles.append(np.stack([firsts[a], tile_ends[a], firsts[b], tile_ends[b], rows + a * n + b, np.where(a < b, rows + b * n + a, -1)], axis=1))
-        index = np.arange(start, end)
-        tile = (index - start) // size
-        gather.append(np.stack([rows + tile * n, np.full_like(index, n), index - firsts[tile]], axis=1))
-        rows += n * n
-    return np.concatenate(tiles).astype(np.int32), np.concatenate(gather).astype(np.int32), rows
+        tiles.append(np.stack([firsts[a], tile_ends[a], firsts[b], tile_ends[b], a, b], axis=1))
+        gather.append(np.tile([n, start, size], (end - start, 1)))
+        most = max(most, n)
+    return np.concatenate(tiles).astype(np.int32), np.concatenate(gather).astype(np.int32), most
 
 
 def contact_model(params: Params) -> ContactModel:
@@ -293,11 +293,13 @@ class Engine:
         newton = tiled and self.layout.newton
         split = self.tree is not None or tiled and (self.layout.contact_pass or newton)
         if newton:
-            tiles, gather, rows = newton_tiles(starts, ends, self.layout.particles_per_block)
+            # Per particle and per tile of its system: the sweep's field sum and candidate bits.
+            tiles, gather, most = newton_tiles(starts, ends, self.layout.particles_per_block)
             self.tiles = wp.array(tiles, dtype=force_kernels.TilePair, device=self.device)
             self.gather = wp.array(gather, dtype=wp.vec3i, device=self.device)
             vector = wp.vec3f if precision == "mixed" else wp.vec3d
-            self.partials = wp.zeros((rows, self.layout.particles_per_block), dtype=vector, device=self.device)
+            self.tile_field = wp.zeros((self.count, most), dtype=vector, device=self.device)
+            self.tile_near = wp.zeros((self.count, most), dtype=wp.uint64, device=self.device)
         self.candidate_count = wp.zeros(self.count if split else 0, dtype=wp.int32, device=self.device)
         self.candidates = wp.zeros((self.count if split else 0, force_kernels.CANDIDATES), dtype=wp.int32, device=self.device)
         # (Warp's CPU blocks, wp.config.enable_cpu_blocks, run every lane: tests use them to check
@@ -306,19 +308,21 @@ class Engine:
             raise ValueError("on the CPU a layout's block_dim must be 1 (Warp runs one thread per block)")
         if newton and self.device.startswith("cuda") and self.layout.block_dim != 32:
             raise ValueError(f"a Newton layout's block is one warp: block_dim must be 32 on CUDA; got {self.layout.block_dim}")
+        # (With Warp's CPU blocks on, the CPU runs the GPU's lanes: tests check the rank sums so.)
+        self._contact_block = CONTACT_BLOCK if self.device.startswith("cuda") or wp.config.enable_cpu_blocks else 1
         if self.tree is not None:
-            self._contact_kernel = force_kernels.contact_pass(params.rolling_friction)
+            self._contact_kernel = force_kernels.contact_pass(params.rolling_friction, self._contact_block)
         elif newton:
             lanes = self.layout.block_dim
             self._force_kernel = force_kernels.pair_gravity_newton(self.layout.particles_per_block // lanes, precision, self.layout.max_registers)
             self._gather_block = lanes  # a warp per particle on a GPU
-            self._gather_kernel = force_kernels.gather_gravity(lanes, precision)
-            self._contact_kernel = force_kernels.contact_pass(params.rolling_friction)
+            self._gather_kernel = force_kernels.gather_newton(lanes, precision)
+            self._contact_kernel = force_kernels.contact_pass(params.rolling_friction, self._contact_block)
         elif split:
             self._force_kernel = force_kernels.pair_gravity_tiled(
                 self.layout.block_dim, self.layout.particles_per_block, precision, self.layout.max_registers, self.layout.prefetch
             )
-            self._contact_kernel = force_kernels.contact_pass(params.rolling_friction)
+            self._contact_kernel = force_kernels.contact_pass(params.rolling_friction, self._contact_block)
         elif tiled:
             self._force_kernel = force_kernels.pair_forces_tiled(
                 self.layout.block_dim,
@@ -358,22 +362,21 @@ class Engine:
             device=self.device,
         )
         if self.layout.newton:
-            # Each pair once, into per-tile-pair partials; each particle's rows added in a fixed order.
-            self.candidate_count.zero_()
+            # Each pair once, per particle and tile; then each particle's gravity and sorted candidates.
             wp.launch_tiled(
                 self._force_kernel,
                 dim=[self.tiles.shape[0]],
                 block_dim=self.layout.block_dim,
-                inputs=[self.tiles, self.radius, self.body, self._max_radius],
-                outputs=[self.partials, self.candidate_count, self.candidates],
+                inputs=[self.tiles, self.body, self._max_radius],
+                outputs=[self.tile_field, self.tile_near],
                 device=self.device,
             )
             wp.launch_tiled(
                 self._gather_kernel,
                 dim=[self.count],
                 block_dim=self._gather_block,
-                inputs=[self.gather, self.mass, self.partials],
-                outputs=[self.force],
+                inputs=[self.gather, self.mass, self.tile_field, self.tile_near],
+                outputs=[self.force, self.candidate_count, self.candidates],
                 device=self.device,
             )
             self._contacts(outputs)
@@ -402,9 +405,10 @@ class Engine:
 
     def _contacts(self, outputs: list) -> None:
         """The contact pass over the candidates noted by the sweep or the hash grid."""
-        wp.launch(
+        wp.launch_tiled(
             self._contact_kernel,
-            dim=self.count,
+            dim=[self.count],
+            block_dim=self._contact_block,
             inputs=[self.model, self.ranges, self.radius, self.position, self.velocity, self.omega, self.candidate_count, self.candidates],
             outputs=outputs,
             device=self.device,

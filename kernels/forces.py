@@ -551,11 +551,35 @@ def pair_gravity_tiled(block_dim: int, particles_per_block: int, precision: str 
     return pair_gravity_tiled_kernel
 
 
+#: A contact's channels on i, one per row: spring force, sliding force, sliding torque, rolling
+#: force, rolling torque (the order of :func:`contact_function`'s results).
+ContactRows = wp.types.matrix(shape=(5, 3), dtype=wp.float64)
+
+
+@wp.func
+def contact_sum_of(rows: ContactRows) -> ContactSum:
+    total = ContactSum()
+    total.spring = rows[0]
+    total.sliding = rows[1]
+    total.sliding_torque = rows[2]
+    total.rolling = rows[3]
+    total.rolling_torque = rows[4]
+    return total
+
+
 @functools.cache
-def contact_pass(rolling: str = "couple"):
-    """Build the second launch of the split layout, one thread per particle: its noted candidates
-    sorted by j, each evaluated in float64 and added to ``force_inout``; ``torque_out`` and the
-    ledger's ``channels_out`` (when it has rows) are written whole."""
+def contact_pass(rolling: str = "couple", block_dim: int = 1):
+    """Build the contact pass over the candidates noted by a sweep (split and Newton layouts) or the
+    tree path's hash grid: a block of ``block_dim`` lanes per particle (32 on a GPU, 1 on the CPU;
+    launch with ``wp.launch_tiled(dim=[N])``), each lane evaluating some of its candidates in float64.
+
+    Every contact is put at its rank among the particle's candidates by j and the ranks are added
+    in a fixed order, so that the sum does not depend on the order the candidates were noted in nor
+    on the lanes (on the CPU: in increasing j).  After an overflow of the list, lane 0 looks at every j
+    of the system in turn.  Writes ``torque_out`` and the ledger's ``channels_out`` (when it has rows)
+    whole and adds the contact force to ``force_inout``.
+    """
+    contact_channels = contact_function(rolling)
     add_contact = contact_sum_function(rolling)
 
     @wp.kernel(module="unique", enable_backward=False)
@@ -576,14 +600,32 @@ def contact_pass(rolling: str = "couple"):
         channels_out: wp.array2d(dtype=wp.vec3d),
         deepest_out: wp.array(dtype=wp.int64),
     ):
-        i = wp.tid()
-        listed, walk = candidates_walk(i, ranges, candidate_count, candidates)
-        total = ContactSum()
-        j = ranges[i][0] - 1
-        for _ in range(walk):  # the list, or every j after an overflow (each pair checked in float64)
-            j = next_candidate(i, listed, candidates, walk, j)
-            total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out, total)
-        force_inout[i] = force_inout[i] + write_contacts(total, i, torque_out, channels_out)
+        i, lane = wp.tid()
+        noted = candidate_count[i]
+        listed = noted <= candidates.shape[1]
+        by_rank = wp.tile_zeros(shape=wp.static(CANDIDATES), dtype=ContactRows, storage="shared")
+        # Every lane takes the same number of slots (the tile's writes are block-wide steps); a
+        # slot past the noted ones writes zeros at its own index, above every rank.
+        for slot in range(lane, wp.static(CANDIDATES), wp.block_dim()):
+            rows = ContactRows()
+            rank = slot
+            if listed and slot < noted:
+                j = candidates[i, slot]
+                rank = int(0)
+                for k in range(noted):
+                    if candidates[i, k] < j:
+                        rank += 1
+                spring, sliding, sliding_torque, rolling_force, rolling_torque = contact_channels(
+                    model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out
+                )
+                rows = wp.matrix_from_rows(spring, sliding, sliding_torque, rolling_force, rolling_torque)
+            by_rank[rank] = rows
+        total = contact_sum_of(wp.tile_sum(by_rank)[0])
+        if lane == 0:
+            if not listed:  # every j of the system, each checked in float64
+                for j in range(ranges[i][0], ranges[i][1]):
+                    total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out, total)
+            force_inout[i] = force_inout[i] + write_contacts(total, i, torque_out, channels_out)
 
     return contact_pass_kernel
 
@@ -591,9 +633,13 @@ def contact_pass(rolling: str = "couple"):
 # --- Newton's third law: each pair once ------------------------------------------------------
 
 #: A tile-pair block of the Newton layout: its i tile [i_first, i_end), its j tile [j_first, j_end),
-#: the partials row its i tile's sums go to and the row its j tile's go to (-1 on the diagonal,
-#: where i and j are the same tile and every pair is met from both sides).
+#: and their tiles' indices a <= b within their system (a == b: the diagonal, where i and j are the
+#: same tile and every pair is met from both sides).
 TilePair = wp.types.vector(length=6, dtype=wp.int32)
+
+#: The Newton layout's tiles hold at most this many particles: a particle's contact candidates in
+#: another tile are the bits of one 64-bit word.
+NEWTON_TILE_MAX = 64
 
 # One lane's value from lane ``source`` of its warp (a warp is one block of the Newton layout).
 # On the CPU a block has one lane, which holds every value itself.
@@ -614,8 +660,44 @@ def lane_value_f32(value: wp.float32, source: int) -> wp.float32: ...
 def lane_value_f64(value: wp.float64, source: int) -> wp.float64: ...
 
 
+@wp.func_native(
+    """
+#if defined(__CUDA_ARCH__)
+return __shfl_sync(0xffffffffu, (unsigned long long)value, source);
+#else
+return value;
+#endif
+"""
+)
+def lane_value_u64(value: wp.uint64, source: int) -> wp.uint64: ...
+
+
+@wp.func_native(
+    """
+#if defined(__CUDA_ARCH__)
+return __popcll(bits);
+#else
+return __builtin_popcountll(bits);
+#endif
+"""
+)
+def bit_count(bits: wp.uint64) -> wp.int32: ...
+
+
+@wp.func_native(
+    """
+#if defined(__CUDA_ARCH__)
+return __ffsll((long long)bits) - 1;
+#else
+return __builtin_ctzll(bits);
+#endif
+"""
+)
+def lowest_bit(bits: wp.uint64) -> wp.int32: ...
+
+
 #: Where an absent particle of a tile (past its system's end) sits: far from everything (d^2 ~ 1e36
-#: stays finite in float32), massless and of no size, so that it adds nothing and notes no contact.
+#: stays finite in float32), massless and of no size, so that it adds nothing and is near nothing.
 ABSENT = 1.0e18
 
 
@@ -633,11 +715,11 @@ def absent_body(like: BodyDouble) -> BodyDouble:
 
 @wp.func
 def body_from_lane(body: BodyMixed, source: int) -> BodyMixed:
-    """The body held by lane ``source``: position and G m (its radius is left out, read when needed)."""
+    """The body held by lane ``source``."""
     return BodyMixed(
         lane_value_f32(body[0], source), lane_value_f32(body[1], source), lane_value_f32(body[2], source),
         lane_value_f32(body[3], source), lane_value_f32(body[4], source), lane_value_f32(body[5], source),
-        wp.float32(0.0), lane_value_f32(body[7], source),
+        lane_value_f32(body[6], source), lane_value_f32(body[7], source),
     )  # fmt: skip
 
 
@@ -645,7 +727,7 @@ def body_from_lane(body: BodyMixed, source: int) -> BodyMixed:
 def body_from_lane(body: BodyDouble, source: int) -> BodyDouble:
     return BodyDouble(
         lane_value_f64(body[0], source), lane_value_f64(body[1], source), lane_value_f64(body[2], source),
-        wp.float64(0.0), lane_value_f64(body[4], source),
+        lane_value_f64(body[3], source), lane_value_f64(body[4], source),
     )  # fmt: skip
 
 
@@ -659,26 +741,20 @@ def field_from_lane(field: wp.vec3d, source: int) -> wp.vec3d:
     return wp.vec3d(lane_value_f64(field[0], source), lane_value_f64(field[1], source), lane_value_f64(field[2], source))
 
 
-@wp.func
-def note_candidate(i: int, j: int, candidate_count: wp.array(dtype=wp.int32), candidates: wp.array2d(dtype=wp.int32)):
-    """Append j to i's contact candidates (counted past the list's width: an overflow)."""
-    slot = wp.atomic_add(candidate_count, i, 1)
-    if slot < candidates.shape[1]:
-        candidates[i, slot] = j
-
-
 @functools.cache
 def pair_gravity_newton(particles_per_lane: int, precision: str = "mixed", max_registers: int = 0):
     """Build the Newton-layout sweep: gravity of each pair computed once and given to both sides,
-    and each pair's contact candidates noted in both particles' lists, as in :func:`pair_gravity_tiled`.
+    and each pair's contact candidacy noted for both.
 
     One block is one warp (``wp.block_dim()`` lanes: 32 on a GPU, 1 on the CPU) and meets two tiles
-    of ``lanes * particles_per_lane`` particles, i and j (``TilePair``).  Each lane keeps its
-    particles of the i tile and, in turn, every lane's particles of the j tile: after each round
-    the j particles and their field sums move one lane on (a register shuffle), so that a lane only
-    ever adds to the sums it holds.  The order of every sum is fixed, so the motion does not depend
-    on scheduling.  The i tile's field sums go to row ``row_i`` of ``partial_out``, the j tile's to
-    ``row_j``; :func:`gather_gravity` adds a particle's rows in a fixed order.
+    of ``lanes * particles_per_lane`` particles (at most NEWTON_TILE_MAX), i and j (``TilePair``).
+    Each lane keeps its particles of the i tile and, in turn, every lane's particles of the j tile:
+    after each round the j particles and their sums move one lane on (a register shuffle), so that
+    a lane only ever adds to what it holds and every sum has a fixed order (the motion does not
+    depend on scheduling).  Per particle and per tile of the other side, the sweep writes its field
+    sum to ``field_out[particle, tile]`` and its contact candidates in that tile as the bits of
+    ``near_out[particle, tile]``: no atomics, no waits in the hot loop.  :func:`gather_newton`
+    adds them up.
     """
     real, vec_real = _real_types(precision)
     inverse_sqrt = _inverse_sqrt(precision)
@@ -689,6 +765,7 @@ def pair_gravity_newton(particles_per_lane: int, precision: str = "mixed", max_r
     Bodies = wp.types.matrix(shape=(K, Body._length_), dtype=real)
     Near = wp.types.vector(length=K, dtype=real)
     Fields = wp.types.matrix(shape=(K, 3), dtype=real)
+    Bits = wp.types.vector(length=K, dtype=wp.uint64)
 
     @wp.func
     def tile_body(body_in: wp.array(dtype=Body), index: int, end: int) -> Body:
@@ -706,20 +783,17 @@ def pair_gravity_newton(particles_per_lane: int, precision: str = "mixed", max_r
     def pair_gravity_newton_kernel(
         # Model:
         tiles: wp.array(dtype=TilePair),
-        radius_in: wp.array(dtype=wp.float64),
         # State in:
         body_in: wp.array(dtype=Body),
         max_radius: real,  # the largest radius: a per-i bound that spares most pairs the contact test
         # Out:
-        partial_out: wp.array2d(dtype=vec_real),  # per row, per particle of its tile: a field sum
-        candidate_count: wp.array(dtype=wp.int32),
-        candidates: wp.array2d(dtype=wp.int32),
+        field_out: wp.array2d(dtype=vec_real),  # [particle, tile of the other side]: G m_j r_ij / d^3 summed
+        near_out: wp.array2d(dtype=wp.uint64),  # [particle, tile of the other side]: bit k, its k-th particle is a candidate
     ):
         block, lane = wp.tid()
         lanes = wp.block_dim()
         tile = tiles[block]
-        i_first, i_end, j_first, j_end, row_i, row_j = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5]
-        diagonal = row_j < 0
+        i_first, i_end, j_first, j_end, tile_i, tile_j = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5]
         source = (lane + 1) % lanes  # each round a lane takes its neighbour's j particles
 
         bodies_i = Bodies()
@@ -731,6 +805,8 @@ def pair_gravity_newton(particles_per_lane: int, precision: str = "mixed", max_r
             near[k] = near_bound(bodies_i[k][radius_at], max_radius, candidate)
         fields_i = Fields()
         fields_j = Fields()  # the sums of the j particles this lane holds, moving with them
+        near_i = Bits()
+        near_j = Bits()  # likewise
 
         for held in range(lanes):  # a round: this lane holds the j particles of lane (lane + held) % lanes
             for a in range(wp.static(K)):
@@ -743,53 +819,78 @@ def pair_gravity_newton(particles_per_lane: int, precision: str = "mixed", max_r
                         fields_i[a] = fields_i[a] + (bodies_j[b][g_mass_at] * inv_d3) * r
                         fields_j[b] = fields_j[b] - (bodies_i[a][g_mass_at] * inv_d3) * r
                         if d2 < near[a]:  # within R_i + R_max: rare
-                            i = i_first + a * lanes + lane
-                            j = j_first + b * lanes + (lane + held) % lanes
-                            if is_candidate(d2, bodies_i[a][radius_at], real(radius_in[j]), candidate):
-                                note_candidate(i, j, candidate_count, candidates)
-                                if not diagonal:  # on the diagonal j meets i from its own side
-                                    note_candidate(j, i, candidate_count, candidates)
+                            if is_candidate(d2, bodies_i[a][radius_at], bodies_j[b][radius_at], candidate):
+                                near_i[a] = near_i[a] | (wp.uint64(1) << wp.uint64(b * lanes + (lane + held) % lanes))
+                                near_j[b] = near_j[b] | (wp.uint64(1) << wp.uint64(a * lanes + lane))
             for b in range(wp.static(K)):
                 bodies_j[b] = body_from_lane(bodies_j[b], source)
                 fields_j[b] = field_from_lane(fields_j[b], source)
+                near_j[b] = lane_value_u64(near_j[b], source)
 
-        # After a full turn every lane holds its own j particles again.
+        # After a full turn every lane holds its own j particles again.  On the diagonal the i side
+        # has met every pair from both ends.
         for k in range(wp.static(K)):
-            partial_out[row_i, k * lanes + lane] = fields_i[k]
-            if not diagonal:
-                partial_out[row_j, k * lanes + lane] = fields_j[k]
+            i = i_first + k * lanes + lane
+            if i < i_end:
+                field_out[i, tile_j] = fields_i[k]
+                near_out[i, tile_j] = near_i[k]
+            j = j_first + k * lanes + lane
+            if tile_i != tile_j and j < j_end:
+                field_out[j, tile_i] = fields_j[k]
+                near_out[j, tile_i] = near_j[k]
 
     return pair_gravity_newton_kernel
 
 
 @functools.cache
-def gather_gravity(block_dim: int, precision: str = "mixed"):
-    """Build the kernel that gives each particle its gravity from the Newton sweep's partials: a
-    block per particle (``block_dim`` lanes: a particle's rows, ~N / tile of them, are too many for
-    one thread to wait on), each lane adding every ``block_dim``-th of its rows in float64, the
-    lanes then reduced in a fixed order; launch with ``wp.launch_tiled(dim=[N])``."""
+def gather_newton(block_dim: int, precision: str = "mixed"):
+    """Build the kernel that gives each particle what the Newton sweep found for it: its gravity (its
+    field sums from every tile, added in float64 in a fixed order) and its contact candidates, listed
+    in increasing j (from the bits per tile), with their count.  A block of ``block_dim`` lanes per
+    particle (a particle has ~N / 64 tiles to read: too many for one thread to wait on), the lanes
+    taking the tiles in turn; launch with ``wp.launch_tiled(dim=[N])``."""
     _, vec_real = _real_types(precision)
 
     @wp.kernel(module="unique", enable_backward=False)
-    def gather_gravity_kernel(
+    def gather_newton_kernel(
         # Model:
-        gather: wp.array(dtype=wp.vec3i),  # per particle: its first partials row, how many, its column
+        gather: wp.array(dtype=wp.vec3i),  # per particle: its system's tiles, its system's first particle, the tile size
         mass_in: wp.array(dtype=wp.float64),
         # In:
-        partial_in: wp.array2d(dtype=vec_real),
+        field_in: wp.array2d(dtype=vec_real),
+        near_in: wp.array2d(dtype=wp.uint64),
         # Out:
         force_out: wp.array(dtype=wp.vec3d),
+        candidate_count: wp.array(dtype=wp.int32),
+        candidates: wp.array2d(dtype=wp.int32),
     ):
         i, lane = wp.tid()
-        rows = gather[i]
+        lanes = wp.block_dim()
+        info = gather[i]
+        tiles, first, size = info[0], info[1], info[2]
         field = wp.vec3d()
-        for r in range(lane, rows[1], wp.block_dim()):
-            field += wp.vec3d(partial_in[rows[0] + r, rows[2]])
+        noted = int(0)
+        for start in range(0, tiles, lanes):  # a round: lane takes tile start + lane
+            t = start + lane
+            bits = wp.uint64(0)
+            if t < tiles:
+                field += wp.vec3d(field_in[i, t])
+                bits = near_in[i, t]
+            # Each lane's candidates go after those of the lanes (tiles) before it: increasing j.
+            count = bit_count(bits)
+            slot = noted + wp.untile(wp.tile_scan_exclusive(wp.tile(count)))
+            while bits != wp.uint64(0):
+                if slot < candidates.shape[1]:
+                    candidates[i, slot] = first + t * size + lowest_bit(bits)
+                bits = bits & (bits - wp.uint64(1))
+                slot += 1
+            noted += wp.tile_sum(wp.tile(count))[0]
         total = wp.tile_sum(wp.tile(field, preserve_type=True))[0]
         if lane == 0:
             force_out[i] = -mass_in[i] * total
+            candidate_count[i] = noted
 
-    return gather_gravity_kernel
+    return gather_newton_kernel
 
 
 @functools.cache
