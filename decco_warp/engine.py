@@ -185,20 +185,22 @@ def tiled_blocks(starts: np.ndarray, ends: np.ndarray, per_block: int) -> np.nda
 
 
 def newton_tiles(starts: np.ndarray, ends: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """The Newton layout's tile pairs (kernels/forces.py ``TilePair``), each particle's gather entry
-    (its system's number of tiles, its system's first particle, the tile size) and the most tiles of a
-    system.  A system's particles are cut into tiles of ``size``; its tile pairs (a, b), a <= b, each
-    meet once."""
-    tiles, gather, most = [], [], 0
+    """The Newton layout's tile pairs (kernels/forces.py ``TilePair``), each particle's rows
+    (``GatherRows``) and the number of rows.  A system's particles are cut into tiles of ``size``;
+    its tile pairs (a, b), a <= b, each meet once; row a * n + b (after the rows of the systems
+    before) holds what tile a gets from tile b."""
+    tiles, gather, rows = [], [], 0
     for start, end in zip(starts.tolist(), ends.tolist()):
         firsts = np.arange(start, end, size)
         n = len(firsts)
         a, b = np.triu_indices(n)
         tile_ends = np.minimum(firsts + size, end)
-        tiles.append(np.stack([firsts[a], tile_ends[a], firsts[b], tile_ends[b], a, b], axis=1))
-        gather.append(np.tile([n, start, size], (end - start, 1)))
-        most = max(most, n)
-    return np.concatenate(tiles).astype(np.int32), np.concatenate(gather).astype(np.int32), most
+        tiles.append(np.stack([firsts[a], tile_ends[a], firsts[b], tile_ends[b], rows + a * n + b, np.where(a < b, rows + b * n + a, -1)], axis=1))
+        index = np.arange(start, end)
+        tile = (index - start) // size
+        gather.append(np.stack([rows + tile * n, np.full_like(index, n), index - firsts[tile], np.full_like(index, start)], axis=1))
+        rows += n * n
+    return np.concatenate(tiles).astype(np.int32), np.concatenate(gather).astype(np.int32), rows
 
 
 def contact_model(params: Params) -> ContactModel:
@@ -293,13 +295,13 @@ class Engine:
         newton = tiled and self.layout.newton
         split = self.tree is not None or tiled and (self.layout.contact_pass or newton)
         if newton:
-            # Per particle and per tile of its system: the sweep's field sum and candidate bits.
-            tiles, gather, most = newton_tiles(starts, ends, self.layout.particles_per_block)
+            # Per tile pair and side, per particle of the tile: the sweep's field sum and candidate bits.
+            tiles, gather, rows = newton_tiles(starts, ends, self.layout.particles_per_block)
             self.tiles = wp.array(tiles, dtype=force_kernels.TilePair, device=self.device)
-            self.gather = wp.array(gather, dtype=wp.vec3i, device=self.device)
+            self.gather = wp.array(gather, dtype=force_kernels.GatherRows, device=self.device)
             vector = wp.vec3f if precision == "mixed" else wp.vec3d
-            self.tile_field = wp.zeros((self.count, most), dtype=vector, device=self.device)
-            self.tile_near = wp.zeros((self.count, most), dtype=wp.uint64, device=self.device)
+            self.tile_field = wp.zeros((rows, self.layout.particles_per_block), dtype=vector, device=self.device)
+            self.tile_near = wp.zeros((rows, self.layout.particles_per_block), dtype=wp.uint64, device=self.device)
         self.candidate_count = wp.zeros(self.count if split else 0, dtype=wp.int32, device=self.device)
         self.candidates = wp.zeros((self.count if split else 0, force_kernels.CANDIDATES), dtype=wp.int32, device=self.device)
         # (Warp's CPU blocks, wp.config.enable_cpu_blocks, run every lane: tests use them to check
@@ -309,14 +311,14 @@ class Engine:
         if newton and self.device.startswith("cuda") and self.layout.block_dim != 32:
             raise ValueError(f"a Newton layout's block is one warp: block_dim must be 32 on CUDA; got {self.layout.block_dim}")
         # (With Warp's CPU blocks on, the CPU runs the GPU's lanes: tests check the rank sums so.)
+        self._contact_kernel = None
         self._contact_block = CONTACT_BLOCK if self.device.startswith("cuda") or wp.config.enable_cpu_blocks else 1
         if self.tree is not None:
             self._contact_kernel = force_kernels.contact_pass(params.rolling_friction, self._contact_block)
         elif newton:
             lanes = self.layout.block_dim
             self._force_kernel = force_kernels.pair_gravity_newton(self.layout.particles_per_block // lanes, precision, self.layout.max_registers)
-            self._gather_block = lanes  # a warp per particle on a GPU
-            self._gather_kernel = force_kernels.gather_newton(lanes, precision)
+            self._gather_kernel = force_kernels.gather_newton(precision)
             self._contact_kernel = force_kernels.contact_pass(params.rolling_friction, self._contact_block)
         elif split:
             self._force_kernel = force_kernels.pair_gravity_tiled(
@@ -342,7 +344,7 @@ class Engine:
     def eval_forces(self) -> None:
         """Force and torque on every particle at the current positions and velocities."""
         outputs = [self.force, self.torque, self.channels, self.deepest_contact]
-        if self.ledger:
+        if self.ledger and self._contact_kernel is None:  # the fused kernel adds to them; a contact pass writes them whole
             self.channels.zero_()
         if self.tree is not None:
             self.tree.build(self.position, self.mass)
@@ -371,10 +373,9 @@ class Engine:
                 outputs=[self.tile_field, self.tile_near],
                 device=self.device,
             )
-            wp.launch_tiled(
+            wp.launch(
                 self._gather_kernel,
-                dim=[self.count],
-                block_dim=self._gather_block,
+                dim=self.count,
                 inputs=[self.gather, self.mass, self.tile_field, self.tile_near],
                 outputs=[self.force, self.candidate_count, self.candidates],
                 device=self.device,

@@ -633,9 +633,13 @@ def contact_pass(rolling: str = "couple", block_dim: int = 1):
 # --- Newton's third law: each pair once ------------------------------------------------------
 
 #: A tile-pair block of the Newton layout: its i tile [i_first, i_end), its j tile [j_first, j_end),
-#: and their tiles' indices a <= b within their system (a == b: the diagonal, where i and j are the
-#: same tile and every pair is met from both sides).
+#: the row of the sweep's outputs its i tile's sums go to and the row its j tile's go to (-1 on the
+#: diagonal, where i and j are the same tile and every pair is met from both sides).
 TilePair = wp.types.vector(length=6, dtype=wp.int32)
+
+#: What the gather needs of a particle: its first row of the sweep's outputs (one per tile of its
+#: system, in order), how many, its column (its place in its tile) and its system's first particle.
+GatherRows = wp.types.vector(length=4, dtype=wp.int32)
 
 #: The Newton layout's tiles hold at most this many particles: a particle's contact candidates in
 #: another tile are the bits of one 64-bit word.
@@ -670,18 +674,6 @@ return value;
 """
 )
 def lane_value_u64(value: wp.uint64, source: int) -> wp.uint64: ...
-
-
-@wp.func_native(
-    """
-#if defined(__CUDA_ARCH__)
-return __popcll(bits);
-#else
-return __builtin_popcountll(bits);
-#endif
-"""
-)
-def bit_count(bits: wp.uint64) -> wp.int32: ...
 
 
 @wp.func_native(
@@ -752,9 +744,9 @@ def pair_gravity_newton(particles_per_lane: int, precision: str = "mixed", max_r
     after each round the j particles and their sums move one lane on (a register shuffle), so that
     a lane only ever adds to what it holds and every sum has a fixed order (the motion does not
     depend on scheduling).  Per particle and per tile of the other side, the sweep writes its field
-    sum to ``field_out[particle, tile]`` and its contact candidates in that tile as the bits of
-    ``near_out[particle, tile]``: no atomics, no waits in the hot loop.  :func:`gather_newton`
-    adds them up.
+    sum and its contact candidates in that tile (as the bits of a word) to its column of the tile
+    pair's row of ``field_out`` and ``near_out``: no atomics, no waits in the hot loop, each row
+    written whole by one warp.  :func:`gather_newton` adds them up.
     """
     real, vec_real = _real_types(precision)
     inverse_sqrt = _inverse_sqrt(precision)
@@ -787,13 +779,13 @@ def pair_gravity_newton(particles_per_lane: int, precision: str = "mixed", max_r
         body_in: wp.array(dtype=Body),
         max_radius: real,  # the largest radius: a per-i bound that spares most pairs the contact test
         # Out:
-        field_out: wp.array2d(dtype=vec_real),  # [particle, tile of the other side]: G m_j r_ij / d^3 summed
-        near_out: wp.array2d(dtype=wp.uint64),  # [particle, tile of the other side]: bit k, its k-th particle is a candidate
+        field_out: wp.array2d(dtype=vec_real),  # [row, column]: G m_j r_ij / d^3 summed over the other tile
+        near_out: wp.array2d(dtype=wp.uint64),  # [row, column]: bit k, the other tile's k-th particle is a candidate
     ):
         block, lane = wp.tid()
         lanes = wp.block_dim()
         tile = tiles[block]
-        i_first, i_end, j_first, j_end, tile_i, tile_j = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5]
+        i_first, i_end, j_first, j_end, row_i, row_j = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5]
         source = (lane + 1) % lanes  # each round a lane takes its neighbour's j particles
 
         bodies_i = Bodies()
@@ -807,8 +799,15 @@ def pair_gravity_newton(particles_per_lane: int, precision: str = "mixed", max_r
         fields_j = Fields()  # the sums of the j particles this lane holds, moving with them
         near_i = Bits()
         near_j = Bits()  # likewise
+        # The bit of each of this lane's i particles in a j particle's word (lanes is 1 or 32).
+        i_bits = Bits()
+        for k in range(wp.static(K)):
+            i_bits[k] = wp.uint64(1) << wp.uint64(k * lanes + lane)
 
         for held in range(lanes):  # a round: this lane holds the j particles of lane (lane + held) % lanes
+            j_bits = Bits()  # the bit of each held j particle in an i particle's word
+            for k in range(wp.static(K)):
+                j_bits[k] = wp.uint64(1) << wp.uint64(k * lanes + ((lane + held) & (lanes - 1)))
             for a in range(wp.static(K)):
                 for b in range(wp.static(K)):
                     r = separation(bodies_i[a], bodies_j[b])
@@ -820,8 +819,8 @@ def pair_gravity_newton(particles_per_lane: int, precision: str = "mixed", max_r
                         fields_j[b] = fields_j[b] - (bodies_i[a][g_mass_at] * inv_d3) * r
                         if d2 < near[a]:  # within R_i + R_max: rare
                             if is_candidate(d2, bodies_i[a][radius_at], bodies_j[b][radius_at], candidate):
-                                near_i[a] = near_i[a] | (wp.uint64(1) << wp.uint64(b * lanes + (lane + held) % lanes))
-                                near_j[b] = near_j[b] | (wp.uint64(1) << wp.uint64(a * lanes + lane))
+                                near_i[a] = near_i[a] | j_bits[b]
+                                near_j[b] = near_j[b] | i_bits[a]
             for b in range(wp.static(K)):
                 bodies_j[b] = body_from_lane(bodies_j[b], source)
                 fields_j[b] = field_from_lane(fields_j[b], source)
@@ -830,31 +829,34 @@ def pair_gravity_newton(particles_per_lane: int, precision: str = "mixed", max_r
         # After a full turn every lane holds its own j particles again.  On the diagonal the i side
         # has met every pair from both ends.
         for k in range(wp.static(K)):
-            i = i_first + k * lanes + lane
-            if i < i_end:
-                field_out[i, tile_j] = fields_i[k]
-                near_out[i, tile_j] = near_i[k]
-            j = j_first + k * lanes + lane
-            if tile_i != tile_j and j < j_end:
-                field_out[j, tile_i] = fields_j[k]
-                near_out[j, tile_i] = near_j[k]
+            field_out[row_i, k * lanes + lane] = fields_i[k]
+            near_out[row_i, k * lanes + lane] = near_i[k]
+            if row_j >= 0:
+                field_out[row_j, k * lanes + lane] = fields_j[k]
+                near_out[row_j, k * lanes + lane] = near_j[k]
 
     return pair_gravity_newton_kernel
 
 
+#: Tiles whose rows the gather loads at once.
+GATHER_AHEAD = 8
+
+
 @functools.cache
-def gather_newton(block_dim: int, precision: str = "mixed"):
-    """Build the kernel that gives each particle what the Newton sweep found for it: its gravity (its
-    field sums from every tile, added in float64 in a fixed order) and its contact candidates, listed
-    in increasing j (from the bits per tile), with their count.  A block of ``block_dim`` lanes per
-    particle (a particle has ~N / 64 tiles to read: too many for one thread to wait on), the lanes
-    taking the tiles in turn; launch with ``wp.launch_tiled(dim=[N])``."""
-    _, vec_real = _real_types(precision)
+def gather_newton(precision: str = "mixed"):
+    """Build the kernel that gives each particle what the Newton sweep found for it, one thread per
+    particle (launch with ``dim=N``): its gravity (its field sums from every tile of its system, added
+    in float64 in the tiles' order) and its contact candidates, listed in increasing j (the bits of
+    each tile's word, tile after tile), with their count.  The threads of a warp read neighbouring
+    columns of each row: whole lines of memory."""
+    real, vec_real = _real_types(precision)
+    Fields = wp.types.matrix(shape=(GATHER_AHEAD, 3), dtype=real)
+    Words = wp.types.vector(length=GATHER_AHEAD, dtype=wp.uint64)
 
     @wp.kernel(module="unique", enable_backward=False)
     def gather_newton_kernel(
         # Model:
-        gather: wp.array(dtype=wp.vec3i),  # per particle: its system's tiles, its system's first particle, the tile size
+        gather: wp.array(dtype=GatherRows),
         mass_in: wp.array(dtype=wp.float64),
         # In:
         field_in: wp.array2d(dtype=vec_real),
@@ -864,31 +866,30 @@ def gather_newton(block_dim: int, precision: str = "mixed"):
         candidate_count: wp.array(dtype=wp.int32),
         candidates: wp.array2d(dtype=wp.int32),
     ):
-        i, lane = wp.tid()
-        lanes = wp.block_dim()
-        info = gather[i]
-        tiles, first, size = info[0], info[1], info[2]
+        i = wp.tid()
+        rows = gather[i]
+        row, tiles, column, first = rows[0], rows[1], rows[2], rows[3]
+        size = field_in.shape[1]
         field = wp.vec3d()
         noted = int(0)
-        for start in range(0, tiles, lanes):  # a round: lane takes tile start + lane
-            t = start + lane
-            bits = wp.uint64(0)
-            if t < tiles:
-                field += wp.vec3d(field_in[i, t])
-                bits = near_in[i, t]
-            # Each lane's candidates go after those of the lanes (tiles) before it: increasing j.
-            count = bit_count(bits)
-            slot = noted + wp.untile(wp.tile_scan_exclusive(wp.tile(count)))
-            while bits != wp.uint64(0):
-                if slot < candidates.shape[1]:
-                    candidates[i, slot] = first + t * size + lowest_bit(bits)
-                bits = bits & (bits - wp.uint64(1))
-                slot += 1
-            noted += wp.tile_sum(wp.tile(count))[0]
-        total = wp.tile_sum(wp.tile(field, preserve_type=True))[0]
-        if lane == 0:
-            force_out[i] = -mass_in[i] * total
-            candidate_count[i] = noted
+        for start in range(0, tiles, wp.static(GATHER_AHEAD)):
+            # The loads of several tiles first, so that their waits overlap (tiles past the end add zeros).
+            fields = Fields()
+            words = Words()
+            for k in range(wp.static(GATHER_AHEAD)):
+                if start + k < tiles:
+                    fields[k] = field_in[row + start + k, column]
+                    words[k] = near_in[row + start + k, column]
+            for k in range(wp.static(GATHER_AHEAD)):
+                field += wp.vec3d(fields[k])
+                bits = words[k]
+                while bits != wp.uint64(0):
+                    if noted < candidates.shape[1]:
+                        candidates[i, noted] = first + (start + k) * size + lowest_bit(bits)
+                    bits = bits & (bits - wp.uint64(1))
+                    noted += 1
+        force_out[i] = -mass_in[i] * field
+        candidate_count[i] = noted
 
     return gather_newton_kernel
 
