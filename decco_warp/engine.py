@@ -37,8 +37,8 @@ PAIR_OBSERVABLES = {
 }
 #: Threads per particle of the observables kernel on a GPU.
 OBSERVABLES_BLOCK = 128
-#: Lanes per particle of the contact pass on a GPU (one on the CPU): its candidates, at most
-#: force_kernels.CANDIDATES, two a lane.
+#: Lanes per particle of the Newton layout's contact pass on a GPU (one on the CPU): its
+#: candidates, at most force_kernels.CANDIDATES, two a lane.
 CONTACT_BLOCK = 32
 
 
@@ -102,9 +102,9 @@ class Layout:
 
 
 #: Systems up to this many particles take the Newton layout on CUDA, which keeps a field sum and
-#: a candidate word per particle and tile of 64 (N^2 / 64 x 20 bytes: 1.3 GB at 65 536 particles);
+#: a candidate word per particle and tile of 64 (N^2 / 64 x 20 bytes: 5.4 GB at 131 072 particles);
 #: past it all-pairs takes the fused layout, which keeps nothing.
-NEWTON_MAX = 65_536
+NEWTON_MAX = 131_072
 
 
 def fused_layout(n: int, device: str) -> Layout:
@@ -312,19 +312,21 @@ class Engine:
             raise ValueError(f"a Newton layout's block is one warp: block_dim must be 32 on CUDA; got {self.layout.block_dim}")
         # (With Warp's CPU blocks on, the CPU runs the GPU's lanes: tests check the rank sums so.)
         self._contact_kernel = None
+        self._tiled_contacts = newton and self.tree is None
         self._contact_block = CONTACT_BLOCK if self.device.startswith("cuda") or wp.config.enable_cpu_blocks else 1
         if self.tree is not None:
-            self._contact_kernel = force_kernels.contact_pass(params.rolling_friction, self._contact_block)
+            self._contact_kernel = force_kernels.contact_pass(params.rolling_friction)
         elif newton:
             lanes = self.layout.block_dim
             self._force_kernel = force_kernels.pair_gravity_newton(self.layout.particles_per_block // lanes, precision, self.layout.max_registers)
             self._gather_kernel = force_kernels.gather_newton(precision)
-            self._contact_kernel = force_kernels.contact_pass(params.rolling_friction, self._contact_block)
+            # The gather lists each particle's candidates in increasing j: lanes can share them out.
+            self._contact_kernel = force_kernels.contact_pass_ordered(params.rolling_friction, self._contact_block)
         elif split:
             self._force_kernel = force_kernels.pair_gravity_tiled(
                 self.layout.block_dim, self.layout.particles_per_block, precision, self.layout.max_registers, self.layout.prefetch
             )
-            self._contact_kernel = force_kernels.contact_pass(params.rolling_friction, self._contact_block)
+            self._contact_kernel = force_kernels.contact_pass(params.rolling_friction)
         elif tiled:
             self._force_kernel = force_kernels.pair_forces_tiled(
                 self.layout.block_dim,
@@ -406,14 +408,11 @@ class Engine:
 
     def _contacts(self, outputs: list) -> None:
         """The contact pass over the candidates noted by the sweep or the hash grid."""
-        wp.launch_tiled(
-            self._contact_kernel,
-            dim=[self.count],
-            block_dim=self._contact_block,
-            inputs=[self.model, self.ranges, self.radius, self.position, self.velocity, self.omega, self.candidate_count, self.candidates],
-            outputs=outputs,
-            device=self.device,
-        )
+        inputs = [self.model, self.ranges, self.radius, self.position, self.velocity, self.omega, self.candidate_count, self.candidates]
+        if self._tiled_contacts:  # a block of lanes per particle
+            wp.launch_tiled(self._contact_kernel, dim=[self.count], block_dim=self._contact_block, inputs=inputs, outputs=outputs, device=self.device)
+        else:
+            wp.launch(self._contact_kernel, dim=self.count, inputs=inputs, outputs=outputs, device=self.device)
 
     def kick_drift(self) -> None:
         """Half kick with the current forces, then a full drift."""

@@ -20,10 +20,11 @@ GRAVITY_CHOICES = (*GRAVITY_SOLVERS, "auto")
 
 #: From this many particles ``gravity = "auto"`` takes the tree, per device kind. CPU: measured
 #: (docs/benchmarks.md: on copies of a settled pile the tree's step is the faster from ~1 150
-#: particles, since its hash grid notes only touching neighbours). CUDA: measured on an H200
-#: (`bench --gravity all-pairs,tree --system piles`): all-pairs is 2.1x faster at 16 384 particles,
-#: the tree 2.4x faster at 65 536; the step times cross near 32 000.
-TREE_FROM = {"cpu": 1200, "cuda": 32768}
+#: particles, since its hash grid notes only touching neighbours). CUDA: measured on an H100
+#: (`bench --gravity all-pairs,tree --system piles`) against all-pairs in the Newton layout: all-pairs
+#: is 3x faster at 32 768 particles, the tree 1.1x faster at 65 536 on copies of the shipped pile,
+#: where a tree walk is ~2.5x cheaper than in one compact pile of the same size (docs/benchmarks.md).
+TREE_FROM = {"cpu": 1200, "cuda": 65536}
 
 
 def choose_gravity(n: int, device: str) -> str:

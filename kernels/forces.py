@@ -568,18 +568,10 @@ def contact_sum_of(rows: ContactRows) -> ContactSum:
 
 
 @functools.cache
-def contact_pass(rolling: str = "couple", block_dim: int = 1):
-    """Build the contact pass over the candidates noted by a sweep (split and Newton layouts) or the
-    tree path's hash grid: a block of ``block_dim`` lanes per particle (32 on a GPU, 1 on the CPU;
-    launch with ``wp.launch_tiled(dim=[N])``), each lane evaluating some of its candidates in float64.
-
-    Every contact is put at its rank among the particle's candidates by j and the ranks are added
-    in a fixed order, so that the sum does not depend on the order the candidates were noted in nor
-    on the lanes (on the CPU: in increasing j).  After an overflow of the list, lane 0 looks at every j
-    of the system in turn.  Writes ``torque_out`` and the ledger's ``channels_out`` (when it has rows)
-    whole and adds the contact force to ``force_inout``.
-    """
-    contact_channels = contact_function(rolling)
+def contact_pass(rolling: str = "couple"):
+    """Build the second launch of the split layout, one thread per particle: its noted candidates
+    sorted by j, each evaluated in float64 and added to ``force_inout``; ``torque_out`` and the
+    ledger's ``channels_out`` (when it has rows) are written whole."""
     add_contact = contact_sum_function(rolling)
 
     @wp.kernel(module="unique", enable_backward=False)
@@ -600,34 +592,65 @@ def contact_pass(rolling: str = "couple", block_dim: int = 1):
         channels_out: wp.array2d(dtype=wp.vec3d),
         deepest_out: wp.array(dtype=wp.int64),
     ):
+        i = wp.tid()
+        listed, walk = candidates_walk(i, ranges, candidate_count, candidates)
+        total = ContactSum()
+        j = ranges[i][0] - 1
+        for _ in range(walk):  # the list, or every j after an overflow (each pair checked in float64)
+            j = next_candidate(i, listed, candidates, walk, j)
+            total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out, total)
+        force_inout[i] = force_inout[i] + write_contacts(total, i, torque_out, channels_out)
+
+    return contact_pass_kernel
+
+
+@functools.cache
+def contact_pass_ordered(rolling: str = "couple", block_dim: int = 1):
+    """Build the contact pass for candidate lists that come in increasing j (the Newton layout's):
+    a block of ``block_dim`` lanes per particle (32 on a GPU, 1 on the CPU; launch with
+    ``wp.launch_tiled(dim=[N])``), each lane evaluating every ``block_dim``-th candidate in float64
+    and adding them in list order, the lanes then reduced in a fixed order, so that the sum does not
+    depend on scheduling (on the CPU: in increasing j, as :func:`contact_pass`).  After an overflow of
+    the list, lane 0 looks at every j of the system in turn.  Writes ``torque_out`` and the ledger's
+    ``channels_out`` (when it has rows) whole and adds the contact force to ``force_inout``."""
+    contact_channels = contact_function(rolling)
+    add_contact = contact_sum_function(rolling)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def contact_pass_ordered_kernel(
+        # Model:
+        model: ContactModel,
+        ranges: wp.array(dtype=wp.vec2i),  # per particle: its system's particles, [first, end)
+        radius_in: wp.array(dtype=wp.float64),
+        # State in:
+        position_in: wp.array(dtype=wp.vec3d),
+        velocity_in: wp.array(dtype=wp.vec3d),
+        omega_in: wp.array(dtype=wp.vec3d),
+        candidate_count: wp.array(dtype=wp.int32),
+        candidates: wp.array2d(dtype=wp.int32),
+        # Out:
+        force_inout: wp.array(dtype=wp.vec3d),
+        torque_out: wp.array(dtype=wp.vec3d),
+        channels_out: wp.array2d(dtype=wp.vec3d),
+        deepest_out: wp.array(dtype=wp.int64),
+    ):
         i, lane = wp.tid()
         noted = candidate_count[i]
         listed = noted <= candidates.shape[1]
-        by_rank = wp.tile_zeros(shape=wp.static(CANDIDATES), dtype=ContactRows, storage="shared")
-        # Every lane takes the same number of slots (the tile's writes are block-wide steps); a
-        # slot past the noted ones writes zeros at its own index, above every rank.
-        for slot in range(lane, wp.static(CANDIDATES), wp.block_dim()):
-            rows = ContactRows()
-            rank = slot
-            if listed and slot < noted:
-                j = candidates[i, slot]
-                rank = int(0)
-                for k in range(noted):
-                    if candidates[i, k] < j:
-                        rank += 1
-                spring, sliding, sliding_torque, rolling_force, rolling_torque = contact_channels(
-                    model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out
-                )
-                rows = wp.matrix_from_rows(spring, sliding, sliding_torque, rolling_force, rolling_torque)
-            by_rank[rank] = rows
-        total = contact_sum_of(wp.tile_sum(by_rank)[0])
+        mine = ContactRows()
+        for slot in range(lane, wp.where(listed, noted, 0), wp.block_dim()):
+            spring, sliding, sliding_torque, rolling_force, rolling_torque = contact_channels(
+                model, i, candidates[i, slot], radius_in, position_in, velocity_in, omega_in, deepest_out
+            )
+            mine += wp.matrix_from_rows(spring, sliding, sliding_torque, rolling_force, rolling_torque)
+        total = contact_sum_of(wp.tile_sum(wp.tile(mine, preserve_type=True))[0])
         if lane == 0:
             if not listed:  # every j of the system, each checked in float64
                 for j in range(ranges[i][0], ranges[i][1]):
                     total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out, total)
             force_inout[i] = force_inout[i] + write_contacts(total, i, torque_out, channels_out)
 
-    return contact_pass_kernel
+    return contact_pass_ordered_kernel
 
 
 # --- Newton's third law: each pair once ------------------------------------------------------

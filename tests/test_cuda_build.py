@@ -26,7 +26,8 @@ SCRIPT = textwrap.dedent(
         kernels.append((forces.pair_gravity_tiled(128, 4, precision, 0, True), 128))
         kernels.append((forces.pair_forces_tiled(128, 4, 4, precision, "couple", True, 128, True), 128))
         kernels += [(forces.pair_gravity_newton(2, precision), 32), (forces.gather_newton(precision), 256)]
-    kernels += [(forces.contact_pass(rolling, 32), 32) for rolling in ("couple", "paper")]
+    kernels += [(forces.contact_pass(rolling), 256) for rolling in ("couple", "paper")]
+    kernels += [(forces.contact_pass_ordered(rolling, 32), 32) for rolling in ("couple", "paper")]
     kernels += [(forces.pack_bodies_mixed, 256), (integrate.kick, 256), (observables.pair_observables, 256), (observables.pair_observables_tiled(128), 128),
                 (observables.candidate_observables, 256), (tree.tree_gravity("mixed"), 256), (tree.tree_gravity("float64"), 256), (tree.tree_potential, 256)]
     folder = tempfile.mkdtemp()

@@ -279,8 +279,8 @@ print("SAME")
 
 def test_gpu_layouts_run_lane_by_lane_on_the_cpu_equal_the_reference_kernel(tmp_path):
     """The GPU's layouts (blocks of 16 and 32 lanes striding over j, the slots' overflow, the split
-    contact pass and its 32 lanes a particle, prefetch, the block reductions) run with Warp's CPU
-    blocks in a fresh interpreter:
+    contact pass, the Newton layout's contact pass of 32 lanes a particle, prefetch, the block
+    reductions) run with Warp's CPU blocks in a fresh interpreter:
     forces and torques equal the plain kernel's (float64 to round-off; mixed within 1e-5)."""
     import subprocess
     import sys
