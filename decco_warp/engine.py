@@ -127,7 +127,7 @@ def choose_layout(n: int, device: str) -> Layout:
     """The force-kernel layout for ``n`` particles on ``device`` (measured with ``decco-warp bench --layouts``).
 
     CUDA (H100, docs/benchmarks.md): each pair once (Newton's third law), a warp meeting two tiles
-    of 64 particles: 1.7x to 3x the fused layout's full step from 6 250 to 65 536 particles.  Past
+    of 64 particles: 1.7x to 2.4x the fused layout's full step from 5 500 to 131 072 particles.  Past
     ``NEWTON_MAX`` particles, and on the CPU (where it gains only ~20 %), the :func:`fused_layout`.
     """
     if device.startswith("cuda") and n <= NEWTON_MAX:
@@ -310,7 +310,8 @@ class Engine:
             raise ValueError("on the CPU a layout's block_dim must be 1 (Warp runs one thread per block)")
         if newton and self.device.startswith("cuda") and self.layout.block_dim != 32:
             raise ValueError(f"a Newton layout's block is one warp: block_dim must be 32 on CUDA; got {self.layout.block_dim}")
-        # (With Warp's CPU blocks on, the CPU runs the GPU's lanes: tests check the rank sums so.)
+        # The Newton layout's contact pass takes a warp per particle (with Warp's CPU blocks on, the
+        # CPU runs those lanes too: tests check the lanes' reduction so).
         self._contact_kernel = None
         self._tiled_contacts = newton and self.tree is None
         self._contact_block = CONTACT_BLOCK if self.device.startswith("cuda") or wp.config.enable_cpu_blocks else 1

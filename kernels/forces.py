@@ -1,6 +1,12 @@
 """All-pairs force and torque kernels: gravity between every pair, contact between overlapping ones.
 
-* ``pair_forces_tiled`` -- the production kernel.  A block of ``block_dim``
+* ``pair_gravity_newton`` + ``gather_newton`` + ``contact_pass_ordered`` -- the CUDA default (the
+  Newton layout): each pair's gravity computed once and given to both particles, a warp meeting two
+  tiles of particles, the j side moving lane to lane by register shuffles; per tile pair a row of
+  field sums and contact-candidate words, which the gather adds up per particle in a fixed order,
+  listing its candidates in increasing j; then the contacts in float64, a warp per particle.  No
+  atomics: the motion does not depend on scheduling.
+* ``pair_forces_tiled`` -- the fused kernel (the CPU default).  A block of ``block_dim``
   threads owns ``particles_per_block`` particles i and sweeps all j in tiles of
   ``block_dim``, loaded cooperatively with ``wp.tile_load`` (one j per thread;
   one thread per block on CPU, so the same source serves both).  Each j load
