@@ -131,7 +131,7 @@ def choose_layout(n: int, device: str) -> Layout:
     ``NEWTON_MAX`` particles, and on the CPU (where it gains only ~20 %), the :func:`fused_layout`.
     """
     if device.startswith("cuda") and n <= NEWTON_MAX:
-        return Layout(block_dim=32, particles_per_block=NEWTON_TILE_MAX, newton=True)
+        return newton_layout(device)
     return fused_layout(n, device)
 
 
@@ -143,11 +143,11 @@ def choose_layout(n: int, device: str) -> Layout:
 LAYOUT_CHOICES = ("auto", "split", "prefetch", "split+prefetch", "newton")
 
 
-def newton_layout(n: int, device: str) -> Layout:
-    """The Newton layout (each pair once, kernels/forces.py ``pair_gravity_newton``) for ``n``
-    particles on ``device``: on CUDA as :func:`choose_layout` takes it, on the CPU tiles of 4."""
+def newton_layout(device: str) -> Layout:
+    """The Newton layout (each pair once, kernels/forces.py ``pair_gravity_newton``) on ``device``:
+    a warp meeting tiles of 64 on CUDA, tiles of 4 on the CPU's one lane."""
     if device.startswith("cuda"):
-        return choose_layout(min(n, NEWTON_MAX), device)
+        return Layout(block_dim=32, particles_per_block=NEWTON_TILE_MAX, newton=True)
     return Layout(block_dim=1, particles_per_block=4, newton=True)
 
 
@@ -159,7 +159,7 @@ def layout_for(choice: str, n: int, device: str) -> Layout | None:
     if choice == "auto":
         return None
     if choice == "newton":
-        return newton_layout(n, device)
+        return newton_layout(device)
     base = fused_layout(n, device)
     split = "split" in choice
     # The split sweep fits its registers uncapped (79 to 92 on sm_90), as benched.
