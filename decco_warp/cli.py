@@ -96,15 +96,40 @@ def info(device: Optional[str] = DeviceOption) -> None:
 # --- progress displays -----------------------------------------------------------------
 
 
+#: Seconds between progress lines when stderr is a file or pipe (a batch job's log), where rich
+#: draws its bar only once, at the end: $DECCO_LOG_EVERY, default 30.
+LOG_EVERY_DEFAULT = 30.0
+
+
 def _progress_bar(description: str, *fields: str):
-    """A rich progress bar with elapsed and estimated remaining time, on stderr."""
+    """A rich progress bar with elapsed and estimated remaining time, on stderr; a line every
+    $DECCO_LOG_EVERY seconds instead when stderr is not a terminal."""
+    import os
+    import time
+
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-    columns = [TextColumn("[bold]{task.description}"), BarColumn()]
+    class LoggedProgress(Progress):
+        """The bar's line printed whole at most every ``every`` seconds (and at the end by rich)."""
+
+        every = float(os.environ.get("DECCO_LOG_EVERY") or LOG_EVERY_DEFAULT)
+        _last_line = time.monotonic()
+
+        def update(self, task_id, **changes):
+            super().update(task_id, **changes)
+            if time.monotonic() - self._last_line >= self.every:
+                self._last_line = time.monotonic()
+                with self._lock:
+                    task = self._tasks[task_id]
+                self.console.print(self.make_tasks_table([task]), soft_wrap=True)
+
+    console = Console(stderr=True)
+    columns = [TextColumn("[bold]{task.description}")] + ([BarColumn()] if console.is_terminal else [])
     columns += [TextColumn(f"{{task.fields[{name}]}}") for name in fields]
     columns += [TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn()]
-    return Progress(*columns, console=Console(stderr=True), transient=False)
+    kind = Progress if console.is_terminal else LoggedProgress
+    return kind(*columns, console=console, transient=False)
 
 
 # --- pile ------------------------------------------------------------------------------

@@ -1,5 +1,6 @@
 """Rubble-pile formation and pile files."""
 
+import os
 import re
 
 import h5py
@@ -214,8 +215,13 @@ def test_pile_command_continues_a_formation_past_its_step_limit(tmp_path):
     first = cli(*args, "--max-steps", "10000")
     assert first.returncode == 1 and "larger --max-steps continues" in first.stderr
     assert (tmp_path / "p.h5.forming").is_file() and not out.exists()
-    second = cli(*args)
+    second = cli(*args, env={**os.environ, "DECCO_LOG_EVERY": "0"})
     assert second.returncode == 0, second.stderr
+    # stderr is a pipe: rich draws the bar's line once, at the end, unless asked for a line every
+    # DECCO_LOG_EVERY seconds (default 30 s, longer than the first call took).
+    progress_line = r"(collapsing|settling) +step \d+ KE/\|U\| "
+    assert len(re.findall(progress_line, first.stderr)) == 1, first.stderr
+    assert len(re.findall(progress_line, second.stderr)) >= 3, second.stderr
     assert "continuing the formation saved in" in second.stderr and "at step 10000" in second.stderr
     # The wall time of the session, itemised: only the steps of this session are counted.
     spent = re.search(r"this session: set-up [0-9.]+ s, stepping ([0-9.]+) s \(([0-9.]+) ms a step over (\d+) steps\), checks [0-9.]+ s, saves [0-9.]+ s", second.stdout)
