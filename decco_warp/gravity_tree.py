@@ -16,6 +16,7 @@ class GravityTree:
 
     def __init__(self, count: int, device: str, precision: str = "mixed"):
         self.count, self.device = count, device
+        self.precision = precision
         self._gravity_kernel = kernels.tree_gravity(precision)
         nodes = max(2 * count - 1, 1)
         internal = max(count - 1, 1)
@@ -28,6 +29,8 @@ class GravityTree:
         self.order = zeros(2 * count, wp.int32)
         self.nodes = kernels.TreeNodes()
         self.nodes.child = zeros((internal, 2), wp.int32)
+        self.nodes.parent = zeros(nodes, wp.int32)
+        self.nodes.escape = zeros(nodes, wp.int32)
         self.nodes.first = zeros(internal, wp.int32)
         self.nodes.last = zeros(internal, wp.int32)
         self.nodes.mass = zeros(nodes, wp.float64)
@@ -39,9 +42,21 @@ class GravityTree:
         self.nodes.offset = zeros(nodes, wp.float64)
         self.pending = zeros(1, wp.int32)  # 1 while the root's moments are unsummed: the levels' loop condition
         self.done = (zeros(nodes, wp.int32), zeros(nodes, wp.int32))
+        # Walk records (kernels.walk_records): where each node is and what it links to, and its
+        # moments for the gravity walk and for the float64 potential walk of frames.
+        self.place = zeros(nodes, wp.vec4d)
+        self.links = zeros(nodes, wp.vec4i)
+        self.moments = {p: zeros((nodes, 2), wp.vec4f if p == "mixed" else wp.vec4d) for p in {precision, "float64"}}
         self.points = zeros(count, wp.vec3)
         self.grid = wp.HashGrid(GRID_CELLS, GRID_CELLS, GRID_CELLS, device=device)
         self.grid.reserve(count)
+
+    def _walk_records(self, precision: str, G: float, theta_open: float) -> list:
+        """The nodes' walk records for this G and theta_open (call :meth:`build` first)."""
+        records = [self.place, self.links, self.moments[precision]]
+        inputs = [wp.float64(G), wp.float64(1.0 / theta_open), self.count, self.nodes, *records]
+        self._launch(kernels.walk_records(precision), max(2 * self.count - 1, 1), inputs)
+        return records
 
     def _launch(self, kernel, dim: int, inputs: list) -> None:
         wp.launch(kernel, dim=dim, inputs=inputs, device=self.device)
@@ -55,6 +70,7 @@ class GravityTree:
         wp.utils.radix_sort_pairs(self.keys, self.order, n)
         if n > 1:
             self._launch(kernels.build_nodes, n - 1, [self.keys, n, self.nodes])
+        self._launch(kernels.escape_links, 2 * n - 1, [self.nodes])
         self._launch(kernels.leaf_moments, n, [position, mass, self.order, n, self.nodes, *self.done])
         if n > 1:
             # Level by level until the root is summed, the loop's condition kept on the device: no
@@ -69,23 +85,13 @@ class GravityTree:
 
     def gravity(self, G: float, theta_open: float, position: wp.array, mass: wp.array, force_out: wp.array) -> None:
         """force_out = gravity on every particle (call :meth:`build` first)."""
-        self._launch(
-            self._gravity_kernel,
-            self.count,
-            [*self._walk_inputs(G, theta_open, position, mass), force_out],
-        )
+        records = self._walk_records(self.precision, G, theta_open)
+        self._launch(self._gravity_kernel, self.count, [position, mass, self.order, self.count, *records, force_out])
 
     def potential(self, G: float, theta_open: float, position: wp.array, mass: wp.array, potential_out: wp.array) -> None:
         """potential_out = half of each particle's gravitational energy (call :meth:`build` first)."""
-        self._launch(
-            kernels.tree_potential,
-            self.count,
-            [*self._walk_inputs(G, theta_open, position, mass), potential_out],
-        )
-
-    def _walk_inputs(self, G: float, theta_open: float, position: wp.array, mass: wp.array) -> list:
-        """The inputs both walks take, before their output."""
-        return [wp.float64(G), wp.float64(1.0 / theta_open), position, mass, self.order, self.count, self.nodes]
+        records = self._walk_records("float64", G, theta_open)
+        self._launch(kernels.tree_potential, self.count, [position, mass, self.order, self.count, *records, potential_out])
 
     def contact_candidates(self, position, radius, max_radius: float, candidate_count, candidates) -> None:
         """Each particle's contact candidates (neighbours within R_i + R_j, plus a margin), from the hash grid."""

@@ -12,9 +12,14 @@ trees") is built every evaluation, all on the device:
 4. ``node_moments``: mass, centre of mass, traceless quadrupole and box of each internal node from
    its two children, one launch per level (a node is summed once both children were summed by an
    earlier launch), so that no thread reads what another writes in the same launch;
-5. ``tree_gravity``: each particle walks the tree from the root with a stack; a node is used
+5. ``escape_links``: each node's escape, the node a depth-first walk goes to once it is done with
+   this node's subtree (the right sibling of its nearest ancestor-or-self that is a left child);
+6. ``walk_records``: what a visit of each node reads, packed into three records (centre and
+   opening reach, links, G-folded moments), once theta_open and G are known;
+7. ``tree_gravity``: each particle walks the tree from the root without a stack: a node is used
    whole (monopole + quadrupole) when its size is below ``theta_open`` times its distance and the
-   particle is not one of its own, else it is opened; leaves are summed directly.
+   particle is not one of its own, and the walk goes to its escape; else it is opened (the walk
+   goes to its first child); leaves are summed directly.
    ``tree_potential`` walks the same way for the potential energy of frames.
 
 The tree is built in float64 and deterministically: the sort is stable, each node's sum has a fixed
@@ -35,17 +40,13 @@ from .pair import inverse_sqrt_exact, inverse_sqrt_fast
 
 wp.set_module_options({"enable_backward": False})
 
-#: Longest walk stack: two children are pushed per opened node, at most one level deeper each time.
-STACK = 128
-
-Stack = wp.types.vector(length=STACK, dtype=wp.int32)
-
-
 @wp.struct
 class TreeNodes:
     """The tree: internal nodes 0 .. n - 2 (links and ranges), all 2n - 1 nodes' moments and boxes."""
 
     child: wp.array2d(dtype=wp.int32)  # internal node -> its two nodes
+    parent: wp.array(dtype=wp.int32)  # node -> its internal node (-1 for the root)
+    escape: wp.array(dtype=wp.int32)  # node -> where a depth-first walk goes after its subtree (-1: done)
     first: wp.array(dtype=wp.int32)  # internal node -> first sorted position it holds
     last: wp.array(dtype=wp.int32)  # ... and last
     mass: wp.array(dtype=wp.float64)
@@ -175,8 +176,29 @@ def build_nodes(keys: wp.array(dtype=wp.int32), count: int, nodes: TreeNodes):
         right = count - 1 + gamma + 1
     nodes.child[i, 0] = wp.int32(left)
     nodes.child[i, 1] = wp.int32(right)
+    nodes.parent[left] = wp.int32(i)
+    nodes.parent[right] = wp.int32(i)
+    if i == 0:
+        nodes.parent[0] = wp.int32(-1)
     nodes.first[i] = wp.int32(low)
     nodes.last[i] = wp.int32(high)
+
+
+@wp.kernel
+def escape_links(nodes: TreeNodes):
+    """Node k's escape: climb while k is its parent's second child; the escape is then the second
+    child of that parent (-1 past the root).  With it the walk needs no stack (a stack of a few dozen
+    nodes per thread lives in slow local memory on a GPU), and visits the nodes in the order a
+    stack that pops the first child first would."""
+    k = wp.tid()
+    node = k
+    escape = int(-1)
+    while node > 0 and escape < 0:
+        up = int(nodes.parent[node])
+        if int(nodes.child[up, 0]) == node:
+            escape = int(nodes.child[up, 1])
+        node = up
+    nodes.escape[k] = wp.int32(escape)
 
 
 @wp.kernel
@@ -275,23 +297,67 @@ def multipole_potential(unit: Any, inv_d: Any, g_mass: Any, g_quadrupole: Any):
     return -inv_d * (g_mass + type(inv_d)(0.5) * inv_d * inv_d * wp.dot(unit, g_quadrupole * unit))
 
 
+def _real_types(precision: str):
+    """(scalar, vec3, vec4, mat33) of a precision's node and pair arithmetic."""
+    if precision == "mixed":
+        return wp.float32, wp.vec3f, wp.vec4f, wp.mat33f
+    return wp.float64, wp.vec3d, wp.vec4d, wp.mat33d
+
+
+@functools.cache
+def walk_records(precision: str):
+    """The kernel that packs each node's walk record (launch with dim = 2n - 1): what a visit reads,
+    in three loads of 16 to 32 bytes instead of ten scattered ones (a GPU walk waits on its loads).
+
+    - ``place``: centre of mass and the opening reach, size / theta_open + offset (float64, so that
+      separations are taken in float64 as before);
+    - ``links``: first and last sorted position held, first child (-1 for a leaf), escape;
+    - ``moments``: G M and the six components of G Q, in the precision's arithmetic (a leaf's
+      centre is its particle's position, its G Q zero)."""
+    real, _, vec4, _ = _real_types(precision)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def walk_records_kernel(
+        G: wp.float64,
+        inv_theta: wp.float64,
+        count: int,
+        nodes: TreeNodes,
+        place: wp.array(dtype=wp.vec4d),
+        links: wp.array(dtype=wp.vec4i),
+        moments: wp.array2d(dtype=vec4),
+    ):
+        node = wp.tid()
+        centre = nodes.centre[node]
+        place[node] = wp.vec4d(centre[0], centre[1], centre[2], nodes.size[node] * inv_theta + nodes.offset[node])
+        if node >= count - 1:
+            position = node - (count - 1)
+            links[node] = wp.vec4i(position, position, -1, int(nodes.escape[node]))
+        else:
+            links[node] = wp.vec4i(int(nodes.first[node]), int(nodes.last[node]), int(nodes.child[node, 0]), int(nodes.escape[node]))
+        g_quadrupole = G * nodes.quadrupole[node]
+        moments[node, 0] = vec4(real(G * nodes.mass[node]), real(g_quadrupole[0, 0]), real(g_quadrupole[1, 1]), real(g_quadrupole[2, 2]))
+        moments[node, 1] = vec4(real(g_quadrupole[0, 1]), real(g_quadrupole[0, 2]), real(g_quadrupole[1, 2]), real(0.0))
+
+    return walk_records_kernel
+
+
 @functools.cache
 def tree_walk_function(precision: str):
     """The walk in a precision's arithmetic: ``"mixed"`` takes each separation in float64 and
     evaluates the node or pair in float32 (one rsqrt instruction on a GPU; the float32 error,
     ~1e-7, is far below the tree's), ``"float64"`` evaluates everything in float64."""
-    real, vec, mat = (wp.float32, wp.vec3f, wp.mat33f) if precision == "mixed" else (wp.float64, wp.vec3d, wp.mat33d)
+    real, vec, vec4, mat = _real_types(precision)
     inverse_sqrt = inverse_sqrt_fast if precision == "mixed" else inverse_sqrt_exact
 
     @wp.func
     def tree_walk(
         k: int,
-        G: wp.float64,
-        inv_theta: wp.float64,
         position_in: wp.array(dtype=wp.vec3d),
         order: wp.array(dtype=wp.int32),
         count: int,
-        nodes: TreeNodes,
+        place: wp.array(dtype=wp.vec4d),
+        links: wp.array(dtype=wp.vec4i),
+        moments: wp.array2d(dtype=vec4),
     ):
         """Acceleration and potential (per unit mass) at the particle at sorted position k, from every
         other particle (neighbours in space walk alike); a kernel that uses one of them lets the
@@ -300,42 +366,37 @@ def tree_walk_function(precision: str):
         x = position_in[i]
         field = vec()
         potential = real(0.0)
-        stack = Stack()
-        top = int(0)
+        node = int(-1)
         if count > 1:
-            stack[0] = wp.int32(0)
-            top = 1
-        while top > 0:
-            top -= 1
-            node = int(stack[top])
-            if node >= count - 1:  # a leaf: one particle, summed directly
-                j = int(order[node - (count - 1)])
-                if j != i:
-                    r = vec(x - position_in[j])
-                    d2 = wp.dot(r, r)
-                    if d2 > real(0.0):
-                        inv_d = inverse_sqrt(d2)
-                        g_mass = real(G * nodes.mass[node])
-                        field -= (g_mass * inv_d * inv_d) * (r * inv_d)
-                        potential -= g_mass * inv_d
-                continue
-            r = vec(x - nodes.centre[node])
+            node = 0  # the root
+        while node >= 0:
+            link = links[node]
+            at = place[node]
+            r = vec(x - wp.vec3d(at[0], at[1], at[2]))
             d2 = wp.dot(r, r)
+            if node >= count - 1:  # a leaf: one particle, summed directly (not the particle itself)
+                if int(link[0]) != k and d2 > real(0.0):
+                    inv_d = inverse_sqrt(d2)
+                    g_mass = moments[node, 0][0]
+                    field -= (g_mass * inv_d * inv_d) * (r * inv_d)
+                    potential -= g_mass * inv_d
+                node = int(link[3])
+                continue
             # Used whole only beyond size / theta_open plus the offset of its centre of mass from
             # its box's centre (Barnes & Hut's guard against a lopsided node), never for its own members.
-            reach = real(nodes.size[node] * inv_theta + nodes.offset[node])
-            own = k >= int(nodes.first[node]) and k <= int(nodes.last[node])
+            reach = real(at[3])
+            own = k >= int(link[0]) and k <= int(link[1])
             if not own and reach * reach < d2:
                 inv_d = inverse_sqrt(d2)
                 unit = r * inv_d
-                g_mass = real(G * nodes.mass[node])
-                g_quadrupole = mat(G * nodes.quadrupole[node])
-                field += multipole_field(unit, inv_d, g_mass, g_quadrupole)
-                potential += multipole_potential(unit, inv_d, g_mass, g_quadrupole)
+                a = moments[node, 0]
+                b = moments[node, 1]
+                g_quadrupole = mat(a[1], b[0], b[1], b[0], a[2], b[2], b[1], b[2], a[3])
+                field += multipole_field(unit, inv_d, a[0], g_quadrupole)
+                potential += multipole_potential(unit, inv_d, a[0], g_quadrupole)
+                node = int(link[3])
             else:
-                stack[top] = nodes.child[node, 1]
-                stack[top + 1] = nodes.child[node, 0]
-                top += 2
+                node = int(link[2])
         return i, wp.vec3d(field), wp.float64(potential)
 
     return tree_walk
@@ -345,20 +406,21 @@ def tree_walk_function(precision: str):
 def tree_gravity(precision: str = "mixed"):
     """Build the gravity kernel of the tree path in a precision's arithmetic (launch with dim=N)."""
     tree_walk = tree_walk_function(precision)
+    vec4 = _real_types(precision)[2]
 
     @wp.kernel(module="unique", enable_backward=False)
     def tree_gravity_kernel(
-        G: wp.float64,
-        inv_theta: wp.float64,
         position_in: wp.array(dtype=wp.vec3d),
         mass_in: wp.array(dtype=wp.float64),
         order: wp.array(dtype=wp.int32),
         count: int,
-        nodes: TreeNodes,
+        place: wp.array(dtype=wp.vec4d),
+        links: wp.array(dtype=wp.vec4i),
+        moments: wp.array2d(dtype=vec4),
         force_out: wp.array(dtype=wp.vec3d),
     ):
         """Gravity on each particle, one thread per sorted position."""
-        i, field, potential = tree_walk(wp.tid(), G, inv_theta, position_in, order, count, nodes)
+        i, field, potential = tree_walk(wp.tid(), position_in, order, count, place, links, moments)
         force_out[i] = mass_in[i] * field
 
     return tree_gravity_kernel
@@ -369,19 +431,19 @@ _walk_float64 = tree_walk_function("float64")
 
 @wp.kernel
 def tree_potential(
-    G: wp.float64,
-    inv_theta: wp.float64,
     position_in: wp.array(dtype=wp.vec3d),
     mass_in: wp.array(dtype=wp.float64),
     order: wp.array(dtype=wp.int32),
     count: int,
-    nodes: TreeNodes,
+    place: wp.array(dtype=wp.vec4d),
+    links: wp.array(dtype=wp.vec4i),
+    moments: wp.array2d(dtype=wp.vec4d),
     potential_out: wp.array(dtype=wp.float64),
 ):
     """Half of each particle's gravitational energy with all others (summed over particles, the
-    potential energy), for frames on the tree path: always float64, so that the energy ledger
-    closes to round-off."""
-    i, field, potential = _walk_float64(wp.tid(), G, inv_theta, position_in, order, count, nodes)
+    potential energy), for frames on the tree path: always float64 (float64 records), so that the
+    energy ledger closes to round-off."""
+    i, field, potential = _walk_float64(wp.tid(), position_in, order, count, place, links, moments)
     potential_out[i] = wp.float64(0.5) * mass_in[i] * potential
 
 
