@@ -44,16 +44,18 @@ class GravityTree:
         self.done = (zeros(nodes, wp.int32), zeros(nodes, wp.int32))
         # Walk records (kernels.walk_records): where each node is and what it links to, and its
         # moments for the gravity walk and for the float64 potential walk of frames.
-        self.place = zeros(nodes, wp.vec4d)
+        self.leaf_position = zeros(count, wp.vec3d)
         self.links = zeros(nodes, wp.vec4i)
-        self.moments = {p: zeros((nodes, 2), wp.vec4f if p == "mixed" else wp.vec4d) for p in {precision, "float64"}}
+        vec4 = {p: wp.vec4f if p == "mixed" else wp.vec4d for p in {precision, "float64"}}
+        self.place = {p: zeros(nodes, v) for p, v in vec4.items()}
+        self.moments = {p: zeros((nodes, 2), v) for p, v in vec4.items()}
         self.points = zeros(count, wp.vec3)
         self.grid = wp.HashGrid(GRID_CELLS, GRID_CELLS, GRID_CELLS, device=device)
         self.grid.reserve(count)
 
     def _walk_records(self, precision: str, G: float, theta_open: float) -> list:
         """The nodes' walk records for this G and theta_open (call :meth:`build` first)."""
-        records = [self.place, self.links, self.moments[precision]]
+        records = [self.box, self.place[precision], self.leaf_position, self.links, self.moments[precision]]
         inputs = [wp.float64(G), wp.float64(1.0 / theta_open), self.count, self.nodes, *records]
         self._launch(kernels.walk_records(precision), max(2 * self.count - 1, 1), inputs)
         return records
