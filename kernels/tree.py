@@ -19,7 +19,9 @@ trees") is built every evaluation, all on the device:
 7. ``tree_gravity``: each particle walks the tree from the root without a stack: a node is used
    whole (monopole + quadrupole) when its size is below ``theta_open`` times its distance and the
    particle is not one of its own, and the walk goes to its escape; else it is opened (the walk
-   goes to its first child); leaves are summed directly.
+   goes to its first child); leaves are summed directly.  On a GPU the walk is split
+   (``walk_roots``): the tree's largest subtrees are split until there are ``parts`` of them, each
+   particle walks each part in its own thread, and ``sum_field_parts`` adds the parts in order.
    ``tree_potential`` walks the same way for the potential energy of frames.
 
 The tree is built in float64 and deterministically: the sort is stable, each node's sum has a fixed
@@ -362,6 +364,7 @@ def tree_walk_function(precision: str):
     @wp.func
     def tree_walk(
         k: int,
+        start: int,
         position_in: wp.array(dtype=wp.vec3d),
         order: wp.array(dtype=wp.int32),
         count: int,
@@ -372,17 +375,18 @@ def tree_walk_function(precision: str):
         moments: wp.array2d(dtype=vec4),
     ):
         """Acceleration and potential (per unit mass) at the particle at sorted position k, from every
-        other particle (neighbours in space walk alike); a kernel that uses one of them lets the
-        compiler drop the other."""
+        other particle under node ``start`` (the root: all others; -1: none); a kernel that uses one
+        of them lets the compiler drop the other."""
         i = int(order[k])
         x = position_in[i]
         x_relative = vec(x - wp.float64(0.5) * (box[0] + box[1]))
         field = vec()
         potential = real(0.0)
-        node = int(-1)
-        if count > 1:
-            node = 0  # the root
-        while node >= 0:
+        node = start
+        end = int(-1)  # where the walk leaves start's subtree
+        if start >= 0:
+            end = int(links[start][3])
+        while node != end:
             link = links[node]
             if node >= count - 1:  # a leaf: one particle, summed directly (not the particle itself)
                 r = vec(x - leaf_position[link[0]])
@@ -412,21 +416,21 @@ def tree_walk_function(precision: str):
                 node = int(link[3])
             else:
                 node = int(link[2])
-        return i, wp.vec3d(field), wp.float64(potential)
+        return i, field, potential
 
     return tree_walk
 
 
 @functools.cache
 def tree_gravity(precision: str = "mixed"):
-    """Build the gravity kernel of the tree path in a precision's arithmetic (launch with dim=N)."""
+    """Build the gravity kernel of the tree path in a precision's arithmetic (launch with dim =
+    parts N; then :func:`sum_field_parts`)."""
     tree_walk = tree_walk_function(precision)
-    vec4 = _real_types(precision)[2]
+    _, vec, vec4, _ = _real_types(precision)
 
     @wp.kernel(module="unique", enable_backward=False)
     def tree_gravity_kernel(
         position_in: wp.array(dtype=wp.vec3d),
-        mass_in: wp.array(dtype=wp.float64),
         order: wp.array(dtype=wp.int32),
         count: int,
         box: wp.array(dtype=wp.vec3d),
@@ -434,13 +438,30 @@ def tree_gravity(precision: str = "mixed"):
         leaf_position: wp.array(dtype=wp.vec3d),
         links: wp.array(dtype=wp.vec4i),
         moments: wp.array2d(dtype=vec4),
-        force_out: wp.array(dtype=wp.vec3d),
+        roots: wp.array(dtype=wp.int32),
+        field_parts: wp.array2d(dtype=vec),
     ):
-        """Gravity on each particle, one thread per sorted position."""
-        i, field, potential = tree_walk(wp.tid(), position_in, order, count, box, place, leaf_position, links, moments)
-        force_out[i] = mass_in[i] * field
+        """The field at each particle from one part of the tree: thread part N + k walks the subtree
+        ``roots[part]`` for the particle at sorted position k."""
+        part = wp.tid() // count
+        k = wp.tid() - part * count
+        i, field, potential = tree_walk(k, int(roots[part]), position_in, order, count, box, place, leaf_position, links, moments)
+        field_parts[part, k] = field
 
     return tree_gravity_kernel
+
+
+@wp.kernel
+def sum_field_parts(
+    field_parts: wp.array2d(dtype=Any), order: wp.array(dtype=wp.int32), mass_in: wp.array(dtype=wp.float64), force_out: wp.array(dtype=wp.vec3d)
+):
+    """force_out = mass times the field summed over the parts, in part order (deterministic)."""
+    k = wp.tid()
+    field = wp.vec3d()
+    for part in range(field_parts.shape[0]):
+        field += wp.vec3d(field_parts[part, k])
+    i = int(order[k])
+    force_out[i] = mass_in[i] * field
 
 
 _walk_float64 = tree_walk_function("float64")
@@ -449,7 +470,6 @@ _walk_float64 = tree_walk_function("float64")
 @wp.kernel
 def tree_potential(
     position_in: wp.array(dtype=wp.vec3d),
-    mass_in: wp.array(dtype=wp.float64),
     order: wp.array(dtype=wp.int32),
     count: int,
     box: wp.array(dtype=wp.vec3d),
@@ -457,13 +477,63 @@ def tree_potential(
     leaf_position: wp.array(dtype=wp.vec3d),
     links: wp.array(dtype=wp.vec4i),
     moments: wp.array2d(dtype=wp.vec4d),
-    potential_out: wp.array(dtype=wp.float64),
+    roots: wp.array(dtype=wp.int32),
+    potential_parts: wp.array2d(dtype=wp.float64),
+):
+    """The potential (per unit mass) at each particle from one part of the tree, for frames on the
+    tree path: always float64 (float64 records), so that the energy ledger closes to round-off."""
+    part = wp.tid() // count
+    k = wp.tid() - part * count
+    i, field, potential = _walk_float64(k, int(roots[part]), position_in, order, count, box, place, leaf_position, links, moments)
+    potential_parts[part, k] = potential
+
+
+@wp.kernel
+def sum_potential_parts(
+    potential_parts: wp.array2d(dtype=wp.float64), order: wp.array(dtype=wp.int32), mass_in: wp.array(dtype=wp.float64), potential_out: wp.array(dtype=wp.float64)
 ):
     """Half of each particle's gravitational energy with all others (summed over particles, the
-    potential energy), for frames on the tree path: always float64 (float64 records), so that the
-    energy ledger closes to round-off."""
-    i, field, potential = _walk_float64(wp.tid(), position_in, order, count, box, place, leaf_position, links, moments)
+    potential energy): the parts summed in order."""
+    k = wp.tid()
+    potential = wp.float64(0.0)
+    for part in range(potential_parts.shape[0]):
+        potential += potential_parts[part, k]
+    i = int(order[k])
     potential_out[i] = wp.float64(0.5) * mass_in[i] * potential
+
+
+@wp.kernel
+def walk_roots(links: wp.array(dtype=wp.vec4i), roots: wp.array(dtype=wp.int32)):
+    """Split the tree into len(roots) subtrees that hold every leaf, so that as many threads walk
+    for each particle (a GPU needs ~1e6 threads in flight to hide the walk's memory latency; one
+    per particle is too few below a few 1e5): from the root, split the subtree holding most
+    particles into its two children, in place (the parts stay in depth-first order), until there
+    are enough.  Parts left over (fewer particles than parts) are -1, an empty walk.  One thread."""
+    parts = roots.shape[0]
+    roots[0] = wp.int32(0)
+    for s in range(1, parts):
+        roots[s] = wp.int32(-1)
+    made = int(1)
+    while made < parts:
+        best = int(-1)
+        most = int(1)
+        for s in range(made):
+            link = links[roots[s]]
+            held = int(link[1]) - int(link[0]) + 1
+            if held > most:
+                best = s
+                most = held
+        if best < 0:  # every part is a leaf
+            made = parts
+        else:
+            s = made
+            while s > best + 1:
+                roots[s] = roots[s - 1]
+                s -= 1
+            first_child = int(links[roots[best]][2])
+            roots[best] = wp.int32(first_child)
+            roots[best + 1] = links[first_child][3]  # the second child: where the first's walk goes next
+            made += 1
 
 
 @wp.kernel

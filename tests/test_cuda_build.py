@@ -29,7 +29,8 @@ SCRIPT = textwrap.dedent(
     kernels += [(forces.contact_pass(rolling), 256) for rolling in ("couple", "paper")]
     kernels += [(forces.contact_pass_ordered(rolling, 32), 32) for rolling in ("couple", "paper")]
     kernels += [(forces.pack_bodies_mixed, 256), (integrate.kick, 256), (observables.pair_observables, 256), (observables.pair_observables_tiled(128), 128),
-                (observables.candidate_observables, 256), (tree.tree_gravity("mixed"), 256), (tree.tree_gravity("float64"), 256), (tree.tree_potential, 256)]
+                (observables.candidate_observables, 256), (tree.tree_gravity("mixed"), 256), (tree.tree_gravity("float64"), 256), (tree.tree_potential, 256),
+                (tree.walk_records("mixed"), 256), (tree.walk_records("float64"), 256)]
     folder = tempfile.mkdtemp()
     for kernel, block_dim in kernels:
         kernel.module.options["block_dim"] = block_dim

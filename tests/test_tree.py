@@ -53,8 +53,8 @@ def test_tree_gravity_on_clouds_with_duplicate_morton_cells_and_tiny_counts(devi
 
 
 def test_the_default_precision_walks_in_float32_within_its_round_off(device):
-    """The default ("mixed") walk takes separations in float64 and evaluates nodes and pairs in
-    float32: per particle within 2e-6 of the float64 walk at the default theta_open (the tree's own
+    """The default ("mixed") walk takes a leaf's separation in float64, a node's in float32 relative
+    to the box's centre, and evaluates both in float32: per particle within 2e-6 of the float64 walk at the default theta_open (the tree's own
     error is ~1e-3), and with theta_open -> small within 2e-6 of float64 all-pairs."""
 
     def tree_gravity(state, theta_open, precision):
@@ -68,6 +68,48 @@ def test_the_default_precision_walks_in_float32_within_its_round_off(device):
         got = tree_gravity(state, theta_open, "mixed")
         relative = np.linalg.norm(got - want, axis=1) / np.linalg.norm(want, axis=1)
         assert 0.0 < relative.max() < 2e-6  # float32 terms: not bit-equal, well within the tree's error
+
+
+@pytest.mark.parametrize("precision", ["mixed", "float64"])
+def test_a_walk_split_into_parts_sums_the_same_pairs_and_nodes_no_worse(device, precision):
+    """On a GPU each particle walks the tree in parts (subtrees, one thread each). The parts tile
+    the sorted particles, with fewer particles than parts too. With every node opened (theta_open
+    -> small) the summed field and potential equal one whole walk's to the round-off of the partial
+    sums (float32 in "mixed"); at the default theta_open a part's ancestors can no longer be taken
+    whole, so the gravity changes by the tree's error, and its rms error against all-pairs does not grow."""
+    import warp as wp
+
+    from decco_warp.gravity_tree import GravityTree
+
+    def walk(state, parts, theta):
+        position = wp.array(state.positions, dtype=wp.vec3d, device=device)
+        mass = wp.array(state.masses, dtype=wp.float64, device=device)
+        tree = GravityTree(state.n, device, precision, parts=parts)
+        tree.build(position, mass)
+        force, potential = wp.zeros(state.n, dtype=wp.vec3d, device=device), wp.zeros(state.n, dtype=wp.float64, device=device)
+        tree.gravity(dw.Params().G, theta, position, mass, force)
+        tree.potential(dw.Params().G, theta, position, mass, potential)
+        links, roots = tree.links.numpy(), tree.roots.numpy()
+        held = sorted((links[r, 0], links[r, 1]) for r in roots if r >= 0)
+        assert len(held) == min(parts, state.n) and held[0][0] == 0 and held[-1][1] == state.n - 1
+        assert all(a[1] + 1 == b[0] for a, b in zip(held, held[1:]))  # the parts tile the sorted particles
+        return force.numpy(), potential.numpy()
+
+    pile = dw.load_pile(builtin_pile("target"))
+    for state in (pile, contact_cluster(5, seed=1), contact_cluster(1, seed=0)):
+        whole_force, whole_potential = walk(state, 1, 1e-6)
+        scale = np.abs(whole_force).max() or 1.0
+        for parts in (3, 64):
+            force, potential = walk(state, parts, 1e-6)
+            np.testing.assert_allclose(force, whole_force, rtol=0, atol=(1e-6 if precision == "mixed" else 1e-13) * scale)
+            np.testing.assert_allclose(potential, whole_potential, rtol=1e-13, atol=0)
+    exact = _gravity(pile, dw.Params(), device=device, force_kernel="reference")
+
+    def rms(force):
+        return float(np.sqrt(np.mean((np.linalg.norm(force - exact, axis=1) / np.linalg.norm(exact, axis=1)) ** 2)))
+
+    errors = [rms(walk(pile, parts, dw.Params().theta_open)[0]) for parts in (1, 8, 64)]
+    assert errors[2] <= errors[1] * 1.05 and errors[1] <= errors[0] * 1.05 and errors[0] <= SETTLED_RMS, errors
 
 
 def test_hash_grid_contacts_equal_all_pairs_contacts(device):
