@@ -21,11 +21,10 @@ GRAVITY_CHOICES = (*GRAVITY_SOLVERS, "auto")
 #: From this many particles ``gravity = "auto"`` takes the tree, per device kind. CPU: measured
 #: (docs/benchmarks.md: on copies of a settled pile the tree's step is the faster from ~1 150
 #: particles, since its hash grid notes only touching neighbours). CUDA: measured on an H100 on
-#: real piles, where a tree walk costs ~2.5x what it costs on the bench's copies of the shipped pile
-#: (there the tree wins from ~55 000): an 80 000-particle pile forms at 6.2 ms a step with all-pairs
-#: in the Newton layout against 8.3 to 10.5 ms with the tree, and the 1e5-particle collision steps
-#: at 9.6 ms with the tree, what all-pairs would take at its 1.05e12 pairs/s (docs/benchmarks.md).
-TREE_FROM = {"cpu": 1200, "cuda": 100_000}
+#: real piles (the innermost 32 768, 49 152 and 65 536 particles of a settled 80 000-particle pile):
+#: a step takes 1.15, 2.42 and 4.19 ms with all-pairs in the Newton layout, 1.72, 2.20 and 2.74 ms
+#: with the tree, so the two meet near 45 000 (docs/benchmarks.md, tenth sitting).
+TREE_FROM = {"cpu": 1200, "cuda": 45_000}
 
 
 def choose_gravity(n: int, device: str) -> str:
