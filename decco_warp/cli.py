@@ -614,10 +614,15 @@ def analyze(
     path: Path = typer.Argument(..., help="A run folder, or a folder of run folders (a sweep)."),
     min_members: int = typer.Option(50, "--min-members", help="Smallest cluster counted (paper Fig. 2: 50)."),
     every: int = typer.Option(1, "--every", help="Analyse every Nth frame (the last one always)."),
+    device: Optional[str] = typer.Option(
+        None, "--device", help="Where the cluster finder's O(N^2) smoothed density is summed: cpu (NumPy, all cores) or cuda[:N] (default: $DECCO_DEVICE, else CUDA if present, else cpu)."
+    ),
 ) -> None:
     """Fragments, the paper's metrics, conservation and energy of runs: analysis.h5, summary.json, figures."""
     import csv
     import json
+
+    from .device import DeviceError, resolve_device
 
     from .analysis.figures import draw_run, write_cross_run
     from .analysis.runs import analyse_run
@@ -627,6 +632,10 @@ def analyze(
 
     if min_members < 1 or every < 1:
         fail("--min-members and --every must be >= 1")
+    try:
+        device = resolve_device(device)
+    except DeviceError as error:
+        fail(str(error))
     if (path / "trajectory.h5").is_file():
         runs = [path]
     elif path.is_dir():
@@ -655,6 +664,7 @@ def analyze(
                         min_members=min_members,
                         every=every,
                         progress=lambda done, total, task=task: bar.update(task, total=total, completed=done, frames=f"{done}/{total} frames"),
+                        device=device,
                     )
                     draw_run(analysis, run_dir)
             except (FileFormatError, InputError) as error:

@@ -3,7 +3,7 @@
 This module (with gravity_tree.py for the tree path) is the only one that touches Warp arrays
 and launches kernels; the public objects (:class:`~decco_warp.simulation.Simulation`,
 :func:`~decco_warp.simulation.compute_forces`, :func:`~decco_warp.diagnostics.diagnostics`)
-are built on it.
+are built on it, and the cluster finder's smoothed density on a GPU (:func:`smoothed_density`).
 """
 
 from __future__ import annotations
@@ -533,3 +533,19 @@ class Engine:
         if records.shape != (self.count,):
             raise ValueError(f"snapshot deepest_contact has shape {records.shape}; expected {(self.count,)}")
         self.deepest_contact.assign(wp.array(records, dtype=wp.int64, device=self.device))
+
+
+def smoothed_density(sources: np.ndarray, norm: np.ndarray, inv_two_var: np.ndarray, targets: np.ndarray, device: str) -> np.ndarray:
+    """sum_j norm_j exp(-|y - x_j|^2 inv_two_var_j) at each target y, on ``device`` in float64
+    (kernels/observables.py; analysis/clusters.py gives the factors)."""
+    device = resolve_device(device)
+    if len(targets) == 0 or len(sources) == 0:
+        return np.zeros(len(targets))
+
+    def array(values, dtype):
+        return wp.array(np.ascontiguousarray(values, dtype=np.float64), dtype=dtype, device=device)
+
+    density = wp.zeros(len(targets), dtype=wp.float64, device=device)
+    inputs = [array(sources, wp.vec3d), array(norm, wp.float64), array(inv_two_var, wp.float64), array(targets, wp.vec3d)]
+    wp.launch(observables.smoothed_density, dim=len(targets), inputs=inputs, outputs=[density], device=device)
+    return density.numpy()

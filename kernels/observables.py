@@ -214,3 +214,23 @@ def candidate_observables(
         if d2 > wp.float64(0.0):
             total = add_contact_observables(model, total, i, j, d2, r_ij, radius_in, velocity_in)
     write_contact_observables(total, i, elastic_out, contacts_out, max_overlap_out, overlap_depth_out, overlap_partner_out)
+
+
+@wp.kernel
+def smoothed_density(
+    source_position: wp.array(dtype=wp.vec3d),
+    source_norm: wp.array(dtype=wp.float64),
+    source_inv_two_var: wp.array(dtype=wp.float64),
+    target_position: wp.array(dtype=wp.vec3d),
+    density_out: wp.array(dtype=wp.float64),
+):
+    """The cluster finder's smoothed density (paper sect. 2.7) at each target: sum over the sources of
+    m_j / ((2 pi)^(3/2) sigma_j^3) exp(-|y - x_j|^2 / (2 sigma_j^2)), the factors given per source.
+    O(N^2) in float64: the Gaussian is 10 radii wide, so it reaches across a whole pile."""
+    t = wp.tid()
+    y = target_position[t]
+    total = wp.float64(0.0)
+    for j in range(source_position.shape[0]):
+        r = y - source_position[j]
+        total += source_norm[j] * wp.exp(-wp.dot(r, r) * source_inv_two_var[j])
+    density_out[t] = total

@@ -142,3 +142,27 @@ def test_smoothed_density_equals_the_plain_gaussian_sum_in_any_block_size(piles,
         monkeypatch.setattr(clusters, "_CHUNK_ELEMENTS", elements)
         np.testing.assert_allclose(clusters.smoothed_density(x, m, sigma, at=at), plain, rtol=1e-9)
         np.testing.assert_allclose(clusters.smoothed_density(x, m, sigma)[:37], clusters.smoothed_density(x, m, sigma, at=x[:37]), rtol=1e-12)
+
+
+def test_the_smoothed_density_on_a_warp_device_equals_numpys_and_finds_the_same_clusters(piles, device):
+    """The O(N^2) smoothed density summed by a Warp kernel (what a GPU runs) against the NumPy sum,
+    at the particles and at other points, to float64 round-off; on CUDA the cluster finder through
+    it finds the NumPy path's clusters, member for member."""
+    from decco_warp.analysis.clusters import SMOOTHING_RADII, smoothed_density
+    from decco_warp.engine import smoothed_density as warp_sum
+
+    target, projectile = piles
+    distance = 3 * (pile_radius(target) + pile_radius(projectile))
+    fast = 5 * _escape_speed(target, distance)  # two clusters: moving apart well above escape speed
+    state = _combine(_moved(projectile, (0, 0, 0), (0, 0, 0)), _moved(target, (distance, 0, 0), (fast, 0, 0)))
+    x, m, sigmas = state.positions, state.masses, SMOOTHING_RADII * state.radii
+    elsewhere = x[::7] + 0.3 * sigmas[::7, None]
+    norm, inv_two_var = m / ((2.0 * math.pi) ** 1.5 * sigmas**3), 0.5 / sigmas**2
+    for at in (x, elsewhere):
+        want = smoothed_density(x, m, sigmas, at=at)
+        np.testing.assert_allclose(warp_sum(x, norm, inv_two_var, at, device), want, rtol=1e-12, atol=0)
+    if device.startswith("cuda"):
+        np.testing.assert_allclose(smoothed_density(x, m, sigmas, device=device), smoothed_density(x, m, sigmas), rtol=1e-12, atol=0)
+        on_gpu, in_numpy = dw.find_clusters(state, min_members=50, device=device), dw.find_clusters(state, min_members=50)
+        assert len(on_gpu) == len(in_numpy) == 2
+        assert all(np.array_equal(a.members, b.members) for a, b in zip(on_gpu, in_numpy))

@@ -11,6 +11,9 @@
 
 Vectorised: contacts come from a k-d tree (scipy.spatial.cKDTree) as a sparse
 graph, growth is sparse matrix-vector products, binding is one array test per pass.
+The smoothed density, O(N^2), runs in NumPy on the CPU's cores, or on a GPU when
+given one (``device="cuda"``: 1e5 particles in a fraction of a second instead of
+half a minute on 16 cores).
 """
 
 from __future__ import annotations
@@ -49,15 +52,20 @@ class Cluster:
 
 
 def smoothed_density(
-    positions: np.ndarray, masses: np.ndarray, sigmas: np.ndarray, at: np.ndarray | None = None
+    positions: np.ndarray, masses: np.ndarray, sigmas: np.ndarray, at: np.ndarray | None = None, device: str | None = None
 ) -> np.ndarray:
     """sum_j m_j N(y - x_j; sigma_j) at the points ``at`` (default: the particles themselves) [g/cm^3].
 
     The sum runs over the particles given (a particle's own mass included at its position).
+    ``device``: None or "cpu" sums in NumPy; a CUDA device ("cuda", "cuda:1") in a Warp kernel there.
     """
     at = positions if at is None else at
     norm = masses / ((2.0 * math.pi) ** 1.5 * sigmas**3)
     inv_two_var = 0.5 / sigmas**2
+    if device is not None and str(device).startswith("cuda"):
+        from ..engine import smoothed_density as on_device
+
+        return on_device(positions, norm, inv_two_var, at, device)
     # |a - b|^2 = |a|^2 + |b|^2 - 2 a.b through BLAS; centring first keeps the cancellation
     # error (~1e-16 of |x|^2) far below sigma^2 ~ (10 R)^2.
     centre = positions.mean(axis=0)
@@ -105,8 +113,9 @@ def contact_graph(positions: np.ndarray, radii: np.ndarray) -> sparse.csr_matrix
     return sparse.csr_matrix((data, (np.concatenate([i, j]), np.concatenate([j, i]))), shape=(n, n))
 
 
-def find_clusters(state: State, min_members: int = 50, G: float = G_CGS) -> list[Cluster]:
-    """Clusters of ``state`` (paper sect. 2.7), largest mass first.
+def find_clusters(state: State, min_members: int = 50, G: float = G_CGS, device: str | None = None) -> list[Cluster]:
+    """Clusters of ``state`` (paper sect. 2.7), largest mass first; ``device`` as for
+    :func:`smoothed_density`.
 
     >>> clusters = find_clusters(state, min_members=50)
     >>> largest = clusters[0]; largest.mass, largest.members.size
@@ -118,7 +127,7 @@ def find_clusters(state: State, min_members: int = 50, G: float = G_CGS) -> list
     contacts = contact_graph(x, radii)
     sigmas = SMOOTHING_RADII * radii
     # The density of the particles left: computed once, then each cluster's share is taken off.
-    density = smoothed_density(x, m, sigmas)
+    density = smoothed_density(x, m, sigmas, device=device)
     left = np.ones(n, dtype=bool)
     clusters: list[Cluster] = []
     while left.sum() >= min_members:
@@ -144,7 +153,7 @@ def find_clusters(state: State, min_members: int = 50, G: float = G_CGS) -> list
         left &= ~member
         rest = np.flatnonzero(left)
         if rest.size:
-            density[rest] -= smoothed_density(x[indices], m[indices], sigmas[indices], at=x[rest])
+            density[rest] -= smoothed_density(x[indices], m[indices], sigmas[indices], at=x[rest], device=device)
     clusters.sort(key=lambda c: (-c.mass, c.members[0]))
     return clusters
 

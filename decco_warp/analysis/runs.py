@@ -51,10 +51,11 @@ def snapshot_state(data: dict, frame: int) -> State:
     )
 
 
-def analyse_snapshot(state: State, target_mass: float, min_members: int = 50, G: float | None = None) -> dict:
-    """Clusters of one snapshot with their properties, and the headline numbers."""
+def analyse_snapshot(state: State, target_mass: float, min_members: int = 50, G: float | None = None, device: str | None = None) -> dict:
+    """Clusters of one snapshot with their properties, and the headline numbers (``device``: where
+    the cluster finder's smoothed density is summed, see :func:`.clusters.smoothed_density`)."""
     kwargs = {} if G is None else {"G": G}
-    clusters = find_clusters(state, min_members=min_members, **kwargs)
+    clusters = find_clusters(state, min_members=min_members, device=device, **kwargs)
     classes = int(state.size_class.max()) + 1
     label = np.full(state.n, -1, dtype=np.int32)
     rows = []
@@ -82,8 +83,9 @@ def analyse_snapshot(state: State, target_mass: float, min_members: int = 50, G:
     }
 
 
-def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None) -> dict:
-    """Analyse every ``every``-th frame of a run (and always the last); write analysis.h5 and summary.json."""
+def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, device: str | None = None) -> dict:
+    """Analyse every ``every``-th frame of a run (and always the last); write analysis.h5 and summary.json.
+    ``device``: as for :func:`analyse_snapshot`."""
     started = time.perf_counter()
     run_dir = Path(run_dir)
     data = read_trajectory(run_dir / "trajectory.h5")
@@ -98,7 +100,7 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None) -
 
     ratio, size_change, n_clusters = [], [], []
     for done, frame in enumerate(frames):
-        result = analyse_snapshot(snapshot_state(data, frame), target_mass, min_members, G)
+        result = analyse_snapshot(snapshot_state(data, frame), target_mass, min_members, G, device)
         ratio.append(result["largest_mass_ratio"])
         size_change.append(result["particle_size_change"])
         n_clusters.append(len(result["clusters"]))
