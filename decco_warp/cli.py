@@ -622,11 +622,10 @@ def analyze(
     import csv
     import json
 
-    from .device import DeviceError, resolve_device
-
     from .analysis.figures import draw_run, write_cross_run
     from .analysis.runs import analyse_run
     from .checks import InputError, check_destination
+    from .device import DeviceError, resolve_device
     from .io import FileFormatError
     from .lock import RunFolderLock, ensure_free
 

@@ -351,7 +351,7 @@ class Engine:
             self.channels.zero_()
         if self.tree is not None:
             self.tree.build(self.position, self.mass)
-            self.tree.gravity(self.params.G, self.params.theta_open, self.position, self.mass, self.force)
+            self.tree.gravity(self.params.G, self.params.theta_open, self.mass, self.force)
             self.tree.contact_candidates(self.position, self.radius, self.max_radius, self.candidate_count, self.candidates)
             self._contacts(outputs)
             return
@@ -461,7 +461,7 @@ class Engine:
         else:  # O(N log N): the potential from the tree, the contacts from the hash grid's candidates
             potential, *contacts = outputs.values()
             self.tree.build(self.position, self.mass)
-            self.tree.potential(self.params.G, self.params.theta_open, self.position, self.mass, potential)
+            self.tree.potential(self.params.G, self.params.theta_open, self.mass, potential)
             self.tree.contact_candidates(self.position, self.radius, self.max_radius, self.candidate_count, self.candidates)
             wp.launch(
                 observables.candidate_observables,

@@ -107,16 +107,16 @@ class GravityTree:
         self._launch(kernels.node_moments, self.count - 1, [self.nodes, before, after, self.pending])
         self._launch(kernels.node_moments, self.count - 1, [self.nodes, after, before, self.pending])
 
-    def gravity(self, G: float, theta_open: float, position: wp.array, mass: wp.array, force_out: wp.array) -> None:
+    def gravity(self, G: float, theta_open: float, mass: wp.array, force_out: wp.array) -> None:
         """force_out = gravity on every particle (call :meth:`build` first)."""
         records = self._walk_records(self.precision, G, theta_open)
-        self._launch(self._gravity_kernel, self.parts * self.count, [position, self.order, self.count, *records, self.field_parts])
+        self._launch(self._gravity_kernel, self.parts * self.count, [self.count, *records, self.field_parts])
         self._launch(kernels.sum_field_parts, self.count, [self.field_parts, self.order, mass, force_out])
 
-    def potential(self, G: float, theta_open: float, position: wp.array, mass: wp.array, potential_out: wp.array) -> None:
+    def potential(self, G: float, theta_open: float, mass: wp.array, potential_out: wp.array) -> None:
         """potential_out = half of each particle's gravitational energy (call :meth:`build` first)."""
         records = self._walk_records("float64", G, theta_open)
-        self._launch(kernels.tree_potential, self.parts * self.count, [position, self.order, self.count, *records, self.potential_parts])
+        self._launch(kernels.tree_potential, self.parts * self.count, [self.count, *records, self.potential_parts])
         self._launch(kernels.sum_potential_parts, self.count, [self.potential_parts, self.order, mass, potential_out])
 
     def contact_candidates(self, position, radius, max_radius: float, candidate_count, candidates) -> None:

@@ -365,8 +365,6 @@ def tree_walk_function(precision: str):
     def tree_walk(
         k: int,
         start: int,
-        position_in: wp.array(dtype=wp.vec3d),
-        order: wp.array(dtype=wp.int32),
         count: int,
         box: wp.array(dtype=wp.vec3d),
         place: wp.array(dtype=vec4),
@@ -377,8 +375,7 @@ def tree_walk_function(precision: str):
         """Acceleration and potential (per unit mass) at the particle at sorted position k, from every
         other particle under node ``start`` (the root: all others; -1: none); a kernel that uses one
         of them lets the compiler drop the other."""
-        i = int(order[k])
-        x = position_in[i]
+        x = leaf_position[k]
         x_relative = vec(x - wp.float64(0.5) * (box[0] + box[1]))
         field = vec()
         potential = real(0.0)
@@ -416,7 +413,7 @@ def tree_walk_function(precision: str):
                 node = int(link[3])
             else:
                 node = int(link[2])
-        return i, field, potential
+        return field, potential
 
     return tree_walk
 
@@ -430,8 +427,6 @@ def tree_gravity(precision: str = "mixed"):
 
     @wp.kernel(module="unique", enable_backward=False)
     def tree_gravity_kernel(
-        position_in: wp.array(dtype=wp.vec3d),
-        order: wp.array(dtype=wp.int32),
         count: int,
         box: wp.array(dtype=wp.vec3d),
         place: wp.array(dtype=vec4),
@@ -445,7 +440,7 @@ def tree_gravity(precision: str = "mixed"):
         ``roots[part]`` for the particle at sorted position k."""
         part = wp.tid() // count
         k = wp.tid() - part * count
-        i, field, potential = tree_walk(k, int(roots[part]), position_in, order, count, box, place, leaf_position, links, moments)
+        field, potential = tree_walk(k, int(roots[part]), count, box, place, leaf_position, links, moments)
         field_parts[part, k] = field
 
     return tree_gravity_kernel
@@ -469,8 +464,6 @@ _walk_float64 = tree_walk_function("float64")
 
 @wp.kernel
 def tree_potential(
-    position_in: wp.array(dtype=wp.vec3d),
-    order: wp.array(dtype=wp.int32),
     count: int,
     box: wp.array(dtype=wp.vec3d),
     place: wp.array(dtype=wp.vec4d),
@@ -484,7 +477,7 @@ def tree_potential(
     tree path: always float64 (float64 records), so that the energy ledger closes to round-off."""
     part = wp.tid() // count
     k = wp.tid() - part * count
-    i, field, potential = _walk_float64(k, int(roots[part]), position_in, order, count, box, place, leaf_position, links, moments)
+    field, potential = _walk_float64(k, int(roots[part]), count, box, place, leaf_position, links, moments)
     potential_parts[part, k] = potential
 
 
