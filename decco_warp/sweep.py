@@ -234,19 +234,22 @@ def _device_name(device: str) -> str:
         return ""
 
 
-def analyse_one(run_dir: str, min_members: int, analyse_every: int, keep_trajectory: bool) -> dict:
+def analyse_one(run_dir: str, min_members: int, analyse_every: int, keep_trajectory: bool, device: str | None = None) -> dict:
     """Analyse a finished run (unless its summary.json is current), draw its figures, and
     drop its trajectory if asked; returns its summary (``analysis_seconds``: what the analysis
-    took when it ran, also for a run found analysed).  Runs in a process of this machine."""
+    took when it ran, also for a run found analysed).  Runs in a process of this machine; the
+    cluster finder's O(N^2) density is summed on ``device`` (default as for runs: this machine's
+    GPU when it has one, where a 6 250-particle frame takes milliseconds, else NumPy)."""
     from .lock import RunFolderLock
 
     with RunFolderLock(run_dir):  # the run has finished: no one else should be writing there
-        return _analyse(Path(run_dir), min_members, analyse_every, keep_trajectory)
+        return _analyse(Path(run_dir), min_members, analyse_every, keep_trajectory, device)
 
 
-def _analyse(run_dir: Path, min_members: int, analyse_every: int, keep_trajectory: bool) -> dict:
+def _analyse(run_dir: Path, min_members: int, analyse_every: int, keep_trajectory: bool, device: str | None = None) -> dict:
     from .analysis.figures import draw_run
     from .analysis.runs import analyse_run
+    from .device import resolve_device
 
     summary_path = run_dir / SUMMARY_FILE
     trajectory = run_dir / TRAJECTORY_FILE
@@ -254,7 +257,7 @@ def _analyse(run_dir: Path, min_members: int, analyse_every: int, keep_trajector
     previous = json.loads(summary_path.read_text()) if summary_path.is_file() else None
     current = previous is not None and all(previous.get(k) == v for k, v in settings.items())
     if trajectory.is_file() and not (current and summary_path.stat().st_mtime >= trajectory.stat().st_mtime):
-        analysis = analyse_run(run_dir, min_members=min_members, every=analyse_every)
+        analysis = analyse_run(run_dir, min_members=min_members, every=analyse_every, device=resolve_device(device))
         draw_run(analysis, run_dir)
         summary = analysis["summary"]
     elif previous is not None:
@@ -313,7 +316,7 @@ def run_sweep(
         simulating = workers or (gpus if gpus > 0 else min(2, os.cpu_count() or 1))
         cluster = LocalCluster(n_workers=simulating, threads_per_worker=1, processes=True, dashboard_address=None)
         client = Client(cluster)
-    # Analysis (cluster finding) is CPU work: it runs here, beside the workers, in fresh processes.
+    # Analysis runs here, beside the workers, in fresh processes (its density on this machine's GPU if any).
     analysers = analysis_workers or max(1, (os.cpu_count() or 1) - (0 if gpus > 0 else simulating))
     pool = ProcessPoolExecutor(max_workers=analysers, mp_context=multiprocessing.get_context("spawn"))
     rows: list[dict | None] = [None] * len(runs)
