@@ -72,7 +72,7 @@ def main(
 
 @app.command()
 def info(device: Optional[str] = DeviceOption) -> None:
-    """Show the Warp version, the devices found and the one a run would use."""
+    """Show the Warp version, the devices found (each GPU with its memory) and the one a run would use."""
     import warp as wp
 
     from .device import DeviceError, describe_devices, resolve_device
@@ -84,12 +84,17 @@ def info(device: Optional[str] = DeviceOption) -> None:
         fail(str(error))
     typer.echo(f"decco-warp {__version__}")
     typer.echo(f"warp-lang  {wp.config.version}")
-    typer.echo("devices:")
-    for entry in describe_devices():
+    typer.echo("devices (* the one a run would use):")
+    devices = describe_devices()
+    for entry in devices:
         marker = "*" if entry["name"] == chosen else " "
-        typer.echo(f"  {marker} {entry['name']:<8} {entry['description']}")
+        memory = f", {entry['memory'] / 2**30:.1f} GiB" if entry["memory"] else ""
+        typer.echo(f"  {marker} {entry['name']:<8} {entry['description']}{memory}")
+    gpus = sum(1 for entry in devices if entry["is_cuda"])
     layout = choose_layout(10_240, chosen)
     typer.echo(f"would use: {chosen}")
+    if gpus:
+        typer.echo(f"a sweep here: {gpus} worker(s), one per GPU, cuda:0 to cuda:{gpus - 1} (--gpus N: the first N)")
     typer.echo(f"force kernel layout at N = 10 240: {layout.describe()}")
 
 
@@ -737,7 +742,12 @@ def view(
 def sweep(
     spec_file: Path = typer.Argument(..., help="Sweep specification (TOML): a run spec plus [sweep] and [sweep.grid]."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Address of a running Dask scheduler."),
-    workers: Optional[int] = typer.Option(None, "--workers", help="Local workers (default: one per GPU, else 2)."),
+    gpus: Optional[int] = typer.Option(
+        None, "--gpus", help="GPUs to use, cuda:0 to cuda:N-1, each with its own worker (default: all visible)."
+    ),
+    workers: Optional[int] = typer.Option(
+        None, "--workers", help="Local workers (default: one per GPU, else 2); more than GPUs share them in turn."
+    ),
     analysis_workers: Optional[int] = typer.Option(
         None, "--analysis-workers", help="Processes analysing finished runs here (default: this machine's cores)."
     ),
@@ -748,6 +758,7 @@ def sweep(
 
     from .analysis.figures import write_cross_run
     from .checks import InputError, check_destination
+    from .device import DeviceError, gpus_to_use
     from .lock import RunFolderLock
     from .spec import SpecError
     from .sweep import load_sweep, run_sweep, write_record, write_summary
@@ -758,6 +769,12 @@ def sweep(
         fail(str(error))
     if workers is not None and workers < 1 or analysis_workers is not None and analysis_workers < 1:
         fail("--workers and --analysis-workers must be >= 1")
+    if gpus is not None and scheduler:
+        fail("--gpus pins local workers; with --scheduler each worker uses its own device (its $DECCO_DEVICE)")
+    try:
+        gpus_to_use(gpus)
+    except DeviceError as error:
+        fail(str(error))
     started = time.perf_counter()
     folder = Path(settings["out"]) / settings["name"]
     try:
@@ -786,7 +803,7 @@ def sweep(
 
         previous = signal.signal(signal.SIGTERM, signal.default_int_handler)  # a batch scheduler's stop, as Ctrl-C
         try:
-            rows = run_sweep(settings, runs, scheduler, workers, on_result=report, analysis_workers=analysis_workers)
+            rows = run_sweep(settings, runs, scheduler, workers, report, analysis_workers=analysis_workers, gpus=gpus)
         except KeyboardInterrupt:
             rows = None
         finally:

@@ -77,9 +77,24 @@ def resolve_device(device: str | None = None) -> str:
 
 
 def describe_devices() -> list[dict]:
-    """Name and kind of every device Warp can use."""
+    """Name, kind and (a GPU's) memory in bytes of every device Warp can use."""
     init_warp()
     return [
-        {"name": d.alias, "description": d.name, "is_cuda": d.is_cuda}
+        {"name": d.alias, "description": d.name, "is_cuda": d.is_cuda, "memory": d.total_memory if d.is_cuda else None}
         for d in wp.get_devices()
     ]
+
+
+def gpus_to_use(requested: int | None = None) -> int:
+    """How many GPUs a local sweep uses, one worker pinned to each of cuda:0 to cuda:N-1:
+    ``requested`` (checked against those visible), by default all of them (0 on a CPU)."""
+    visible = cuda_device_count()
+    if requested is None:
+        return visible
+    if requested < 1:
+        raise DeviceError(f"--gpus {requested}: must be >= 1")
+    if visible == 0:
+        raise DeviceError(f"--gpus {requested}: Warp finds no GPU here; leave --gpus out to run on CPU workers (--workers)")
+    if requested > visible:
+        raise DeviceError(f"--gpus {requested}: only {visible} GPU(s) visible here, cuda:0 to cuda:{visible - 1}")
+    return requested

@@ -270,25 +270,45 @@ def _analyse(run_dir: Path, min_members: int, analyse_every: int, keep_trajector
 
 
 def _worker_device() -> str | None:
-    """One GPU per Dask worker (by worker number, among the GPUs of the worker's own machine),
-    each worker with its own Warp kernel cache."""
+    """The device of this Dask worker: the one it was pinned to (its own $DECCO_DEVICE, set by
+    :func:`local_cluster`, or by whoever started a remote worker), else None (the run's own
+    choice); each worker with its own Warp kernel cache."""
     try:
         from distributed import get_worker
 
         worker = get_worker()
     except (ImportError, ValueError):
         return None
-    from .device import cuda_device_count
-
-    gpus = cuda_device_count()
-    digits = "".join(c for c in str(worker.name) if c.isdigit())
-    index = int(digits) if digits else 0
     import warp as wp
 
-    cache = Path(os.environ.get("DECCO_CACHE", Path.home() / ".cache" / "decco-warp")) / f"warp-worker-{index}"
+    from .device import ENV_VARIABLE
+
+    label = "".join(c if c.isalnum() or c in "-_" else "_" for c in str(worker.name))
+    cache = Path(os.environ.get("DECCO_CACHE", Path.home() / ".cache" / "decco-warp")) / f"warp-worker-{label}"
     if wp.config.kernel_cache_dir is None or "warp-worker-" not in str(wp.config.kernel_cache_dir):
         wp.config.kernel_cache_dir = str(cache)
-    return f"cuda:{index % gpus}" if gpus > 0 else "cpu"
+    return os.environ.get(ENV_VARIABLE) or None
+
+
+def local_cluster(workers: int, gpus: int):
+    """A Dask LocalCluster of ``workers`` single-threaded processes, worker k pinned to cuda:(k mod
+    gpus) (to the CPU without GPUs) through its own $DECCO_DEVICE, which it keeps if restarted."""
+    from distributed import LocalCluster
+
+    from .device import ENV_VARIABLE
+
+    cluster = LocalCluster(n_workers=0, threads_per_worker=1, processes=True, dashboard_address=None, memory_limit=1 / workers)
+    spec = cluster.new_spec
+    for k in range(workers):
+        env = {ENV_VARIABLE: f"cuda:{k % gpus}" if gpus > 0 else "cpu"}
+        cluster.worker_spec[k] = {"cls": spec["cls"], "options": {**spec["options"], "env": env}}
+    cluster.scale(workers)
+    try:
+        cluster.wait_for_workers(workers, timeout=WORKER_START_SECONDS)
+    except BaseException:  # a worker that cannot start, or Ctrl-C: leave no processes behind
+        cluster.close()
+        raise
+    return cluster
 
 
 # --- the whole grid ------------------------------------------------------------------------
@@ -301,20 +321,24 @@ def run_sweep(
     workers: int | None = None,
     on_result=None,
     analysis_workers: int | None = None,
+    gpus: int | None = None,
 ) -> list[dict]:
-    """Simulate every run with Dask and analyse each here as it finishes; one row per run, in grid order."""
-    from distributed import Client, LocalCluster, as_completed
+    """Simulate every run with Dask and analyse each here as it finishes; one row per run, in grid order.
+    Local workers: one per GPU (the first ``gpus``, default all, see :func:`local_cluster`), else
+    ``workers`` (default 2) on the CPU; a ``scheduler``'s workers each use their own device."""
+    from distributed import Client, as_completed
 
-    from .device import cuda_device_count
+    from .device import cuda_device_count, gpus_to_use
 
-    gpus = cuda_device_count()
     if scheduler:
+        gpus = cuda_device_count()
         client = Client(scheduler)
         cluster = None
         simulating = 1
     else:
+        gpus = gpus_to_use(gpus)
         simulating = workers or (gpus if gpus > 0 else min(2, os.cpu_count() or 1))
-        cluster = LocalCluster(n_workers=simulating, threads_per_worker=1, processes=True, dashboard_address=None)
+        cluster = local_cluster(simulating, gpus)
         client = Client(cluster)
     # Analysis runs here, beside the workers, in fresh processes (its density on this machine's GPU if any).
     analysers = analysis_workers or max(1, (os.cpu_count() or 1) - (0 if gpus > 0 else simulating))
@@ -368,6 +392,9 @@ def run_sweep(
             cluster.close()
     return rows
 
+
+#: How long local workers may take to start (a loaded machine) before the sweep gives up [s].
+WORKER_START_SECONDS = 300
 
 #: How often the sweep looks for finished simulations and analyses [s].
 POLL_SECONDS = 0.2
