@@ -23,7 +23,7 @@ GRAVITY_CHOICES = (*GRAVITY_SOLVERS, "auto")
 #: particles, since its hash grid notes only touching neighbours). CUDA: measured on an H100 on
 #: real piles (the innermost 32 768, 49 152 and 65 536 particles of a settled 80 000-particle pile):
 #: a step takes 1.15, 2.42 and 4.19 ms with all-pairs in the Newton layout, 1.72, 2.20 and 2.74 ms
-#: with the tree, so the two meet near 45 000 (docs/benchmarks.md, tenth sitting).
+#: with the tree, so the two meet near 45 000 (docs/benchmarks.md, "The tree path").
 TREE_FROM = {"cpu": 1200, "cuda": 45_000}
 
 
