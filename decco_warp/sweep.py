@@ -16,6 +16,8 @@ A sweep specification is a run specification plus a ``[sweep]`` table:
     [sweep.grid]                   # the cartesian product of these lists
     "collision.eta" = [0.5, 1.0, 2.0]
     "collision.theta_deg" = [0.0, 22.0]
+    # several keys that go together: one entry, a list of values for each
+    "collision.target_spin_axis, collision.projectile_spin_axis" = [["+z", "+z"], ["+z", "-z"]]
 
 Every combination is checked as a run specification before anything runs.  The
 runs go to Dask workers (one per GPU); each finished run is analysed on this
@@ -93,26 +95,30 @@ def load_sweep(path) -> tuple[dict, list[dict]]:
     grid = sweep.get("grid", {})
     if not isinstance(grid, dict) or not grid:
         raise specs.SpecError("[sweep.grid] must list at least one \"table.key\" = [values]")
-    axes = []
+    axes = []  # per grid entry: its (table, key) pairs and, per value, one value for each
     for dotted, values in grid.items():
-        table, _, key = dotted.partition(".")
-        if table not in specs.SCHEMA or key not in specs.SCHEMA[table] or table == "run" and key in ("name", "out"):
-            raise specs.SpecError(f"[sweep.grid] {dotted!r} is not a sweepable \"table.key\"")
+        keys = [part.strip().partition(".")[::2] for part in dotted.split(",")]
+        for table, key in keys:
+            if table not in specs.SCHEMA or key not in specs.SCHEMA[table] or table == "run" and key in ("name", "out"):
+                raise specs.SpecError(f"[sweep.grid] {dotted!r} is not a sweepable \"table.key\"")
         if not isinstance(values, list) or not values:
             raise specs.SpecError(f"[sweep.grid] {dotted} must be a non-empty list")
-        axes.append((table, key, values))
-    seeded = "orientation_seed" in raw.get("collision", {}) or "collision.orientation_seed" in grid
+        if len(keys) > 1 and not all(isinstance(v, list) and len(v) == len(keys) for v in values):
+            raise specs.SpecError(f"[sweep.grid] {dotted} names {len(keys)} keys: each value must be a list of {len(keys)}")
+        axes.append((keys, [v if len(keys) > 1 else [v] for v in values]))
+    seeded = "orientation_seed" in raw.get("collision", {}) or any(("collision", "orientation_seed") in keys for keys, _ in axes)
     if settings["realizations"] > 1 and seeded:
         raise specs.SpecError("[sweep] realizations choose each run's orientation_seed: leave [collision] orientation_seed out")
     runs = []
-    for combination in itertools.product(*(values for _, _, values in axes)):
+    for combination in itertools.product(*(values for _, values in axes)):
         run = {table: dict(values) for table, values in raw.items() if isinstance(values, dict)}
         labels = []
-        for (table, key, _), value in zip(axes, combination):
-            run.setdefault(table, {})[key] = value
-            if table == "collision" and key in ("eta", "speed"):
-                run[table].pop("speed" if key == "eta" else "eta", None)
-            labels.append(f"{key}{_slug(value)}")
+        for (keys, _), values in zip(axes, combination):
+            for (table, key), value in zip(keys, values):
+                run.setdefault(table, {})[key] = value
+                if table == "collision" and key in ("eta", "speed"):
+                    run[table].pop("speed" if key == "eta" else "eta", None)
+                labels.append(f"{key}{_slug(value)}")
         run.setdefault("run", {})
         run["run"]["out"] = str(Path(settings["out"]) / name)
         for k in range(settings["realizations"]):
@@ -215,6 +221,20 @@ def simulate_batch(batch: list[dict], max_particles: int | None = None) -> list[
             else:
                 rows[k]["status"] = "ok"
     return [_timed(row) for row in rows]
+
+
+def _complete_row(spec: dict) -> dict | None:
+    """A sweep run's row if its folder holds it complete, else None (also when that cannot be told
+    here: the worker then finds out, and reports a damaged folder)."""
+    from .run import RUN_FAILURES, run_dir_of
+
+    run_dir = run_dir_of(spec)
+    try:
+        if not _run_complete(run_dir):
+            return None
+    except (*RUN_FAILURES, specs.SpecError):
+        return None
+    return _timed({"run": spec["run"]["name"], "run_dir": str(run_dir), "device": "auto", "status": "skipped (complete)"})
 
 
 def _prepare(spec: dict, device: str | None) -> tuple[dict, object]:
@@ -382,17 +402,24 @@ def run_sweep(
         # Runs in grid order, `ensemble` at a time to a worker (neighbours in a grid mostly share
         # their piles and Params, and those are stepped together).
         size, max_particles = ensemble_plan(settings.get("ensemble", 1), gpus)
-        batches = [list(range(k, min(k + size, len(runs)))) for k in range(0, len(runs), size)]
+        # Runs already complete (made by an earlier sweep) are reported here, so that the batches
+        # hold only runs to step and pack into full ensembles.
+        done = {k: _complete_row(spec) for k, spec in enumerate(runs)}
+        todo = [k for k, row in done.items() if row is None]
+        batches = [todo[k : k + size] for k in range(0, len(todo), size)]
         futures = {client.submit(simulate_batch, [runs[k] for k in batch], max_particles, pure=False): batch for batch in batches}
         simulations = as_completed(futures)
-        while not simulations.is_empty() or pending:
+        arrived = [([k for k, row in done.items() if row is not None], [row for row in done.values() if row is not None])]
+        while not simulations.is_empty() or pending or arrived:
             # Poll both kinds of work, so that each run is reported as soon as its analysis ends.
             for future in simulations.next_batch(block=False):
                 batch = futures[future]
                 try:
-                    results = future.result()
+                    arrived.append((batch, future.result()))
                 except Exception as error:  # a worker that died: record it, go on
-                    results = [{"run": runs[k]["run"]["name"], "status": "failed", "reason": f"worker lost: {error}"} for k in batch]
+                    arrived.append((batch, [{"run": runs[k]["run"]["name"], "status": "failed", "reason": f"worker lost: {error}"} for k in batch]))
+            while arrived:
+                batch, results = arrived.pop(0)
                 for k, row in zip(batch, results):
                     collision = runs[k]["collision"]
                     row.update(eta=collision.get("eta"), speed=collision.get("speed"), theta_deg=collision["theta_deg"])

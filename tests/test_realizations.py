@@ -155,18 +155,41 @@ def test_realizations_expand_each_point_with_seeds_that_adding_never_changes(tmp
         load_sweep(path)
 
 
-def test_a_sweep_of_realizations_records_them_in_its_table(tmp_path):
-    path = tmp_path / "s.toml"
-    path.write_text(SWEEP.format(out=tmp_path, k=2, etas="[0.5]"))
+def test_a_sweep_of_realizations_adds_runs_to_those_made_and_records_them(tmp_path):
+    """A sweep without realizations, its run kept without a checkpoint (as runs/results keeps them);
+    the same sweep with two realizations skips that run and adds the second, both in its table."""
     pytest.importorskip("distributed")
+    path = tmp_path / "s.toml"
+    path.write_text(SWEEP.format(out=tmp_path, k=1, etas="[0.5]"))
+    assert cli("sweep", str(path), "--workers", "1").returncode == 0
+    (tmp_path / "grid" / "eta0.5" / "checkpoint.h5").unlink()
+    made = (tmp_path / "grid" / "eta0.5" / "summary.json").read_text()
+    path.write_text(SWEEP.format(out=tmp_path, k=2, etas="[0.5]"))
     result = cli("sweep", str(path), "--workers", "1")
     assert result.returncode == 0, result.stderr
     with open(tmp_path / "grid" / "summary.csv") as f:
         rows = {row["run"]: row for row in csv.DictReader(f)}
-    assert {name: (row["realization"], row["status"]) for name, row in rows.items()} == {"eta0.5": ("0", "ok"), "eta0.5_r1": ("1", "ok")}
+    assert {name: (row["realization"], row["status"]) for name, row in rows.items()} == {
+        "eta0.5": ("0", "skipped (complete)"), "eta0.5_r1": ("1", "ok")
+    }  # fmt: skip
+    assert (tmp_path / "grid" / "eta0.5" / "summary.json").read_text() == made
     _, runs = load_sweep(path)
     assert rows["eta0.5_r1"]["orientation_seed"] == str(runs[1]["collision"]["orientation_seed"])
     assert rows["eta0.5"]["orientation_seed"] == "" and rows["eta0.5"]["spin_kind"] == "none"
+
+
+def test_keys_that_go_together_are_one_grid_entry(tmp_path):
+    path = tmp_path / "s.toml"
+    pairs = '[["+z", "+z"], ["+z", "-z"], ["+x", "+z"]]'
+    entry = f'"collision.target_spin_axis, collision.projectile_spin_axis" = {pairs}\n'
+    path.write_text(SWEEP.format(out=tmp_path, k=1, etas="[1.0, 2.0]").replace("[run]", entry + "[run]"))
+    _, runs = load_sweep(path)
+    axes = [(r["collision"]["target_spin_axis"], r["collision"]["projectile_spin_axis"], r["collision"]["eta"]) for r in runs]
+    assert axes == [(t, p, eta) for eta in (1.0, 2.0) for t, p in (("+z", "+z"), ("+z", "-z"), ("+x", "+z"))]
+    assert runs[1]["run"]["name"] == "eta1_target_spin_axispz_projectile_spin_axismz"
+    path.write_text(SWEEP.format(out=tmp_path, k=1, etas="[1.0]").replace("[run]", entry.replace('["+x", "+z"]', '["+x"]') + "[run]"))
+    with pytest.raises(specs.SpecError, match="list of 2"):
+        load_sweep(path)
 
 
 def _summary(eta, value, theta=0.0, ratio=0.25, spins="none"):
