@@ -379,6 +379,9 @@ def simulate(
     gap: Optional[float] = typer.Option(None, "--gap", help="Initial surface gap along x [cm]."),
     spin_target: Optional[str] = typer.Option(None, "--spin-target", help="FRACTION[,AXIS] of breakup spin, e.g. 0.5,+z."),
     spin_projectile: Optional[str] = typer.Option(None, "--spin-projectile", help="FRACTION[,AXIS] of breakup spin."),
+    orientation_seed: Optional[int] = typer.Option(
+        None, "--orientation-seed", help="Turn each pile by a random rotation drawn from this seed (a realization of the collision)."
+    ),
     steps: Optional[int] = typer.Option(None, "--steps", help="Steps to run."),
     duration: Optional[float] = typer.Option(None, "--duration", help="Simulated time to run [s], instead of --steps."),
     dt: Optional[str] = typer.Option(None, "--dt", help='Time step [s], or "auto" (eq. 17 for k_in).'),
@@ -418,7 +421,8 @@ def simulate(
             raw.get("run", {}).pop("steps", None)
             raw.get("run", {}).pop("duration", None)
             run_overrides.update(steps=steps, duration=duration)
-        collision = {"theta_deg": theta, "gap": gap, **_spin_option(spin_target, "target"), **_spin_option(spin_projectile, "projectile")}
+        collision = {"theta_deg": theta, "gap": gap, "orientation_seed": orientation_seed}
+        collision.update(**_spin_option(spin_target, "target"), **_spin_option(spin_projectile, "projectile"))
         if eta is not None or speed is not None:
             raw.get("collision", {}).pop("eta", None)
             raw.get("collision", {}).pop("speed", None)

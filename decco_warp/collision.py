@@ -37,6 +37,37 @@ def breakup_spin(state: State, G: float = G_CGS) -> float:
     return math.sqrt(G * state.total_mass / pile_radius(state) ** 3)
 
 
+def random_rotations(seed: int, count: int = 2) -> np.ndarray:
+    """``count`` rotation matrices drawn uniformly over all rotations (the Haar measure) from ``seed``,
+    in order: the same seed always gives the same rotations, on any machine.
+
+    A unit quaternion with four independent normal components is uniform on the 3-sphere, and so
+    its rotation is uniform over SO(3) (Shoemake 1992)."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"orientation_seed must be an integer >= 0; got {seed!r}")
+    quaternions = np.random.default_rng(int(seed)).standard_normal((count, 4))
+    w, x, y, z = (quaternions / np.linalg.norm(quaternions, axis=1, keepdims=True)).T
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
+        ],
+        axis=1,
+    )
+
+
+def rotate_pile(state: State, rotation: np.ndarray) -> State:
+    """A copy of ``state`` turned rigidly about its centre of mass by the 3x3 ``rotation``: positions
+    about the centre, velocities about the bulk velocity, and spins."""
+    turned = state.copy()
+    centre, bulk = state.centre_of_mass, state.bulk_velocity
+    turned.positions = centre + (state.positions - centre) @ rotation.T
+    turned.velocities = bulk + (state.velocities - bulk) @ rotation.T
+    turned.omegas = state.omegas @ rotation.T
+    return turned
+
+
 def _spin_vector(spin, state: State, G: float, which: str) -> np.ndarray | None:
     if spin is None:
         return None
@@ -62,6 +93,7 @@ def setup_collision(
     speed: float | None = None,
     G: float = G_CGS,
     device: str | None = None,
+    orientation_seed: int | None = None,
 ) -> State:
     """Both piles in the centre-of-mass frame, set to collide.
 
@@ -70,6 +102,10 @@ def setup_collision(
     either ``eta`` or ``speed`` (the relative speed [cm/s]).  ``theta_deg`` is
     the impact angle, ``gap`` [cm] the initial surface separation along x, and a
     spin is (fraction of breakup, axis) with axis one of +x, -x, +y, -y, +z, -z.
+    ``orientation_seed`` turns each pile about its centre of mass by a random rotation, uniform
+    over all rotations and drawn from the seed (:func:`random_rotations`: the target's first),
+    before anything else: a realization of the same collision (docs/model.md).  None keeps the
+    piles as their files hold them.
 
     The result has ``pile_id`` 0 (target) and 1 (projectile), and ``metadata``
     holding eta, speed, b, both radii and masses, KE, both self-potentials and
@@ -93,6 +129,9 @@ def setup_collision(
             f"the target must be the more massive pile: target {target.total_mass:.4g} g < "
             f"projectile {projectile.total_mass:.4g} g; swap them"
         )
+    rotations = None if orientation_seed is None else random_rotations(orientation_seed)
+    if rotations is not None:  # turned as the files hold them, before spins (along fixed axes) are given
+        target, projectile = rotate_pile(target, rotations[0]), rotate_pile(projectile, rotations[1])
     target_spin_vector = _spin_vector(target_spin, target, G, "target")
     projectile_spin_vector = _spin_vector(projectile_spin, projectile, G, "projectile")
 
@@ -156,6 +195,8 @@ def setup_collision(
         "projectile_potential": potential_p,
         "cross_potential": potential_total - potential_t - potential_p,
     }
+    if rotations is not None:
+        combined.metadata.update(orientation_seed=int(orientation_seed), target_rotation=rotations[0], projectile_rotation=rotations[1])
     return combined
 
 

@@ -184,6 +184,7 @@ def prepare_collision(spec: dict, device: str | None) -> tuple[State, dict]:
         projectile_spin=specs.spin_of(spec, "projectile"),
         G=spec["params"]["G"],
         device=device,
+        orientation_seed=collision.get("orientation_seed"),
     )
     return state, piles
 
@@ -233,7 +234,8 @@ class Plan:
         return [
             f"collision: {self.state.n} particles ({int((self.state.pile_id == 0).sum())} target + "
             f"{int((self.state.pile_id == 1).sum())} projectile), eta {meta['eta']:.6g}, speed {meta['speed']:.6g} cm/s, "
-            f"theta {meta['theta_deg']:g} deg, b {meta['impact_parameter']:.6g} cm",
+            f"theta {meta['theta_deg']:g} deg, b {meta['impact_parameter']:.6g} cm"
+            + (f", piles turned by random rotations of orientation_seed {meta['orientation_seed']}" if "orientation_seed" in meta else ""),
             *self.notes,
             f"parameters: k_in {params['k_in']:.6g} dyne/cm, dt {params['dt']:.6g} s, {self.spec['run']['steps']} steps "
             f"({self.spec['run']['steps'] * params['dt']:.6g} s)"

@@ -5,7 +5,8 @@ A specification has four tables, every key optional (defaults below):
     [run]        name, steps | duration, output_every, checkpoint_every, device, precision, out,
                  allow_unstable, max_overlap
     [piles]      target, projectile          (pile files, or builtin:target / builtin:projectile)
-    [collision]  eta | speed, theta_deg, gap, target_spin, target_spin_axis, projectile_spin, projectile_spin_axis
+    [collision]  eta | speed, theta_deg, gap, target_spin, target_spin_axis, projectile_spin, projectile_spin_axis,
+                 orientation_seed
     [params]     k_in, restitution, mu_k, mu_r, dt, G, rolling_friction, gravity, theta_open, max_compression
 
 Every problem is a :class:`SpecError` naming the table, the key and what is allowed.
@@ -96,6 +97,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "target_spin_axis": Key(str, "+z", lambda v: v in SPIN_AXES, ", ".join(SPIN_AXES)),
         "projectile_spin": Key(float, 0.0, lambda v: 0 <= v <= 1, "in [0, 1] (fraction of breakup spin)"),
         "projectile_spin_axis": Key(str, "+z", lambda v: v in SPIN_AXES, ", ".join(SPIN_AXES)),
+        "orientation_seed": Key(
+            int, None, _non_negative, "an integer >= 0 (turns each pile by a random rotation drawn from it: a realization)"
+        ),
     },
     "params": {
         "k_in": Key(float, _PARAMS_DEFAULT.k_in, _positive, "> 0 (dyne/cm) or \"auto\"", auto=True),

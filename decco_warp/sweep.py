@@ -11,9 +11,13 @@ A sweep specification is a run specification plus a ``[sweep]`` table:
     ensemble = "auto"              # runs handed to a worker at a time; those sharing Params step together
                                    # (auto: 4 at a time on a GPU, runs of the same particle count up to
                                    # 8 000 particles stepped together, larger ones alone; 1 on a CPU)
+    realizations = 1               # runs of each grid point: the piles as their files hold them, then
+                                   # turned by random rotations (orientation_seed derived from the point)
     [sweep.grid]                   # the cartesian product of these lists
     "collision.eta" = [0.5, 1.0, 2.0]
     "collision.theta_deg" = [0.0, 22.0]
+    # several keys that go together: one entry, a list of values for each
+    "collision.target_spin_axis, collision.projectile_spin_axis" = [["+z", "+z"], ["+z", "-z"]]
 
 Every combination is checked as a run specification before anything runs.  The
 runs go to Dask workers (one per GPU); each finished run is analysed on this
@@ -26,6 +30,7 @@ without stopping the others.
 from __future__ import annotations
 
 import csv
+import hashlib
 import itertools
 import json
 import multiprocessing
@@ -44,9 +49,10 @@ from ._version import __version__
 #: 1.35 to 1.47 times as fast as one at a time; at 10 000 one run nearly fills the GPU: 1.07x for 2).
 AUTO_ENSEMBLE = 4
 ENSEMBLE_MAX_PARTICLES = 8_000
-SWEEP_KEYS = {"name", "out", "min_members", "analyse_every", "keep_trajectory", "ensemble", "grid"}
+SWEEP_KEYS = {"name", "out", "min_members", "analyse_every", "keep_trajectory", "ensemble", "realizations", "grid"}
 SUMMARY_FIELDS = [
-    "run", "status", "reason", "n_particles", "mass_ratio", "theta_deg", "eta", "speed", "k_in", "dt", "steps",
+    "run", "status", "reason", "n_particles", "mass_ratio", "theta_deg", "eta", "speed", "spin_kind", "realization", "orientation_seed",
+    "k_in", "dt", "steps",
     "largest_mass_ratio", "ls12_largest_mass_ratio", "particle_size_change", "clusters", "deepest_overlap", "predicted_overlap",
     "momentum_drift", "angular_momentum_drift", "ledger_closure", "wall_seconds", "stepping_seconds", "analysis_seconds",
     "device", "device_name", "ensemble",
@@ -75,8 +81,9 @@ def load_sweep(path) -> tuple[dict, list[dict]]:
         "analyse_every": sweep.get("analyse_every", 1),
         "keep_trajectory": sweep.get("keep_trajectory", True),
         "ensemble": sweep.get("ensemble", "auto"),
+        "realizations": sweep.get("realizations", 1),
     }
-    for key in ("min_members", "analyse_every", "ensemble"):
+    for key in ("min_members", "analyse_every", "ensemble", "realizations"):
         value = settings[key]
         if key == "ensemble" and value == "auto":
             continue
@@ -88,31 +95,66 @@ def load_sweep(path) -> tuple[dict, list[dict]]:
     grid = sweep.get("grid", {})
     if not isinstance(grid, dict) or not grid:
         raise specs.SpecError("[sweep.grid] must list at least one \"table.key\" = [values]")
-    axes = []
+    axes = []  # per grid entry: its (table, key) pairs and, per value, one value for each
     for dotted, values in grid.items():
-        table, _, key = dotted.partition(".")
-        if table not in specs.SCHEMA or key not in specs.SCHEMA[table] or table == "run" and key in ("name", "out"):
-            raise specs.SpecError(f"[sweep.grid] {dotted!r} is not a sweepable \"table.key\"")
+        keys = [part.strip().partition(".")[::2] for part in dotted.split(",")]
+        for table, key in keys:
+            if table not in specs.SCHEMA or key not in specs.SCHEMA[table] or table == "run" and key in ("name", "out"):
+                raise specs.SpecError(f"[sweep.grid] {dotted!r} is not a sweepable \"table.key\"")
         if not isinstance(values, list) or not values:
             raise specs.SpecError(f"[sweep.grid] {dotted} must be a non-empty list")
-        axes.append((table, key, values))
+        if len(keys) > 1 and not all(isinstance(v, list) and len(v) == len(keys) for v in values):
+            raise specs.SpecError(f"[sweep.grid] {dotted} names {len(keys)} keys: each value must be a list of {len(keys)}")
+        axes.append((keys, [v if len(keys) > 1 else [v] for v in values]))
+    seeded = "orientation_seed" in raw.get("collision", {}) or any(("collision", "orientation_seed") in keys for keys, _ in axes)
+    if settings["realizations"] > 1 and seeded:
+        raise specs.SpecError("[sweep] realizations choose each run's orientation_seed: leave [collision] orientation_seed out")
     runs = []
-    for combination in itertools.product(*(values for _, _, values in axes)):
+    for combination in itertools.product(*(values for _, values in axes)):
         run = {table: dict(values) for table, values in raw.items() if isinstance(values, dict)}
         labels = []
-        for (table, key, _), value in zip(axes, combination):
-            run.setdefault(table, {})[key] = value
-            if table == "collision" and key in ("eta", "speed"):
-                run[table].pop("speed" if key == "eta" else "eta", None)
-            labels.append(f"{key}{_slug(value)}")
+        for (keys, _), values in zip(axes, combination):
+            for (table, key), value in zip(keys, values):
+                run.setdefault(table, {})[key] = value
+                if table == "collision" and key in ("eta", "speed"):
+                    run[table].pop("speed" if key == "eta" else "eta", None)
+                labels.append(f"{key}{_slug(value)}")
         run.setdefault("run", {})
-        run["run"]["name"] = "_".join(labels)
         run["run"]["out"] = str(Path(settings["out"]) / name)
-        runs.append(specs.resolve_spec(run))
+        for k in range(settings["realizations"]):
+            runs.append(specs.resolve_spec(realization(run, "_".join(labels), k)))
     names = [r["run"]["name"] for r in runs]
     if len(set(names)) != len(names):
         raise specs.SpecError("[sweep.grid] gives two runs the same name; use values that differ in their text")
     return settings, runs
+
+
+def realization(point: dict, name: str, k: int) -> dict:
+    """The ``k``-th realization of a grid point (raw tables): k = 0 is the point as written (its piles
+    as their files hold them: the runs a sweep without realizations makes, under the same name); k >= 1
+    is named NAME_rK and turns the piles by random rotations whose seed is drawn from the point's
+    piles and collision and from k alone, so that adding points, realizations or other [params]
+    never changes a run already made, and runs that differ only in their [params] share orientations."""
+    run = {table: dict(values) for table, values in point.items()}
+    run["run"]["name"] = name
+    if k > 0:
+        run["run"]["name"] = f"{name}_r{k}"
+        run.setdefault("collision", {})["orientation_seed"] = orientation_seed_of(specs.resolve_spec(point), k)
+    return run
+
+
+def orientation_seed_of(spec: dict, k: int) -> int:
+    """A seed in [0, 2^31) from a resolved point's piles and collision and the realization number."""
+    identity = json.dumps({"piles": spec["piles"], "collision": spec["collision"], "realization": k}, sort_keys=True)
+    return int(hashlib.sha256(identity.encode()).hexdigest()[:8], 16) & 0x7FFFFFFF
+
+
+def realization_of(spec: dict) -> int:
+    """Which realization of its point a sweep's run is (0: the piles as their files hold them)."""
+    if "orientation_seed" not in spec["collision"]:
+        return 0
+    suffix = spec["run"]["name"].rpartition("_r")[2]
+    return int(suffix) if suffix.isdigit() else 0
 
 
 def _slug(value) -> str:
@@ -181,6 +223,20 @@ def simulate_batch(batch: list[dict], max_particles: int | None = None) -> list[
     return [_timed(row) for row in rows]
 
 
+def _complete_row(spec: dict) -> dict | None:
+    """A sweep run's row if its folder holds it complete, else None (also when that cannot be told
+    here: the worker then finds out, and reports a damaged folder)."""
+    from .run import RUN_FAILURES, run_dir_of
+
+    run_dir = run_dir_of(spec)
+    try:
+        if not _run_complete(run_dir):
+            return None
+    except (*RUN_FAILURES, specs.SpecError):
+        return None
+    return _timed({"run": spec["run"]["name"], "run_dir": str(run_dir), "device": "auto", "status": "skipped (complete)"})
+
+
 def _prepare(spec: dict, device: str | None) -> tuple[dict, object]:
     """A sweep run's row so far, and the run prepared to start or resume (None if complete or failed)."""
     from .run import RUN_FAILURES, prepare_resume, prepare_start, run_dir_of
@@ -189,7 +245,7 @@ def _prepare(spec: dict, device: str | None) -> tuple[dict, object]:
     row = {"run": spec["run"]["name"], "run_dir": str(run_dir), "device": device or "auto"}
     try:
         checkpoint = run_dir / CHECKPOINT_FILE
-        if checkpoint.is_file() and _run_complete(run_dir):
+        if _run_complete(run_dir):
             row["status"] = "skipped (complete)"
             return row, None
         prepared = prepare_resume(run_dir, device=device) if checkpoint.is_file() else prepare_start(spec, overwrite=True, device=device)
@@ -218,11 +274,17 @@ def _timed(row: dict) -> dict:
 
 
 def _run_complete(run_dir: Path) -> bool:
-    """True when the run folder's checkpoint has reached the steps of its own spec.toml."""
+    """True when the run folder's checkpoint has reached the steps of its own spec.toml, or, for a run
+    kept without its checkpoint (the committed results), when its analysis reached them."""
     from .io import read_checkpoint
 
+    checkpoint, summary = run_dir / CHECKPOINT_FILE, run_dir / SUMMARY_FILE
+    if not checkpoint.is_file() and not summary.is_file():
+        return False
     spec = specs.resolve_spec(specs.load_spec_file(run_dir / "spec.toml"))
-    return int(read_checkpoint(run_dir / CHECKPOINT_FILE)[0]["step"]) >= spec["run"]["steps"]
+    if checkpoint.is_file():
+        return int(read_checkpoint(checkpoint)[0]["step"]) >= spec["run"]["steps"]
+    return int(json.loads(summary.read_text()).get("steps", -1)) >= spec["run"]["steps"]
 
 
 def _device_name(device: str) -> str:
@@ -364,20 +426,28 @@ def run_sweep(
         # Runs in grid order, `ensemble` at a time to a worker (neighbours in a grid mostly share
         # their piles and Params, and those are stepped together).
         size, max_particles = ensemble_plan(settings.get("ensemble", 1), gpus)
-        batches = [list(range(k, min(k + size, len(runs)))) for k in range(0, len(runs), size)]
+        # Runs already complete (made by an earlier sweep) are reported here, so that the batches
+        # hold only runs to step and pack into full ensembles.
+        done = {k: _complete_row(spec) for k, spec in enumerate(runs)}
+        todo = [k for k, row in done.items() if row is None]
+        batches = [todo[k : k + size] for k in range(0, len(todo), size)]
         futures = {client.submit(simulate_batch, [runs[k] for k in batch], max_particles, pure=False): batch for batch in batches}
         simulations = as_completed(futures)
-        while not simulations.is_empty() or pending:
+        arrived = [([k for k, row in done.items() if row is not None], [row for row in done.values() if row is not None])]
+        while not simulations.is_empty() or pending or arrived:
             # Poll both kinds of work, so that each run is reported as soon as its analysis ends.
             for future in simulations.next_batch(block=False):
                 batch = futures[future]
                 try:
-                    results = future.result()
+                    arrived.append((batch, future.result()))
                 except Exception as error:  # a worker that died: record it, go on
-                    results = [{"run": runs[k]["run"]["name"], "status": "failed", "reason": f"worker lost: {error}"} for k in batch]
+                    arrived.append((batch, [{"run": runs[k]["run"]["name"], "status": "failed", "reason": f"worker lost: {error}"} for k in batch]))
+            while arrived:
+                batch, results = arrived.pop(0)
                 for k, row in zip(batch, results):
                     collision = runs[k]["collision"]
                     row.update(eta=collision.get("eta"), speed=collision.get("speed"), theta_deg=collision["theta_deg"])
+                    row.update(realization=realization_of(runs[k]), orientation_seed=collision.get("orientation_seed"))
                     if row["status"] == "failed":
                         finish(k, row)
                     else:

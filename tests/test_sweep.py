@@ -9,6 +9,8 @@ from helpers import cli
 
 import decco_warp as dw
 from decco_warp import spec as specs
+from decco_warp.analysis.runs import spin_kind
+from decco_warp.collision import SPIN_AXES
 from decco_warp.sweep import load_sweep
 
 pytest.importorskip("distributed")
@@ -94,14 +96,21 @@ def test_bad_sweep_files_are_exit_2(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "name", ["fig3_validation", "fig3_headon", "fig3_reduced", "fig8_stress", "fig8_reduced", "fig9_spin", "fig9_reduced"]
+    "name", ["fig3_validation", "fig3_headon", "fig3_oblique", "fig3_reduced", "fig8_stress", "fig8_reduced", "fig9_spin", "fig9_reduced", "realizations"]
 )
 def test_shipped_paper_sweeps_are_valid(name):
     settings, runs = load_sweep(Path(__file__).parent.parent / "runs" / "paper" / f"{name}.toml")
     assert runs and len({r["run"]["name"] for r in runs}) == len(runs)
-    expected = {"fig3_validation": 63, "fig3_headon": 21, "fig8_stress": 3, "fig9_spin": 12}
+    expected = {"fig3_validation": 63, "fig3_headon": 21, "fig3_oblique": 42, "fig8_stress": 3, "fig9_spin": 24, "realizations": 18}
     if name in expected:
         assert len(runs) == expected[name]
+    if name == "fig9_spin":  # two axis pairs of each kind of spin, at every eta
+        kinds = [spin_kind(SPIN_AXES[r["collision"]["target_spin_axis"]], SPIN_AXES[r["collision"]["projectile_spin_axis"]]) for r in runs]
+        assert sorted(set(kinds)) == ["anti-parallel", "parallel", "perpendicular"] and all(kinds.count(k) == 8 for k in set(kinds))
+    if name in ("fig3_oblique", "realizations"):  # the same folder and names as the head-on runs they join
+        headon = {r["run"]["name"]: r for r in load_sweep(Path(__file__).parent.parent / "runs" / "paper" / "fig3_headon.toml")[1]}
+        assert {r["run"]["out"] for r in runs} == {r["run"]["out"] for r in headon.values()}
+        assert all(headon[r["run"]["name"]] == r for r in runs if r["run"]["name"] in headon)
     for run in runs:  # the paper's piles are shipped
         for which in ("target", "projectile"):
             reference = run["piles"][which]

@@ -141,20 +141,47 @@ def draw_run(analysis: dict, run_dir: Path) -> list[Path]:
     return paths
 
 
+def realization_points(summaries: list[dict], metric: str) -> list[dict]:
+    """Runs of one set-up family grouped by eta (realizations of one point: same piles, angle and
+    spins, the piles turned otherwise), in increasing eta: per point its ``eta``, every run's
+    ``values``, their ``mean``, ``low`` and ``high``, and the LS12 law's value (``law``, or None)."""
+    points: dict[float, list[dict]] = {}
+    for s in summaries:
+        points.setdefault(round(float(s["eta"]), 6), []).append(s)
+    out = []
+    for eta in sorted(points):
+        runs = points[eta]
+        values = np.array([float(r[metric]) for r in runs])
+        law = runs[0].get(f"ls12_{metric}")
+        out.append({"eta": float(runs[0]["eta"]), "values": values, "mean": float(values.mean()), "low": float(values.min()),
+                    "high": float(values.max()), "law": law})  # fmt: skip
+    return out
+
+
 def plot_runs(summaries: list[dict], metric: str, ylabel: str):
-    """Cross-run figure (Fig. 3 / Fig. 6 style): ``metric`` vs eta, one panel per mass ratio, a line per angle;
-    for m_lf/m_t, dashed, the Leinhardt & Stewart (2012) universal law at the same set-ups."""
+    """Cross-run figure (Fig. 3 / Fig. 6 / Fig. 9 style): ``metric`` vs eta, one panel per mass ratio,
+    a line per angle and kind of spin through each point's mean; where a point has several
+    realizations, each drawn faintly and a bar from the smallest to the largest; for m_lf/m_t,
+    dashed, the Leinhardt & Stewart (2012) universal law at the same set-ups."""
     ratios = sorted({round(s["mass_ratio"], 3) for s in summaries})
     fig, axes = plt.subplots(1, len(ratios), figsize=(4.0 * len(ratios), 3.6), squeeze=False, sharey=True)
     for ax, ratio in zip(axes[0], ratios):
         mine = [s for s in summaries if round(s["mass_ratio"], 3) == ratio]
-        for k, angle in enumerate(sorted({s["theta_deg"] for s in mine})):
-            runs = sorted((s for s in mine if s["theta_deg"] == angle), key=lambda s: s["eta"])
+        families = sorted({(s["theta_deg"], s.get("spin_kind") or "none") for s in mine})
+        for k, (angle, spins) in enumerate(families):
+            points = realization_points([s for s in mine if (s["theta_deg"], s.get("spin_kind") or "none") == (angle, spins)], metric)
             colour = plt.get_cmap("tab10")(k)
-            ax.plot([s["eta"] for s in runs], [s[metric] for s in runs], marker="o", color=colour, label=f"{angle:g} deg")
-            law = [(s["eta"], s.get(f"ls12_{metric}")) for s in runs]
+            label = f"{angle:g} deg" + (f", {spins} spins" if spins != "none" else "")
+            etas, means = [p["eta"] for p in points], [p["mean"] for p in points]
+            ax.plot(etas, means, marker="o", color=colour, label=label)
+            if any(len(p["values"]) > 1 for p in points):
+                ax.plot([p["eta"] for p in points for _ in p["values"]], [v for p in points for v in p["values"]],
+                        linestyle="", marker=".", alpha=0.35, color=colour)  # fmt: skip
+                spread = [[m - p["low"] for m, p in zip(means, points)], [p["high"] - m for m, p in zip(means, points)]]
+                ax.errorbar(etas, means, yerr=spread, linestyle="", color=colour, capsize=3)
+            law = [(p["eta"], p["law"]) for p in points]
             if metric == "largest_mass_ratio" and all(v is not None for _, v in law):
-                ax.plot(*zip(*law), linestyle="--", color=colour, label=f"{angle:g} deg, LS12 law")
+                ax.plot(*zip(*law), linestyle="--", color=colour, label=f"{label}, LS12 law")
         ax.set_title(f"m_p / m_t = {ratio:g}")
         ax.set_xlabel("eta = KE / |U|")
         ax.legend(fontsize=8)
@@ -162,9 +189,37 @@ def plot_runs(summaries: list[dict], metric: str, ylabel: str):
     return fig
 
 
+#: Fig. 6's markers by mass ratio m_p/m_t (others: a diamond).
+RATIO_MARKERS = {0.1: "s", 0.25: "^", 1.0: "o"}
+
+
+def plot_size_change(summaries: list[dict]):
+    """Fig. 6 style: the largest fragment's particle-size change vs eta from every run, one panel per
+    angle, markers by mass ratio, constructive (m_lf > m_t) blue and destructive orange."""
+    angles = sorted({s["theta_deg"] for s in summaries})
+    fig, axes = plt.subplots(1, len(angles), figsize=(4.0 * len(angles), 3.6), squeeze=False, sharey=True)
+    for ax, angle in zip(axes[0], angles):
+        mine = [s for s in summaries if s["theta_deg"] == angle]
+        for ratio in sorted({round(s["mass_ratio"], 2) for s in mine}):
+            runs = [s for s in mine if round(s["mass_ratio"], 2) == ratio]
+            for constructive, colour in ((True, "C0"), (False, "C1")):
+                chosen = [s for s in runs if (s["largest_mass_ratio"] > 1) == constructive]
+                if chosen:
+                    ax.plot([s["eta"] for s in chosen], [s["particle_size_change"] for s in chosen], linestyle="",
+                            marker=RATIO_MARKERS.get(ratio, "D"), color=colour, alpha=0.8,
+                            label=f"m_p/m_t = {ratio:g}, {'constructive' if constructive else 'destructive'}")  # fmt: skip
+        ax.axhline(0.0, color="0.6", linewidth=0.6)
+        ax.set_xscale("log")
+        ax.set_xlabel("eta = KE / |U|")
+        ax.set_title(f"theta = {angle:g} deg")
+        ax.legend(fontsize=7)
+    axes[0][0].set_ylabel("mean particle mass change of the largest fragment [%]")
+    return fig
+
+
 CROSS_RUN_FIGURES = {
-    "largest_fragment": ("largest_mass_ratio", "m_lf / m_t"),
-    "particle_size_change": ("particle_size_change", "mean particle mass change [%]"),
+    "largest_fragment": lambda summaries: plot_runs(summaries, "largest_mass_ratio", "m_lf / m_t"),
+    "particle_size_change": plot_size_change,
 }
 
 
@@ -178,6 +233,6 @@ def write_cross_run(folder: Path, summaries: list[dict]) -> list[Path]:
     usable = [s for s in summaries if s.get("eta") is not None and s.get("mass_ratio") is not None]
     paths = []
     if usable:
-        for name, (metric, label) in CROSS_RUN_FIGURES.items():
-            paths += save(plot_runs(usable, metric, label), folder / "figures", name)
+        for name, plot in CROSS_RUN_FIGURES.items():
+            paths += save(plot(usable), folder / "figures", name)
     return paths

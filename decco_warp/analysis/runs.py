@@ -38,6 +38,27 @@ def particle_size_change(cluster_mass: float, cluster_members: int, parents_mass
     return 100.0 * ((cluster_mass / cluster_members) / (parents_mass / parents_count) - 1.0)
 
 
+#: |cos| of the angle between the two spin axes past which they count as (anti-)parallel, and below
+#: which as perpendicular (the paper's Fig. 9 consolidates runs by these kinds).
+SPIN_ALIGNED = 0.99
+
+
+def spin_kind(target_spin, projectile_spin) -> str:
+    """The paper's Fig. 9 kind of a collision's spins: "none", "target only", "projectile only",
+    "parallel", "anti-parallel", "perpendicular" or "oblique" (any other angle)."""
+    target = np.zeros(3) if target_spin is None else np.asarray(target_spin, dtype=float)
+    projectile = np.zeros(3) if projectile_spin is None else np.asarray(projectile_spin, dtype=float)
+    size_t, size_p = float(np.linalg.norm(target)), float(np.linalg.norm(projectile))
+    if size_t == 0 or size_p == 0:
+        return "none" if size_t == size_p else "target only" if size_p == 0 else "projectile only"
+    cosine = float(target @ projectile) / (size_t * size_p)
+    if cosine > SPIN_ALIGNED:
+        return "parallel"
+    if cosine < -SPIN_ALIGNED:
+        return "anti-parallel"
+    return "perpendicular" if abs(cosine) < 1 - SPIN_ALIGNED else "oblique"
+
+
 def snapshot_state(data: dict, frame: int) -> State:
     static = data["static"]
     return State.from_arrays(
@@ -160,6 +181,8 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
         "eta": collision.get("eta"),
         "speed": collision.get("speed"),
         "theta_deg": collision.get("theta_deg"),
+        "spin_kind": spin_kind(collision.get("target_spin"), collision.get("projectile_spin")) if collision else None,
+        "orientation_seed": int(collision["orientation_seed"]) if "orientation_seed" in collision else None,
         "mass_ratio": (collision.get("projectile_mass", np.nan) / collision.get("target_mass", np.nan)) if collision else None,
         "target_mass": target_mass,
         "k_in": params.get("k_in"),
