@@ -96,7 +96,7 @@ def test_bad_sweep_files_are_exit_2(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "name", ["fig3_validation", "fig3_headon", "fig3_oblique", "fig3_reduced", "fig8_stress", "fig8_reduced", "fig9_spin", "fig9_reduced", "realizations"]
+    "name", ["fig3_validation", "fig3_headon", "fig3_oblique", "fig3_reduced", "fig8_stress", "fig8_reduced", "fig9_spin", "fig9_reduced", "realizations", "size_change_causes"]
 )
 def test_shipped_paper_sweeps_are_valid(name):
     settings, runs = load_sweep(Path(__file__).parent.parent / "runs" / "paper" / f"{name}.toml")
