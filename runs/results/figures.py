@@ -18,7 +18,7 @@ import numpy as np  # noqa: E402
 
 import decco_warp as dw  # noqa: E402
 from decco_warp.analysis import scaling  # noqa: E402
-from decco_warp.analysis.figures import SIZE_LABELS, save  # noqa: E402
+from decco_warp.analysis.figures import SIZE_LABELS, plot_size_change, realization_points, save  # noqa: E402
 from decco_warp.analysis.runs import read_analysis  # noqa: E402
 from decco_warp.collision import pile_radius  # noqa: E402
 
@@ -40,11 +40,8 @@ def runs(sweep: str, ratio: float | None = None) -> list[dict]:
     return sorted(found, key=lambda r: r["summary"]["eta"])
 
 
-def panel_sets() -> list[tuple[str, float, str]]:
-    """One panel per sweep and mass ratio that has runs: the head-on grid first, then 22 deg."""
-    sets = [("fig3", ratio, f"m_p/m_t = {label}, head-on") for ratio, label in ((0.1, "1/10"), (0.25, "1/4"), (1.0, "1"))]
-    sets.append(("fig8", 0.25, "m_p/m_t = 1/4, 22 deg"))
-    return [entry for entry in sets if runs(entry[0], entry[1])]
+RATIOS = ((0.1, "1/10"), (0.25, "1/4"), (1.0, "1"))
+ANGLES = (0.0, 22.0, 44.0)
 
 
 def ls12_curve(summary: dict, etas: np.ndarray) -> np.ndarray:
@@ -60,37 +57,65 @@ def ls12_curve(summary: dict, etas: np.ndarray) -> np.ndarray:
     return np.array([scaling.largest_mass_ratio({**collision, "kinetic_energy": kinetic_per_eta * e}) for e in etas])
 
 
-def panels(sets: list[tuple[str, float, str]]):
-    return plt.subplots(1, len(sets), figsize=(4.4 * len(sets), 3.8), squeeze=False)
+def draw_points(ax, summaries: list[dict], metric: str, colour: str, label: str) -> None:
+    """Each point's mean (marker and line), every realization faintly, a bar from the smallest to the largest."""
+    points = realization_points(summaries, metric)
+    etas, means = [p["eta"] for p in points], [p["mean"] for p in points]
+    spread = [[m - p["low"] for m, p in zip(means, points)], [p["high"] - m for m, p in zip(means, points)]]
+    ax.errorbar(etas, means, yerr=spread, marker="o", color=colour, capsize=3, label=label)
+    several = [p for p in points if len(p["values"]) > 1]
+    ax.plot([p["eta"] for p in several for _ in p["values"]], [v for p in several for v in p["values"]], ".", color=colour, alpha=0.35)
 
 
-def largest_fragment(sets):
-    fig, axes = panels(sets)
+def largest_fragment():
+    """Fig. 3: nine panels, angles by row and mass ratios by column, beside the LS12 law."""
+    fig, axes = plt.subplots(3, 3, figsize=(13, 10.5), sharex=True, sharey="col")
     etas = np.geomspace(0.3, 15, 200)
-    for ax, (sweep, ratio, title) in zip(axes[0], sets):
-        s = [r["summary"] for r in runs(sweep, ratio)]
-        ax.plot([x["eta"] for x in s], [x["largest_mass_ratio"] for x in s], "o", color="C0", label="decco-warp")
-        ax.plot(etas, ls12_curve(s[0], etas), "--", color="C1", label="LS12 universal law (small bodies)")
-        ax.axhline(1.0, color="0.6", linewidth=0.6)
-        ax.set_xscale("log")
-        ax.set_xlabel("eta = KE / |U|")
-        ax.set_title(title)
-        ax.legend(fontsize=8, loc="lower left")  # merged runs sit top left, the law's tail bottom right
-    axes[0][0].set_ylabel("m_lf / m_t")
+    summaries = [r["summary"] for r in runs("fig3")]
+    for row, angle in enumerate(ANGLES):
+        for col, (ratio, label) in enumerate(RATIOS):
+            ax = axes[row][col]
+            mine = [s for s in summaries if round(s["mass_ratio"], 2) == ratio and s["theta_deg"] == angle]
+            if mine:
+                draw_points(ax, mine, "largest_mass_ratio", "C0", "decco-warp (mean, range of realizations)")
+                ax.plot(etas, ls12_curve(mine[0], etas), "--", color="C1", label="LS12 universal law (small bodies)")
+            else:
+                ax.text(0.5, 0.5, "not run", transform=ax.transAxes, ha="center", color="0.5")
+            if (ratio, angle) == (0.25, 22.0):  # the Fig. 8 runs: the same set-ups, stepped in another layout
+                fig8 = [r["summary"] for r in runs("fig8")]
+                ax.plot([x["eta"] for x in fig8], [x["largest_mass_ratio"] for x in fig8], "x", color="C2", label="Fig. 8 runs (fused layout)")
+                ax.legend(fontsize=7, loc="lower left")
+            ax.axhline(1.0, color="0.6", linewidth=0.6)
+            ax.set_xscale("log")
+            ax.set_title(f"m_p/m_t = {label}, theta = {angle:g} deg", fontsize=10)
+            if row == 2:
+                ax.set_xlabel("eta = KE / |U|")
+            if col == 0:
+                ax.set_ylabel("m_lf / m_t")
+    axes[0][0].legend(fontsize=7, loc="lower left")  # merged runs sit top left, the law's tail bottom right
     return fig
 
 
-def size_change(sets):
-    fig, axes = panels(sets)
-    for ax, (sweep, ratio, title) in zip(axes[0], sets):
-        s = [r["summary"] for r in runs(sweep, ratio)]
-        colours = ["C0" if x["largest_mass_ratio"] > 1 else "C1" for x in s]
-        ax.scatter([x["eta"] for x in s], [x["particle_size_change"] for x in s], c=colours)
-        ax.axhline(0.0, color="0.6", linewidth=0.6)
-        ax.set_xscale("log")
-        ax.set_xlabel("eta = KE / |U|")
-        ax.set_title(f"{title}\n(blue: constructive, orange: destructive)")
-    axes[0][0].set_ylabel("mean particle mass change of the largest fragment [%]")
+def size_change():
+    """Fig. 6: every run's particle-size change, a panel per angle, markers by mass ratio."""
+    return plot_size_change([r["summary"] for r in runs("fig3")])
+
+
+def spins():
+    """Fig. 9: equal masses head-on, m_lf/m_t vs eta per kind of spin; the bars span the runs that the
+    kind consolidates (axis pairs and realizations)."""
+    spinning = [r["summary"] for r in runs("fig9")]
+    still = [r["summary"] for r in runs("fig3", 1.0) if r["summary"]["theta_deg"] == 0 and r["summary"]["eta"] >= 2.9]
+    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    for k, kind in enumerate(("none", "parallel", "anti-parallel", "perpendicular")):
+        mine = still if kind == "none" else [s for s in spinning if s.get("spin_kind") == kind]
+        if mine:
+            draw_points(ax, mine, "largest_mass_ratio", f"C{k}", "no spin" if kind == "none" else f"{kind} spins")
+    ax.set_xscale("log")
+    ax.set_xlabel("eta = KE / |U|")
+    ax.set_ylabel("m_lf / m_t")
+    ax.set_title("equal masses, head-on, spins at half breakup")
+    ax.legend(fontsize=8)
     return fig
 
 
@@ -127,10 +152,13 @@ def conservation():
 
 def overlaps():
     fig, ax = plt.subplots(figsize=(5.0, 4.0))
-    for sweep, ratio, title in panel_sets():
+    sets = [("fig8", None, "Fig. 8 runs (a frame every 1 000 steps)")]
+    sets += [("fig3", ratio, f"Fig. 3, m_p/m_t = {label} (every 5 000)") for ratio, label in RATIOS]
+    for sweep, ratio, title in sets:
         s = [r["summary"] for r in runs(sweep, ratio)]
         marker = "o" if sweep == "fig8" else "s"
-        ax.plot([x["predicted_overlap"] for x in s], [x["deepest_overlap"] for x in s], marker, label=title)
+        if s:
+            ax.plot([x["predicted_overlap"] for x in s], [x["deepest_overlap"] for x in s], marker, label=title)
     line = np.array([0.1, 4.0])
     ax.plot(line, line, color="0.5", linewidth=0.8, label="measured = predicted")
     ax.plot(line, 0.1 * line, color="0.5", linestyle=":", linewidth=0.8, label="1/10 of predicted")
@@ -143,10 +171,10 @@ def overlaps():
 
 
 def main() -> None:
-    sets = panel_sets()
     for name, fig in [
-        ("validation-largest-fragment", largest_fragment(sets)),
-        ("validation-size-change", size_change(sets)),
+        ("validation-largest-fragment", largest_fragment()),
+        ("validation-size-change", size_change()),
+        ("validation-spins", spins()),
         ("validation-stress-shares", stress_shares()),
         ("validation-conservation", conservation()),
         ("validation-overlaps", overlaps()),
