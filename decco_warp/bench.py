@@ -49,6 +49,13 @@ class BenchRow:
     """Systems of n particles stepped together (an ensemble); pairs/s counts all of them."""
     system: str = "lattice"
     """The test system: ``lattice`` or ``piles`` (see the module's docstring)."""
+    particles_per_s: float = math.nan
+    """Particles advanced per second by the full step (all systems)."""
+    gravity: str = "all-pairs"
+    """The gravity solver: a tree row has no pairs/s and no fraction of the all-pairs limit (it does
+    not compute the pairs); ``versus_all_pairs`` compares it with all-pairs where both were timed."""
+    versus_all_pairs: float | None = None
+    """All-pairs step time over this row's, at the same N in the same call (tree rows)."""
 
 
 #: The test systems of :func:`bench_size`.
@@ -164,8 +171,8 @@ def bench_size(
     systems: int = 1,
     system: str = "lattice",
 ) -> BenchRow:
-    """One row: the force evaluation and the full step at ``n`` (pairs/s counts N^2 pairs, also
-    for the tree, whose figure is then an equivalent rate), beside the one-thread-per-particle kernel.
+    """One row: the force evaluation and the full step at ``n`` (pairs/s counts N^2 pairs; a tree row
+    gives none, only its times and particles/s), beside the one-thread-per-particle kernel.
     With ``systems`` > 1, that many systems of ``n`` stepped together, and pairs/s counts them all."""
     state = bench_system(system, n, systems)
     sizes = [n] * systems
@@ -182,7 +189,7 @@ def bench_size(
     else:
         baseline_seconds = math.nan
     limit, _ = device_limit_pairs_per_s(device)
-    pairs = float(n) * n * systems
+    pairs = float(n) * n * systems if gravity == "all-pairs" else math.nan
     return BenchRow(
         n=n,
         device=device,
@@ -193,11 +200,13 @@ def bench_size(
         step_seconds=step_seconds,
         step_pairs_per_s=pairs / step_seconds,
         baseline_seconds=baseline_seconds,
-        baseline_pairs_per_s=pairs / baseline_seconds,
+        baseline_pairs_per_s=float(n) * n * systems / baseline_seconds,
         speedup=baseline_seconds / force_seconds,
-        fraction_of_limit=None if limit is None else (pairs / step_seconds) / limit,
+        fraction_of_limit=None if limit is None or gravity != "all-pairs" else (pairs / step_seconds) / limit,
         systems=systems,
         system=system,
+        particles_per_s=n * systems / step_seconds,
+        gravity=gravity,
     )
 
 

@@ -67,6 +67,26 @@ def test_bench_cli_writes_a_table_with_its_baseline(tmp_path):
     assert "3 systems together" in rows[3]["layout"] and ratio == round(rows[3]["step_pairs_per_s"] / rows[0]["step_pairs_per_s"], 2)
 
 
+def test_bench_gives_the_tree_in_its_own_terms(tmp_path):
+    """A tree row: its step time, particles/s and its ratio to the all-pairs step of the same call;
+    no pairs/s (it does not compute the pairs) and no fraction of the all-pairs limit."""
+    out = tmp_path / "bench.json"
+    result = subprocess.run(
+        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", "bench", "--device", "cpu", "--n", "300",
+         "--seconds", "0.05", "--steps", "2", "--gravity", "all-pairs,tree", "--json", str(out)],
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode == 0, result.stderr
+    pairs, tree = json.loads(out.read_text())["rows"]
+    assert pairs["gravity"] == "all-pairs" and tree["gravity"] == "tree"
+    assert tree["step_pairs_per_s"] is None and tree["force_pairs_per_s"] is None and tree["fraction_of_limit"] is None
+    for row in (pairs, tree):
+        assert np.isclose(row["particles_per_s"], row["n"] / row["step_seconds"])
+    assert np.isclose(tree["versus_all_pairs"], pairs["step_seconds"] / tree["step_seconds"])
+    assert f"{tree['versus_all_pairs']:.2f}x the all-pairs step" in tree["layout"] and "particles/s" in result.stdout
+
+
 def test_bench_cli_rejects_bad_layouts():
     for layouts in ("128:4", "1:4:4:0:split:newton"):
         result = subprocess.run(
