@@ -16,14 +16,17 @@ import warp as wp
 
 from .device import resolve_device
 from .gravity_tree import GravityTree
-from .kernels import forces as force_kernels
 from .kernels import integrate, observables
+from .kernels.bodies import BODY_TYPES, PACK_KERNELS, PRECISIONS
+from .kernels.contacts import CANDIDATES, LEDGER_CHANNELS, contact_pass, unpack_depth
+from .kernels.fused import pair_forces_tiled
+from .kernels.newton import NEWTON_TILE_MAX, GatherRows, TilePair, contact_pass_ordered, gather_newton, pair_gravity_newton
 from .kernels.pair import ContactModel
+from .kernels.reference import pair_forces_reference
+from .kernels.split import pair_gravity_tiled
 from .params import Params
 from .state import State
 
-PRECISIONS = force_kernels.PRECISIONS
-NEWTON_TILE_MAX = force_kernels.NEWTON_TILE_MAX
 FORCE_KERNELS = ("tiled", "reference")
 
 #: Per-particle outputs of kernels/observables.py, in the kernel's order.
@@ -38,7 +41,7 @@ PAIR_OBSERVABLES = {
 #: Threads per particle of the observables kernel on a GPU.
 OBSERVABLES_BLOCK = 128
 #: Lanes per particle of the Newton layout's contact pass on a GPU (one on the CPU): its
-#: candidates, at most force_kernels.CANDIDATES, two a lane.
+#: candidates, at most kernels/contacts.py CANDIDATES, two a lane.
 CONTACT_BLOCK = 32
 
 
@@ -60,11 +63,11 @@ class Layout:
     """Cap on registers per thread on CUDA (0: the compiler's choice)."""
     contact_pass: bool = False
     """Split the step's forces in two launches: a gravity-only sweep noting contact candidates,
-    then the contacts one thread per particle (kernels/forces.py).  ``contact_slots`` is unused."""
+    then the contacts one thread per particle (kernels/split.py).  ``contact_slots`` is unused."""
     prefetch: bool = False
-    """Load each tile of j one tile ahead, while the tile before is swept (kernels/forces.py)."""
+    """Load each tile of j one tile ahead, while the tile before is swept (kernels/fused.py)."""
     newton: bool = False
-    """Each pair once (Newton's third law, kernels/forces.py ``pair_gravity_newton``): a block is one
+    """Each pair once (Newton's third law, kernels/newton.py): a block is one
     warp (``block_dim`` 32 on a GPU, 1 on the CPU) meeting two tiles of ``particles_per_block``
     particles, gravity given to both sides, then the contacts in their own pass as with
     ``contact_pass``.  ``contact_slots`` and ``prefetch`` are unused."""
@@ -144,7 +147,7 @@ LAYOUT_CHOICES = ("auto", "split", "prefetch", "split+prefetch", "newton")
 
 
 def newton_layout(device: str) -> Layout:
-    """The Newton layout (each pair once, kernels/forces.py ``pair_gravity_newton``) on ``device``:
+    """The Newton layout (each pair once, kernels/newton.py) on ``device``:
     a warp meeting tiles of 64 on CUDA, tiles of 4 on the CPU's one lane."""
     if device.startswith("cuda"):
         return Layout(block_dim=32, particles_per_block=NEWTON_TILE_MAX, newton=True)
@@ -185,7 +188,7 @@ def tiled_blocks(starts: np.ndarray, ends: np.ndarray, per_block: int) -> np.nda
 
 
 def newton_tiles(starts: np.ndarray, ends: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """The Newton layout's tile pairs (kernels/forces.py ``TilePair``), each particle's rows
+    """The Newton layout's tile pairs (kernels/newton.py ``TilePair``), each particle's rows
     (``GatherRows``) and the number of rows.  A system's particles are cut into tiles of ``size``;
     its tile pairs (a, b), a <= b, each meet once; row a * n + b (after the rows of the systems
     before) holds what tile a gets from tile b."""
@@ -262,16 +265,16 @@ class Engine:
         # Energy ledger (kernels/integrate.py): contact channels of the last force
         # evaluation, and the work of each channel since the start, per particle.
         ledger_rows = self.count if ledger else 0
-        channel_count = len(force_kernels.LEDGER_CHANNELS)
+        channel_count = len(LEDGER_CHANNELS)
         self.channels = wp.zeros((ledger_rows, channel_count), dtype=wp.vec3d, device=self.device)
         self.work = wp.zeros(ledger_rows, dtype=wp.vec4d, device=self.device)
         # Each particle's deepest contact met by any force evaluation since the host last took it
-        # (kernels/forces.py note_depth): frames report the peak between them, not a sample.
+        # (kernels/contacts.py note_depth): frames report the peak between them, not a sample.
         self.deepest_contact = wp.zeros(self.count, dtype=wp.int64, device=self.device)
 
-        # The tiled sweep reads packed bodies (force_kernels.BODY_TYPES), refreshed before each sweep.
+        # The tiled sweep reads packed bodies (kernels/bodies.py), refreshed before each sweep.
         tiled = force_kernel == "tiled"
-        self.body = wp.zeros(self.count if tiled else 0, dtype=force_kernels.BODY_TYPES[precision], device=self.device)
+        self.body = wp.zeros(self.count if tiled else 0, dtype=BODY_TYPES[precision], device=self.device)
         # The tree path: gravity from a radix tree, contacts from a hash grid, both into the contact pass.
         # (A "reference" engine is the all-pairs yardstick, also for diagnostics: it never builds a tree.)
         self.tree = GravityTree(self.count, self.device, precision) if params.gravity == "tree" and tiled else None
@@ -297,13 +300,13 @@ class Engine:
         if newton:
             # Per tile pair and side, per particle of the tile: the sweep's field sum and candidate bits.
             tiles, gather, rows = newton_tiles(starts, ends, self.layout.particles_per_block)
-            self.tiles = wp.array(tiles, dtype=force_kernels.TilePair, device=self.device)
-            self.gather = wp.array(gather, dtype=force_kernels.GatherRows, device=self.device)
+            self.tiles = wp.array(tiles, dtype=TilePair, device=self.device)
+            self.gather = wp.array(gather, dtype=GatherRows, device=self.device)
             vector = wp.vec3f if precision == "mixed" else wp.vec3d
             self.tile_field = wp.zeros((rows, self.layout.particles_per_block), dtype=vector, device=self.device)
             self.tile_near = wp.zeros((rows, self.layout.particles_per_block), dtype=wp.uint64, device=self.device)
         self.candidate_count = wp.zeros(self.count if split else 0, dtype=wp.int32, device=self.device)
-        self.candidates = wp.zeros((self.count if split else 0, force_kernels.CANDIDATES), dtype=wp.int32, device=self.device)
+        self.candidates = wp.zeros((self.count if split else 0, CANDIDATES), dtype=wp.int32, device=self.device)
         # (Warp's CPU blocks, wp.config.enable_cpu_blocks, run every lane: tests use them to check
         # the GPU layouts' reductions on a CPU.)
         if tiled and not self.device.startswith("cuda") and self.layout.block_dim != 1 and (newton or not wp.config.enable_cpu_blocks):
@@ -316,20 +319,20 @@ class Engine:
         self._tiled_contacts = newton and self.tree is None
         self._contact_block = CONTACT_BLOCK if self.device.startswith("cuda") or wp.config.enable_cpu_blocks else 1
         if self.tree is not None:
-            self._contact_kernel = force_kernels.contact_pass(params.rolling_friction)
+            self._contact_kernel = contact_pass(params.rolling_friction)
         elif newton:
             lanes = self.layout.block_dim
-            self._force_kernel = force_kernels.pair_gravity_newton(self.layout.particles_per_block // lanes, precision, self.layout.max_registers)
-            self._gather_kernel = force_kernels.gather_newton(precision)
+            self._force_kernel = pair_gravity_newton(self.layout.particles_per_block // lanes, precision, self.layout.max_registers)
+            self._gather_kernel = gather_newton(precision)
             # The gather lists each particle's candidates in increasing j: lanes can share them out.
-            self._contact_kernel = force_kernels.contact_pass_ordered(params.rolling_friction, self._contact_block)
+            self._contact_kernel = contact_pass_ordered(params.rolling_friction, self._contact_block)
         elif split:
-            self._force_kernel = force_kernels.pair_gravity_tiled(
+            self._force_kernel = pair_gravity_tiled(
                 self.layout.block_dim, self.layout.particles_per_block, precision, self.layout.max_registers, self.layout.prefetch
             )
-            self._contact_kernel = force_kernels.contact_pass(params.rolling_friction)
+            self._contact_kernel = contact_pass(params.rolling_friction)
         elif tiled:
-            self._force_kernel = force_kernels.pair_forces_tiled(
+            self._force_kernel = pair_forces_tiled(
                 self.layout.block_dim,
                 self.layout.particles_per_block,
                 self.layout.contact_slots,
@@ -340,7 +343,7 @@ class Engine:
                 self.layout.prefetch,
             )
         else:
-            self._force_kernel = force_kernels.pair_forces_reference(precision, params.rolling_friction)
+            self._force_kernel = pair_forces_reference(precision, params.rolling_friction)
 
     # -- stages of a step -----------------------------------------------------------
 
@@ -360,7 +363,7 @@ class Engine:
             wp.launch(self._force_kernel, dim=self.count, inputs=[self.model, self.ranges, *state], outputs=outputs, device=self.device)
             return
         wp.launch(
-            force_kernels.PACK_KERNELS[self.precision],
+            PACK_KERNELS[self.precision],
             dim=self.count,
             inputs=[wp.float64(self.params.G), self.radius, self.mass, self.position],
             outputs=[self.body],
@@ -482,7 +485,7 @@ class Engine:
         records = part.numpy().copy()  # on the CPU numpy() is a view of the array zeroed next
         part.zero_()
         i = int(np.argmax(records))
-        depth, j = force_kernels.unpack_depth(int(records[i]))
+        depth, j = unpack_depth(int(records[i]))
         pair = np.array(sorted((i, j - first)) if records[i] > 0 else (-1, -1), dtype=np.int64)
         return {"deepest_overlap": depth, "deepest_overlap_pair": pair}
 

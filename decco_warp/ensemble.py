@@ -93,7 +93,7 @@ _ARRAYS = ("positions", "velocities", "omegas", "force", "torque", "channels", "
 
 
 def _partners_moved(records: np.ndarray, offset: int) -> np.ndarray:
-    """Deepest-contact records (kernels/forces.py note_depth) with their partner's index moved by
+    """Deepest-contact records (kernels/contacts.py note_depth) with their partner's index moved by
     ``offset``: a system's own numbering in its snapshot, the ensemble's inside the ensemble."""
     return np.where(records > 0, records + offset, records)
 

@@ -11,7 +11,7 @@ import functools
 
 import warp as wp
 
-from .forces import candidates_walk, next_candidate
+from .contacts import candidates_walk, next_candidate
 from .pair import ContactModel, in_contact, normal_force_magnitude, overlap, spring_constant
 
 wp.set_module_options({"enable_backward": False})

@@ -1,8 +1,8 @@
 """The physics of one pair of spheres, as small Warp functions (docs/model.md).
 
 Every function here is pure: it takes the state of spheres i and j and returns
-what i receives from j.  The kernels in :mod:`decco_warp.kernels.forces` only
-gather pairs and sum.  Everything in contact is float64: the overlap of two
+what i receives from j.  The force kernels (one module per layout, :mod:`.contacts` for the
+contacts) only gather pairs and sum.  Everything in contact is float64: the overlap of two
 ~1e6 cm spheres is ~1e2 cm, and its velocity-dependent terms (the k_in/k_out
 switch, the slip) need the same resolution.
 

@@ -30,7 +30,7 @@ run's precision (``tree_gravity(precision)``: float32 terms by default), the pot
 frames in float64.  Contacts do not use the tree: ``grid_candidates`` lists each
 particle's neighbours that may touch it (searched within R_i + R_max of a ``wp.HashGrid``,
 noted within R_i + R_j), and the contact pass of
-:mod:`.forces` evaluates them with the same pair functions as the all-pairs path.
+:mod:`.contacts` evaluates them with the same pair functions as the all-pairs path.
 """
 
 import functools

@@ -14,21 +14,21 @@ SCRIPT = textwrap.dedent(
     """
     import tempfile, warp as wp
     import decco_warp
-    from decco_warp.kernels import forces, integrate, observables, tree
+    from decco_warp.kernels import bodies, contacts, fused, integrate, newton, observables, reference, split, tree
 
     kernels = []
-    for precision in forces.PRECISIONS:
+    for precision in bodies.PRECISIONS:
         for ledger in (False, True):
-            kernels += [(forces.pair_forces_tiled(128, 4, 4, precision, "couple", ledger, 128), 128),
-                        (forces.pair_forces_tiled(64, 4, 4, precision, "paper", ledger, 128), 64),
-                        (forces.pair_forces_reference(precision, "couple"), 256)]
-        kernels.append((forces.pair_gravity_tiled(128, 4, precision, 0), 128))
-        kernels.append((forces.pair_gravity_tiled(128, 4, precision, 0, True), 128))
-        kernels.append((forces.pair_forces_tiled(128, 4, 4, precision, "couple", True, 128, True), 128))
-        kernels += [(forces.pair_gravity_newton(2, precision), 32), (forces.gather_newton(precision), 256)]
-    kernels += [(forces.contact_pass(rolling), 256) for rolling in ("couple", "paper")]
-    kernels += [(forces.contact_pass_ordered(rolling, 32), 32) for rolling in ("couple", "paper")]
-    kernels += [(forces.pack_bodies_mixed, 256), (integrate.kick, 256), (observables.pair_observables, 256), (observables.pair_observables_tiled(128), 128),
+            kernels += [(fused.pair_forces_tiled(128, 4, 4, precision, "couple", ledger, 128), 128),
+                        (fused.pair_forces_tiled(64, 4, 4, precision, "paper", ledger, 128), 64),
+                        (reference.pair_forces_reference(precision, "couple"), 256)]
+        kernels.append((split.pair_gravity_tiled(128, 4, precision, 0), 128))
+        kernels.append((split.pair_gravity_tiled(128, 4, precision, 0, True), 128))
+        kernels.append((fused.pair_forces_tiled(128, 4, 4, precision, "couple", True, 128, True), 128))
+        kernels += [(newton.pair_gravity_newton(2, precision), 32), (newton.gather_newton(precision), 256)]
+    kernels += [(contacts.contact_pass(rolling), 256) for rolling in ("couple", "paper")]
+    kernels += [(newton.contact_pass_ordered(rolling, 32), 32) for rolling in ("couple", "paper")]
+    kernels += [(bodies.pack_bodies_mixed, 256), (integrate.kick, 256), (observables.pair_observables, 256), (observables.pair_observables_tiled(128), 128),
                 (observables.candidate_observables, 256), (tree.tree_gravity("mixed"), 256), (tree.tree_gravity("float64"), 256), (tree.tree_potential, 256),
                 (tree.walk_records("mixed"), 256), (tree.walk_records("float64"), 256)]
     folder = tempfile.mkdtemp()

@@ -146,7 +146,7 @@ def test_contact_pass_handles_more_candidates_than_its_list_holds(case):
     """A 22.5 km sphere touched by more small ones than the list holds (they overlap each other
     too): the contact pass looks at every j for it; forces still equal the plain loop's, and the
     tree path's contacts (gravity off) too."""
-    from decco_warp.kernels.forces import CANDIDATES
+    from decco_warp.kernels.contacts import CANDIDATES
     from scenes import sphere_mass
 
     device, layout = case

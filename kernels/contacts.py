@@ -1,0 +1,238 @@
+"""Contacts in float64, shared by every layout: the contact channels of a pair, their sums per
+particle, the record of the deepest contact, and the contact pass over a list of candidates.
+
+The sweeps find contacts cheaply (:mod:`.bodies` ``is_candidate``, in the sweep's precision); every
+contact is then evaluated here, in float64 from the state arrays, with the pair laws of
+:mod:`.pair`: positions are ~1e7 cm and overlaps ~1e2 cm.  Contacts are few, so this code is kept
+out of the hot loops.
+
+``contact_pass`` (one thread per particle) lives here rather than with the split layout's sweep
+because it serves any candidate list whatever its order: the split sweep's (noted with atomics, in
+any order) and the tree path's hash grid (:mod:`.tree` ``grid_candidates``).  It walks each list in
+increasing j, so its sums (and the ledger's channels) do not depend on scheduling, and the tree
+path's observables walk the lists the same way (``candidates_walk``, ``next_candidate``).  The
+Newton layout's gather lists its candidates already sorted; its own contact pass, a warp per
+particle, is in :mod:`.newton`.
+"""
+
+import functools
+
+import warp as wp
+
+from .pair import CONTACT_FUNCTIONS, ContactModel, in_contact, overlap
+
+wp.set_module_options({"enable_backward": False})
+
+#: Per-particle contact channels written by the ledger variants, in this order
+#: (float64, summed over contacts); gravity is the rest of the force.
+LEDGER_CHANNELS = ("spring_force", "sliding_force", "sliding_torque", "rolling_force")
+
+
+# The deepest contact of each particle since the host last read it, as one int64 so that a
+# single atomic max keeps depth and partner together: the depth (a fraction of the smaller
+# radius) in units of 2^-DEPTH_BITS above PARTNER_BITS bits of the partner's index.
+DEPTH_BITS = 24
+PARTNER_BITS = 31
+MAX_DEPTH = 63.0  # keeps the packed value below 2^62 (depths past 2 cannot occur: 4 with radii 1:3)
+DEPTH_UNIT = float(2**DEPTH_BITS)
+
+
+@wp.func
+def note_depth(deepest_out: wp.array(dtype=wp.int64), i: int, j: int, d2: wp.float64, radius_i: wp.float64, radius_j: wp.float64):
+    """Raise i's record of its deepest contact to this one (with j) if deeper; no-op without a record."""
+    if deepest_out.shape[0] > 0:
+        depth = overlap(wp.sqrt(d2), radius_i, radius_j) / wp.min(radius_i, radius_j)
+        units = wp.int64(wp.min(depth, wp.float64(MAX_DEPTH)) * wp.float64(DEPTH_UNIT))
+        wp.atomic_max(deepest_out, i, (units << wp.int64(PARTNER_BITS)) | wp.int64(j))
+
+
+def unpack_depth(record: int) -> tuple[float, int]:
+    """A record written by :func:`note_depth`: (depth as a fraction of the smaller radius, partner)."""
+    return (record >> PARTNER_BITS) / DEPTH_UNIT, record & ((1 << PARTNER_BITS) - 1)
+
+
+@functools.cache
+def contact_function(rolling: str):
+    """The Warp function giving the contact channels on i from j if they touch, in float64 from the state arrays.
+
+    Returns (spring force, sliding force, sliding torque, rolling force, rolling
+    torque), all zero for a pair that does not touch; notes the contact's depth in
+    ``deepest_out`` (see :func:`note_depth`).
+    """
+    contact = CONTACT_FUNCTIONS[rolling]
+
+    @wp.func
+    def contact_channels(
+        model: ContactModel,
+        i: int,
+        j: int,
+        radius_in: wp.array(dtype=wp.float64),
+        position_in: wp.array(dtype=wp.vec3d),
+        velocity_in: wp.array(dtype=wp.vec3d),
+        omega_in: wp.array(dtype=wp.vec3d),
+        deepest_out: wp.array(dtype=wp.int64),
+    ):
+        # The separation is taken in float64: positions are ~1e7 cm, overlaps ~1e2 cm.
+        r_ij = position_in[i] - position_in[j]
+        d2 = wp.dot(r_ij, r_ij)
+        # d2 == 0: the particle itself, or a coincident one, which has no direction.
+        if d2 > wp.float64(0.0) and in_contact(d2, radius_in[i], radius_in[j]):
+            note_depth(deepest_out, i, j, d2, radius_in[i], radius_in[j])
+            return wp.static(contact)(
+                model,
+                r_ij,
+                d2,
+                radius_in[i],
+                velocity_in[i],
+                omega_in[i],
+                radius_in[j],
+                velocity_in[j],
+                omega_in[j],
+                i < j,
+            )
+        return wp.vec3d(), wp.vec3d(), wp.vec3d(), wp.vec3d(), wp.vec3d()
+
+    return contact_channels
+
+
+@wp.struct
+class ContactSum:
+    """The contact channels on one particle, summed over its contacts."""
+
+    spring: wp.vec3d
+    sliding: wp.vec3d
+    sliding_torque: wp.vec3d
+    rolling: wp.vec3d
+    rolling_torque: wp.vec3d
+
+
+@functools.cache
+def contact_sum_function(rolling: str):
+    """The Warp function adding the contact channels on i from j (zero unless they touch) to a ContactSum."""
+    contact_channels = contact_function(rolling)
+
+    @wp.func
+    def add_contact(
+        model: ContactModel,
+        i: int,
+        j: int,
+        radius_in: wp.array(dtype=wp.float64),
+        position_in: wp.array(dtype=wp.vec3d),
+        velocity_in: wp.array(dtype=wp.vec3d),
+        omega_in: wp.array(dtype=wp.vec3d),
+        deepest_out: wp.array(dtype=wp.int64),
+        total: ContactSum,
+    ) -> ContactSum:
+        spring, sliding, sliding_torque, rolling_force, rolling_torque = contact_channels(
+            model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out
+        )
+        out = ContactSum()
+        out.spring = total.spring + spring
+        out.sliding = total.sliding + sliding
+        out.sliding_torque = total.sliding_torque + sliding_torque
+        out.rolling = total.rolling + rolling_force
+        out.rolling_torque = total.rolling_torque + rolling_torque
+        return out
+
+    return add_contact
+
+
+@wp.func
+def write_contacts(total: ContactSum, i: int, torque_out: wp.array(dtype=wp.vec3d), channels_out: wp.array2d(dtype=wp.vec3d)) -> wp.vec3d:
+    """Write i's contact torque and (when the ledger has rows) its channels; return its contact force."""
+    torque_out[i] = total.sliding_torque + total.rolling_torque
+    if channels_out.shape[0] > 0:
+        channels_out[i, 0] = total.spring
+        channels_out[i, 1] = total.sliding
+        channels_out[i, 2] = total.sliding_torque
+        channels_out[i, 3] = total.rolling
+    return total.spring + total.sliding + total.rolling
+
+
+#: A contact's channels on i, one per row: spring force, sliding force, sliding torque, rolling
+#: force, rolling torque (the order of :func:`contact_function`'s results).
+ContactRows = wp.types.matrix(shape=(5, 3), dtype=wp.float64)
+
+
+@wp.func
+def contact_sum_of(rows: ContactRows) -> ContactSum:
+    total = ContactSum()
+    total.spring = rows[0]
+    total.sliding = rows[1]
+    total.sliding_torque = rows[2]
+    total.rolling = rows[3]
+    total.rolling_torque = rows[4]
+    return total
+
+
+# --- Candidate lists and the one-thread contact pass -------------------------------------------
+
+#: Contact candidates a particle may note for the contact pass (the list's width; kernels read it
+#: from the array).  A large grain of a settled pile touches up to ~27 small ones, ~33 when the
+#: pile is squeezed to overlaps of 0.25 of a radius; the geometric limit for the paper's radius
+#: ratio of 3 is ~60.  A particle with more has every j of its system looked at again, which is
+#: right but costs a whole-system walk per step (24 slots made a merged pile 10x slower).
+CANDIDATES = 64
+
+
+@wp.func
+def candidates_walk(i: int, ranges: wp.array(dtype=wp.vec2i), candidate_count: wp.array(dtype=wp.int32), candidates: wp.array2d(dtype=wp.int32)):
+    """How i's candidates are walked: (listed, how many steps).  Listed: its noted candidates in
+    increasing j (see :func:`next_candidate`), so that sums over them do not depend on the order
+    they were noted in; after an overflow of the list, every j of its system."""
+    noted = candidate_count[i]
+    if noted <= candidates.shape[1]:
+        return True, noted
+    return False, ranges[i][1] - ranges[i][0]
+
+
+@wp.func
+def next_candidate(i: int, listed: bool, candidates: wp.array2d(dtype=wp.int32), walk: int, previous: int) -> int:
+    """The candidate after ``previous`` (start from the system's first particle - 1): the smallest
+    noted j above it (a selection pass over the row: no per-thread copy of the list), or simply
+    the next j of the system after an overflow."""
+    if not listed:
+        return previous + 1
+    best = int(2147483647)
+    for s in range(walk):
+        j = candidates[i, s]
+        if j > previous and j < best:
+            best = j
+    return best
+
+
+@functools.cache
+def contact_pass(rolling: str = "couple"):
+    """Build the contact pass of the split layout and the tree path, one thread per particle: its
+    noted candidates sorted by j, each evaluated in float64 and added to ``force_inout``;
+    ``torque_out`` and the ledger's ``channels_out`` (when it has rows) are written whole."""
+    add_contact = contact_sum_function(rolling)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def contact_pass_kernel(
+        # Model:
+        model: ContactModel,
+        ranges: wp.array(dtype=wp.vec2i),  # per particle: its system's particles, [first, end)
+        radius_in: wp.array(dtype=wp.float64),
+        # State in:
+        position_in: wp.array(dtype=wp.vec3d),
+        velocity_in: wp.array(dtype=wp.vec3d),
+        omega_in: wp.array(dtype=wp.vec3d),
+        candidate_count: wp.array(dtype=wp.int32),
+        candidates: wp.array2d(dtype=wp.int32),
+        # Out:
+        force_inout: wp.array(dtype=wp.vec3d),
+        torque_out: wp.array(dtype=wp.vec3d),
+        channels_out: wp.array2d(dtype=wp.vec3d),
+        deepest_out: wp.array(dtype=wp.int64),
+    ):
+        i = wp.tid()
+        listed, walk = candidates_walk(i, ranges, candidate_count, candidates)
+        total = ContactSum()
+        j = ranges[i][0] - 1
+        for _ in range(walk):  # the list, or every j after an overflow (each pair checked in float64)
+            j = next_candidate(i, listed, candidates, walk, j)
+            total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out, total)
+        force_inout[i] = force_inout[i] + write_contacts(total, i, torque_out, channels_out)
+
+    return contact_pass_kernel

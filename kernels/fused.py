@@ -1,0 +1,193 @@
+"""The fused layout: gravity and contacts in one tiled kernel (the CPU default; on CUDA the
+default past the Newton layout's memory reach, engine.NEWTON_MAX particles).
+
+A block of ``block_dim`` threads owns ``particles_per_block`` particles i and sweeps all j in tiles
+of ``block_dim``, loaded cooperatively with ``wp.tile_load`` (one j per thread; one thread per block
+on the CPU, so the same source serves both).  Each j load serves every particle of the block.  The
+sweep itself is gravity only, plus a cheap test that notes contact candidates in a few slots; the
+contacts, which are few, are evaluated in float64 after the sweep (:mod:`.contacts`), so that the
+hot loop stays small.  Per-thread sums are reduced with ``wp.tile_sum`` and lane 0 writes each
+particle's force and torque: no atomics, and the motion does not depend on scheduling.  (The energy
+ledger's contact channels are added with atomics; on a GPU their last bits may vary from run to run,
+the motion's never.)
+
+Two options tune it to a GPU: ``max_registers`` caps the registers per thread, so that the rarely
+run float64 contact code spills rather than the sweep losing occupancy; ``prefetch`` loads each
+tile of j one tile ahead, so that the load is in flight while the tile before is swept (latency
+hidden at low occupancy); it changes no bit of the result.
+"""
+
+import functools
+
+import warp as wp
+
+from .bodies import is_candidate, near_bound, separation, sweep_of, unpack_block
+from .contacts import contact_function
+from .pair import ContactModel
+
+wp.set_module_options({"enable_backward": False})
+
+
+@functools.cache
+def pair_forces_tiled(
+    block_dim: int,
+    particles_per_block: int,
+    contact_slots: int,
+    precision: str = "mixed",
+    rolling: str = "couple",
+    ledger: bool = False,
+    max_registers: int = 0,
+    prefetch: bool = False,
+):
+    """Build the tiled all-pairs kernel for a layout; launch with ``wp.launch_tiled``.
+
+    Launch: ``ceil(N / particles_per_block)`` blocks of ``block_dim`` threads
+    (``block_dim`` must be 1 on CPU, where Warp runs one thread per block), with
+    ``body_in`` packed by ``PACK_KERNELS[precision]``.  Each thread notes up to
+    ``contact_slots`` contact candidates per particle; past that it finds them
+    again after the sweep, so any number of contacts is handled.  ``max_registers``
+    (CUDA, 0 = the compiler's choice) caps registers per thread: the float64
+    contact code, which runs rarely, then spills instead of the sweep losing occupancy.
+    ``prefetch`` loads each tile of j one tile ahead.
+    """
+    real, _, Body, inverse_sqrt, radius_at, g_mass_at, candidate = sweep_of(precision)
+    contact_channels = contact_function(rolling)
+    T, P, K = block_dim, particles_per_block, contact_slots
+    Bodies = wp.types.matrix(shape=(P, Body._length_), dtype=real)
+    Near = wp.types.vector(length=P, dtype=real)
+    Fields = wp.types.matrix(shape=(P, 3), dtype=real)
+    Slots = wp.types.matrix(shape=(P, K), dtype=wp.int32)
+    Counts = wp.types.vector(length=P, dtype=wp.int32)
+    # Per particle: the field sum G m_j r_ij / d^3 (gravity is -m_i times it), contact force, torque.
+    Sums = wp.types.matrix(shape=(P, 9), dtype=real)
+    Sum = wp.types.vector(length=9, dtype=real)
+    Contacts = wp.types.matrix(shape=(P, 6), dtype=real)
+
+    @wp.kernel(
+        module="unique",
+        enable_backward=False,
+        module_options={"fast_math": precision == "mixed"},
+        cuda_max_registers=max_registers or None,
+    )
+    def pair_forces_tiled_kernel(
+        # Model:
+        model: ContactModel,
+        blocks: wp.array(dtype=wp.vec4i),  # per block: first particle, end of its rows, its system's j range
+        radius_in: wp.array(dtype=wp.float64),
+        mass_in: wp.array(dtype=wp.float64),
+        # State in:
+        position_in: wp.array(dtype=wp.vec3d),
+        velocity_in: wp.array(dtype=wp.vec3d),
+        omega_in: wp.array(dtype=wp.vec3d),
+        body_in: wp.array(dtype=Body),
+        max_radius: real,  # the largest radius: a per-i bound that spares most pairs the contact test
+        # Out:
+        force_out: wp.array(dtype=wp.vec3d),
+        torque_out: wp.array(dtype=wp.vec3d),
+        channels_out: wp.array2d(dtype=wp.vec3d),  # (N, 4) with the ledger, else empty; zeroed by the caller
+        deepest_out: wp.array(dtype=wp.int64),  # raised to each contact's depth (note_depth), or empty
+    ):
+        block, lane = wp.tid()
+        first, end, j_first, j_end = unpack_block(blocks[block])
+
+        # The block's own particles stay in registers; rows past the end repeat the
+        # last particle and are never written.
+        bodies_i = Bodies()
+        near = Near()
+        for p in range(wp.static(P)):
+            bodies_i[p] = body_in[wp.min(first + p, end - 1)]
+            near[p] = near_bound(bodies_i[p][radius_at], max_radius, candidate)
+
+        fields = Fields()
+        slots = Slots()
+        candidates = Counts()
+        # With prefetch each tile of j is loaded one tile ahead, so that the load is in flight
+        # while the tile before is swept (latency hidden at low occupancy); past the array a
+        # tile holds zeros, never used.
+        if wp.static(prefetch):
+            body_next = wp.untile(wp.tile_load(body_in, shape=wp.static(T), offset=j_first, storage="register"))
+        for start in range(j_first, j_end, wp.static(T)):
+            # One j per thread (counted from the system's first, so that a system's sums do not
+            # depend on where it sits among others); elements past its end are skipped.
+            if wp.static(prefetch):
+                body_j = body_next
+                body_next = wp.untile(wp.tile_load(body_in, shape=wp.static(T), offset=start + wp.static(T), storage="register"))
+            else:
+                body_j = wp.untile(wp.tile_load(body_in, shape=wp.static(T), offset=start, storage="register"))
+            j = start + lane
+            if j < j_end:
+                for p in range(wp.static(P)):
+                    r = separation(bodies_i[p], body_j)
+                    d2 = wp.dot(r, r)
+                    if d2 > real(0.0):  # not the particle itself
+                        inv_d = inverse_sqrt(d2)
+                        fields[p] = fields[p] + (body_j[g_mass_at] * inv_d * inv_d * inv_d) * r
+                        if d2 < near[p]:  # within R_i + R_max: rare, so the exact test costs little
+                            if is_candidate(d2, bodies_i[p][radius_at], body_j[radius_at], candidate):
+                                noted = candidates[p]
+                                if noted < wp.static(K):
+                                    slots[p, noted] = j
+                                candidates[p] = noted + 1
+
+        # Contacts, in float64: the noted candidates, or after an overflow of the slots,
+        # this thread's share of j looked at again; either way in increasing j.  The
+        # loop over the block's particles is deliberately not unrolled: one copy of the
+        # contact code keeps the kernel's register count (and so the sweep's occupancy) low.
+        contacts = Contacts()
+        for p in range(wp.min(wp.static(P), end - first)):  # a run-time bound: not unrolled
+            i = first + p
+            noted = candidates[p]
+            overflow = noted > wp.static(K)
+            walk = noted
+            body_i = body_in[i]
+            if overflow:
+                walk = (j_end - j_first - lane + wp.static(T) - 1) // wp.static(T)
+            for s in range(walk):
+                j = 0
+                if overflow:
+                    j = j_first + lane + s * wp.static(T)
+                    body_j = body_in[j]
+                    r = separation(body_i, body_j)
+                    reach = body_i[radius_at] + body_j[radius_at]
+                    if wp.dot(r, r) >= reach * reach * candidate:
+                        continue
+                else:
+                    j = slots[p, s]
+                spring, sliding, sliding_torque, rolling, rolling_torque = contact_channels(
+                    model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out
+                )
+                force = spring + sliding + rolling
+                torque = sliding_torque + rolling_torque
+                for k in range(3):
+                    contacts[p, k] += real(force[k])
+                    contacts[p, 3 + k] += real(torque[k])
+                if wp.static(ledger):
+                    # Atomics: the channel sums feed only the energy ledger, never the motion,
+                    # and keeping them out of the reduction keeps the kernel lean.
+                    wp.atomic_add(channels_out, i, 0, spring)
+                    wp.atomic_add(channels_out, i, 1, sliding)
+                    wp.atomic_add(channels_out, i, 2, sliding_torque)
+                    wp.atomic_add(channels_out, i, 3, rolling)
+
+        sums = Sums()
+        for p in range(wp.static(P)):
+            field = fields[p]
+            row = Sum()
+            for k in range(3):
+                row[k] = field[k]
+            for k in range(6):
+                row[3 + k] = contacts[p, k]
+            sums[p] = row
+
+        total = wp.tile_sum(wp.tile(sums, preserve_type=True))[0]
+        if lane == 0:
+            for p in range(wp.static(P)):
+                i = first + p
+                if i < end:
+                    row = total[p]
+                    field_sum = wp.vec3d(wp.float64(row[0]), wp.float64(row[1]), wp.float64(row[2]))
+                    contact_sum = wp.vec3d(wp.float64(row[3]), wp.float64(row[4]), wp.float64(row[5]))
+                    force_out[i] = contact_sum - mass_in[i] * field_sum
+                    torque_out[i] = wp.vec3d(wp.float64(row[6]), wp.float64(row[7]), wp.float64(row[8]))
+
+    return pair_forces_tiled_kernel
