@@ -363,7 +363,7 @@ def _report(result) -> None:
         f"done: {result.steps} steps, {result.time:.6g} s simulated, {result.wall_seconds:.1f} s wall, "
         f"{result.stepping_seconds:.1f} s of it stepping ({result.steps_this_session} steps this session)"
     )
-    typer.echo(f"outputs in {run_dir}/: spec.toml, trajectory.h5 (H5MD), checkpoint.h5, run.log")
+    typer.echo(f"outputs in {run_dir}/: spec.toml, trajectory.h5 (H5MD), trajectory.xdmf (for ParaView, VisIt), checkpoint.h5, run.log")
     typer.echo(f"inspect: h5ls -r {run_dir}/trajectory.h5   |   python: decco_warp.io.read_trajectory('{run_dir}/trajectory.h5')")
 
 
@@ -741,6 +741,45 @@ def view(
         typer.echo(f"wrote {save_to} (view it with: rerun {save_to})")
     elif logger.url:
         typer.echo(f"rerun: serving {logger.url}")
+
+
+# --- export ------------------------------------------------------------------------------
+
+
+@app.command()
+def export(
+    path: Path = typer.Argument(..., help="A run folder or its trajectory.h5 (finished, stopped or still running)."),
+    xdmf: bool = typer.Option(False, "--xdmf", help="Write trajectory.xdmf beside trajectory.h5, for ParaView and VisIt."),
+) -> None:
+    """Describe a run's trajectory for other programs (the data stays in trajectory.h5)."""
+    from .checks import InputError, check_destination
+    from .io import FileFormatError, clear_write_flags
+    from .lock import RunFolderBusy, RunFolderLock
+    from .xdmf import XDMF_FILE, write_xdmf
+
+    if not xdmf:
+        fail("say what to export: --xdmf")
+    trajectory = path / "trajectory.h5" if path.is_dir() else path
+    if not trajectory.is_file():
+        fail(f"{path} is neither a run folder with a trajectory.h5 nor a trajectory file")
+    destination = trajectory.with_name(XDMF_FILE)
+    running = False
+    try:
+        check_destination(destination, "XDMF file")
+        try:  # no run writes it: clear the flags a killed one left (as h5clear -s), which other readers refuse
+            with RunFolderLock(trajectory.parent):
+                clear_write_flags(trajectory)
+        except RunFolderBusy:
+            running = True
+        frames = write_xdmf(trajectory, destination)
+    except (InputError, FileFormatError, OSError) as error:
+        fail(" ".join(str(error).split()))
+    typer.echo(f"wrote {destination}: {frames} frame(s) of {trajectory.name}, read in place; open it in ParaView or VisIt")
+    if running:
+        typer.echo(
+            "the run is still going: ParaView and VisIt open its trajectory once it ends (while a file is written, HDF5 "
+            "admits only SWMR readers), and it then rewrites trajectory.xdmf with every frame"
+        )
 
 
 # --- sweep ---------------------------------------------------------------------------------

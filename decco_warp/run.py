@@ -30,6 +30,7 @@ from .simulation import GRAPH_STEPS, Simulation
 from .stops import StopRequests
 from .stability import MIN_TIME_STEP_MARGIN, CompressionForecast, StabilityReport, check_stability, predict_compression
 from .state import State
+from .xdmf import write_xdmf
 
 SPEC_FILE = "spec.toml"
 TRAJECTORY_FILE = "trajectory.h5"
@@ -631,6 +632,11 @@ class RunDriver:
         except OSError as error:
             with contextlib.suppress(OSError):
                 self.log(f"output error: the last frame may be missing from the trajectory ({error})")
+        try:  # the sidecar through which ParaView and VisIt read the trajectory (decco_warp/xdmf.py)
+            write_xdmf(self.run_dir / TRAJECTORY_FILE)
+        except (OSError, FileFormatError) as error:
+            with contextlib.suppress(OSError):
+                self.log(f"output error: trajectory.xdmf not written ({error}); decco-warp export {self.run_dir} --xdmf writes it")
         self.wall = _time.perf_counter() - self.started
         if self.done:
             outside = 100.0 * (self.wall - self.stepping) / self.wall if self.wall > 0 else 0.0

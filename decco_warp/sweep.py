@@ -328,6 +328,7 @@ def _analyse(run_dir: Path, min_members: int, analyse_every: int, keep_trajector
         raise FileNotFoundError(f"{run_dir} has neither a trajectory nor a summary to report")
     if not keep_trajectory and trajectory.is_file():
         trajectory.unlink()  # analysis.h5, summary.json, figures/ and the checkpoint stay
+        trajectory.with_name("trajectory.xdmf").unlink(missing_ok=True)  # it describes the trajectory only
     return summary
 
 

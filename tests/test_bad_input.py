@@ -216,6 +216,7 @@ _other = st.one_of(
     st.tuples(st.just("analyze"), st.sampled_from(["@run", "@out", "@file", "missing"]), st.sampled_from([[], ["--every", "0"], ["--every", "3"], ["--min-members", "-1"], ["--device", "cpu"], ["--device", "bogus"], ["--device", "cuda:7"]])),
     st.tuples(st.just("resume"), st.sampled_from(["@run", "@out", "missing"]), st.sampled_from([[], ["--steps", "10"], ["--steps", "x"]])),
     st.tuples(st.just("view"), st.sampled_from(["@run", "missing"]), st.sampled_from([["--save", "@out/r.rrd"], ["--save", "@file/r.rrd"], ["--mode", "bogus"]])),
+    st.tuples(st.just("export"), st.sampled_from(["@run", "@out", "@file", "missing"]), st.sampled_from([["--xdmf"], []])),
     st.tuples(st.just("bench"), st.just(""), st.sampled_from([["--n", "8", "--seconds", "0.01", "--steps", "2"], ["--n", "0"], ["--n", "x"], ["--seconds", "-1"], ["--layouts", "2:2"], ["--json", "@file/b.json"]])),
     st.tuples(st.just("sweep"), st.sampled_from(["@bad-sweep", "missing.toml", "@not-toml"]), st.just([])),
     st.tuples(st.just("piles"), st.sampled_from(["@bad-piles", "missing.toml", "@not-toml"]), st.just([])),

@@ -40,7 +40,7 @@ def finished(tmp_path_factory):
 
 def test_default_simulate_writes_a_complete_run_folder(finished):
     run_dir, result = finished
-    assert {p.name for p in run_dir.iterdir()} == {"spec.toml", "trajectory.h5", "checkpoint.h5", "run.log"}
+    assert {p.name for p in run_dir.iterdir()} == {"spec.toml", "trajectory.h5", "trajectory.xdmf", "checkpoint.h5", "run.log"}
     assert str(run_dir) in result.stdout and "trajectory.h5" in result.stdout
     spec = specs.resolve_spec(specs.load_spec_file(run_dir / "spec.toml"))
     assert spec["run"]["steps"] == 600 and spec["piles"]["target"] == "builtin:target"
