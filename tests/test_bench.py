@@ -5,6 +5,7 @@ import subprocess
 import sys
 
 import numpy as np
+from helpers import cli
 
 import decco_warp as dw
 from decco_warp.bench import lattice_pile, pile_mosaic
@@ -71,12 +72,7 @@ def test_bench_gives_the_tree_in_its_own_terms(tmp_path):
     """A tree row: its step time, particles/s and its ratio to the all-pairs step of the same call;
     no pairs/s (it does not compute the pairs) and no fraction of the all-pairs limit."""
     out = tmp_path / "bench.json"
-    result = subprocess.run(
-        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", "bench", "--device", "cpu", "--n", "300",
-         "--seconds", "0.05", "--steps", "2", "--gravity", "all-pairs,tree", "--json", str(out)],
-        capture_output=True,
-        text=True,
-    )
+    result = cli("bench", "--device", "cpu", "--n", "300", "--seconds", "0.05", "--steps", "2", "--gravity", "all-pairs,tree", "--json", str(out))
     assert result.returncode == 0, result.stderr
     pairs, tree = json.loads(out.read_text())["rows"]
     assert pairs["gravity"] == "all-pairs" and tree["gravity"] == "tree"
