@@ -9,7 +9,7 @@ A sweep specification is a run specification plus a ``[sweep]`` table:
     analyse_every = 1              # analyse every Nth frame of a run (the last one always)
     keep_trajectory = true         # false: delete trajectory.h5 once the run is analysed
     ensemble = "auto"              # runs handed to a worker at a time; those sharing Params step together
-                                   # (auto: 4 at a time on a GPU, runs of the same particle count up to
+                                   # (auto: up to 8 at a time on a GPU, runs of the same particle count up to
                                    # 8 000 particles stepped together, larger ones alone; 1 on a CPU)
     realizations = 1               # runs of each grid point: the piles as their files hold them, then
                                    # turned by random rotations (orientation_seed derived from the point)
@@ -32,6 +32,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import itertools
+import math
 import json
 import multiprocessing
 import os
@@ -44,10 +45,12 @@ from pathlib import Path
 from . import spec as specs
 from ._version import __version__
 
-#: ``ensemble = "auto"`` on a GPU: runs go to a worker 4 at a time, and those of the same particle
-#: count up to 8 000 are stepped together (on an H100, 4 systems of 5 500 to 6 250 particles step
-#: 1.35 to 1.47 times as fast as one at a time; at 10 000 one run nearly fills the GPU: 1.07x for 2).
-AUTO_ENSEMBLE = 4
+#: ``ensemble = "auto"`` on a GPU: runs go to a worker up to 8 at a time (fewer where that leaves a
+#: worker idle), and those of the same particle count up to 8 000 are stepped together.  On an H100,
+#: systems of 5 500 to 6 250 particles step 1.42 to 1.54 times as fast as one at a time 4 together,
+#: 1.52 to 1.67 times 8 together (bench), and whole sweeps 1.45 to 1.55x with 4, 1.68 to 1.86x with 6
+#: (docs/benchmarks.md); at 10 000 one run nearly fills the GPU (1.07x for 2).
+AUTO_ENSEMBLE = 8
 ENSEMBLE_MAX_PARTICLES = 8_000
 SWEEP_KEYS = {"name", "out", "min_members", "analyse_every", "keep_trajectory", "ensemble", "realizations", "grid"}
 SUMMARY_FIELDS = [
@@ -176,12 +179,15 @@ def simulate_one(spec: dict) -> dict:
     return simulate_batch([spec])[0]
 
 
-def ensemble_plan(setting, gpus: int) -> tuple[int, int | None]:
+def ensemble_plan(setting, gpus: int, runs: int = AUTO_ENSEMBLE, workers: int = 1) -> tuple[int, int | None]:
     """``[sweep] ensemble`` as (runs handed to a worker at a time, the largest particle count
-    stepped with others, None for any): ``"auto"`` packs the small runs on a GPU only."""
+    stepped with others, None for any): ``"auto"`` packs the small runs on a GPU only, up to
+    AUTO_ENSEMBLE at a time but no more than shares ``runs`` out among all ``workers``."""
     if setting != "auto":
         return int(setting), None
-    return (AUTO_ENSEMBLE, ENSEMBLE_MAX_PARTICLES) if gpus > 0 else (1, None)
+    if gpus == 0:
+        return 1, None
+    return max(1, min(AUTO_ENSEMBLE, math.ceil(runs / max(1, workers)))), ENSEMBLE_MAX_PARTICLES
 
 
 def simulate_batch(batch: list[dict], max_particles: int | None = None) -> list[dict]:
@@ -397,7 +403,7 @@ def run_sweep(
         gpus = cuda_device_count()
         client = Client(scheduler)
         cluster = None
-        simulating = 1
+        simulating = max(1, len(client.scheduler_info().get("workers", {})))  # those connected now
     else:
         gpus = gpus_to_use(gpus)
         simulating = workers or (gpus if gpus > 0 else min(2, os.cpu_count() or 1))
@@ -426,11 +432,11 @@ def run_sweep(
     try:
         # Runs in grid order, `ensemble` at a time to a worker (neighbours in a grid mostly share
         # their piles and Params, and those are stepped together).
-        size, max_particles = ensemble_plan(settings.get("ensemble", 1), gpus)
         # Runs already complete (made by an earlier sweep) are reported here, so that the batches
         # hold only runs to step and pack into full ensembles.
         done = {k: _complete_row(spec) for k, spec in enumerate(runs)}
         todo = [k for k, row in done.items() if row is None]
+        size, max_particles = ensemble_plan(settings.get("ensemble", 1), gpus, len(todo), simulating)
         batches = [todo[k : k + size] for k in range(0, len(todo), size)]
         futures = {client.submit(simulate_batch, [runs[k] for k in batch], max_particles, pure=False): batch for batch in batches}
         simulations = as_completed(futures)

@@ -207,8 +207,9 @@ def test_a_sweep_packs_runs_into_ensembles_with_the_results_of_runs_alone(tmp_pa
 
 
 def test_ensemble_auto_packs_small_runs_on_a_gpu_only_and_alike_in_size(tmp_path):
-    """[sweep] ensemble defaults to "auto": one run at a time on a CPU; on a GPU 4 to a worker,
-    stepped together only when they have the same particle count, up to 8 000."""
+    """[sweep] ensemble defaults to "auto": one run at a time on a CPU; on a GPU up to 8 to a worker
+    (fewer when that would leave a worker without runs), stepped together only when they have the
+    same particle count, up to 8 000."""
     from decco_warp.sweep import ENSEMBLE_MAX_PARTICLES, ensemble_plan, simulate_batch
 
     path = tmp_path / "s.toml"
@@ -216,7 +217,10 @@ def test_ensemble_auto_packs_small_runs_on_a_gpu_only_and_alike_in_size(tmp_path
     settings, runs = load_sweep(path)
     assert settings["ensemble"] == "auto"
     assert ensemble_plan("auto", 0) == (1, None)
-    assert ensemble_plan("auto", 2) == (4, ENSEMBLE_MAX_PARTICLES)
+    assert ensemble_plan("auto", 1, runs=42) == (8, ENSEMBLE_MAX_PARTICLES)
+    assert ensemble_plan("auto", 8, runs=42, workers=8) == (6, ENSEMBLE_MAX_PARTICLES)  # every GPU gets runs
+    assert ensemble_plan("auto", 2, runs=3, workers=2) == (2, ENSEMBLE_MAX_PARTICLES)
+    assert ensemble_plan("auto", 2, runs=0, workers=2) == (1, ENSEMBLE_MAX_PARTICLES)
     assert ensemble_plan(3, 0) == (3, None)
     for bad in ("many", 0, 2.5, True):
         path.write_text(SWEEP.format(out=tmp_path).replace("analyse_every = 2", f"ensemble = {json.dumps(bad)}"))
