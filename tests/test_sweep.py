@@ -101,7 +101,7 @@ def test_bad_sweep_files_are_exit_2(tmp_path):
 def test_shipped_paper_sweeps_are_valid(name):
     settings, runs = load_sweep(Path(__file__).parent.parent / "runs" / "paper" / f"{name}.toml")
     assert runs and len({r["run"]["name"] for r in runs}) == len(runs)
-    expected = {"fig3_validation": 63, "fig3_headon": 21, "fig3_oblique": 42, "fig8_stress": 3, "fig9_spin": 24, "realizations": 18}
+    expected = {"fig3_validation": 63, "fig3_headon": 21, "fig3_oblique": 42, "fig8_stress": 3, "fig9_spin": 24, "realizations": 27}
     if name in expected:
         assert len(runs) == expected[name]
     if name == "fig9_spin":  # two axis pairs of each kind of spin, at every eta
