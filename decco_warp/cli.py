@@ -286,7 +286,7 @@ def _rerun_observer(prepared, mode_text: str | None, every: int | None):
 
     try:
         mode, address = parse_mode(mode_text)
-        every = every or prepared.spec["run"]["output_every"]
+        every = every or prepared.plan.outputs.output_every
         if every < 1:
             raise ValueError("--rerun-every must be >= 1")
         if prepared.resume:
@@ -456,22 +456,21 @@ def _number_or_auto(text: Optional[str], option: str):
 
 
 def _check(spec: dict) -> None:
-    """``simulate --check``: the set-up's margins and predicted deepest overlap; exit 2 if it would be refused."""
+    """``simulate --check``: the run's plan (its set-up, margins, predicted deepest overlap and resolved choices); exit 2 if it would be refused."""
     from .device import DeviceError
     from .io import FileFormatError
-    from .run import RunError, plan_start, run_dir_of
+    from .plan import RunError, plan_start
     from .spec import SpecError
 
     try:
         plan = plan_start(spec)
     except (SpecError, RunError, FileFormatError, DeviceError, ValueError) as error:
         fail(str(error))
-    for line in plan.lines():
+    for line in [*plan.lines(), *plan.choices()]:
         typer.echo(line)
-    run_dir = run_dir_of(plan.spec)
-    if run_dir.exists():
-        typer.echo(f"note: run folder {run_dir} exists (resume continues it, --overwrite replaces it)")
-    if not plan.stability.stable and not plan.spec["run"]["allow_unstable"]:
+    if plan.run_dir.exists():
+        typer.echo(f"note: run folder {plan.run_dir} exists (resume continues it, --overwrite replaces it)")
+    if not plan.stability.stable and not plan.allow_unstable:
         fail(f"unstable set-up: {'; '.join(plan.stability.problems())}; set allow_unstable = true in [run] to run it anyway")
     depth = plan.forecast.fraction
     verdict = "would run"

@@ -8,28 +8,23 @@ atomically every ``checkpoint_every`` steps and at the end) and ``run.log``.
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import time as _time
 from dataclasses import dataclass
 from datetime import datetime, timezone
-from importlib import resources
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
 from . import spec as specs
-from .checks import MAX_REST_OVERLAP, InputError, check_destination, check_particles, deepest_rest_overlap
-from .collision import setup_collision
-from .device import resolve_device
+from .checks import MAX_REST_OVERLAP, InputError, check_destination
 from .diagnostics import energy_ledger, energy_scale, ledger_closure, stress_shares
-from .engine import Layout, layout_for
-from .io import BackgroundFrames, FileFormatError, Trajectory, load_pile, pause_point, read_checkpoint, read_frame, write_checkpoint
+from .io import BackgroundFrames, FileFormatError, Trajectory, pause_point, read_checkpoint, read_frame, write_checkpoint
 from .lock import RunFolderLock
+from .plan import Plan, RunError, builtin_pile, pile_path, plan_resume, plan_start, run_dir_of  # noqa: F401 (run's names)
 from .simulation import GRAPH_STEPS, Simulation
 from .stops import StopRequests
-from .stability import MIN_TIME_STEP_MARGIN, CompressionForecast, StabilityReport, check_stability, predict_compression
-from .state import State
+from .stability import MIN_TIME_STEP_MARGIN, StabilityReport
 from .xdmf import write_xdmf
 
 SPEC_FILE = "spec.toml"
@@ -38,11 +33,6 @@ CHECKPOINT_FILE = "checkpoint.h5"
 LOG_FILE = "run.log"
 #: Seconds of stepping between two looks at the stop requests (Ctrl-C, SIGTERM), whatever the pace.
 STOP_LATENCY = 2.0
-BUILTIN_PREFIX = "builtin:"
-
-
-class RunError(ValueError):
-    """A run that cannot start or continue as asked (bad folder, pile, checkpoint)."""
 
 
 @dataclass
@@ -74,41 +64,12 @@ class RunResult:
 # --- piles and folders ---------------------------------------------------------------
 
 
-def builtin_pile(name: str) -> Path:
-    """Path of a pile shipped with the package (``target`` or ``projectile``)."""
-    path = Path(str(resources.files("decco_warp") / "data" / "piles" / f"{name}.h5"))
-    if not path.is_file():
-        raise RunError(f"there is no builtin pile {name!r}; shipped: target, projectile")
-    return path
-
-
-def pile_path(reference: str) -> Path:
-    if reference.startswith(BUILTIN_PREFIX):
-        return builtin_pile(reference[len(BUILTIN_PREFIX) :])
-    path = Path(reference).expanduser()
-    if not path.is_file():
-        raise RunError(f"pile file {reference} does not exist")
-    return path
-
-
 def check_writable(run_dir: Path) -> None:
     """Refuse early an output folder that cannot be created or written (nothing is left behind)."""
     try:
         check_destination(run_dir, "run folder", folder=True)
     except InputError as error:
         raise RunError(str(error)) from None
-
-
-def run_dir_of(spec: dict) -> Path:
-    return Path(spec["run"]["out"]).expanduser() / spec["run"]["name"]
-
-
-def _sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 class RunLog:
@@ -162,102 +123,29 @@ def record(sim: Simulation, size_classes: int) -> tuple[dict, dict]:
 # --- start, resume ----------------------------------------------------------------------
 
 
-def prepare_collision(spec: dict, device: str | None) -> tuple[State, dict]:
-    """The combined State of a spec's collision, and what to record about its inputs."""
-    piles = {}
-    for which in ("target", "projectile"):
-        path = pile_path(spec["piles"][which])
-        try:
-            piles[which] = load_pile(path)
-        except FileFormatError as error:
-            raise RunError(str(error)) from None
-        piles[f"{which}_file"] = str(path.resolve())
-        piles[f"{which}_sha256"] = _sha256(path)
-    collision = spec["collision"]
-    state = setup_collision(
-        piles.pop("target"),
-        piles.pop("projectile"),
-        eta=collision.get("eta"),
-        speed=collision.get("speed"),
-        theta_deg=collision["theta_deg"],
-        gap=collision["gap"],
-        target_spin=specs.spin_of(spec, "target"),
-        projectile_spin=specs.spin_of(spec, "projectile"),
-        G=spec["params"]["G"],
-        device=device,
-        orientation_seed=collision.get("orientation_seed"),
-    )
-    return state, piles
-
-
-def _device(spec: dict, override: str | None) -> str | None:
-    if override is not None:
-        return override
-    return None if spec["run"]["device"] == "auto" else spec["run"]["device"]
-
-
-def _layout(spec: dict, n: int, override: str | None) -> Layout | None:
-    return layout_for(spec["run"]["layout"], n, resolve_device(_device(spec, override)))
-
-
 @dataclass
 class PreparedRun:
-    """A run checked and set up, nothing written yet: what :func:`execute` needs."""
+    """A run's plan with its simulation built, nothing written yet: what :func:`execute` needs."""
 
     sim: Simulation
-    spec: dict
-    run_dir: Path
+    plan: Plan
     extra: dict
     resume: bool
-    plan: Plan | None = None
-    """A new run's set-up (None when resuming)."""
     lock: RunFolderLock | None = None
     """The run folder's lock, once taken (execute takes it for a new folder and releases it at the end)."""
 
+    @property
+    def spec(self) -> dict:
+        """The plan's resolved specification (spec.toml, /parameters)."""
+        return self.plan.spec
 
-@dataclass
-class Plan:
-    """A new run's collision set up and checked, nothing compiled or written: what ``--check`` shows."""
-
-    spec: dict
-    """The resolved spec with every "auto" value chosen."""
-    state: State
-    pile_info: dict
-    stability: StabilityReport
-    forecast: CompressionForecast
-    notes: list[str]
-    """One line per value chosen from the set-up (k_in = "auto", ...)."""
-
-    def lines(self) -> list[str]:
-        """What run.log and ``--check`` say about the set-up before any step."""
-        meta = self.state.metadata
-        params = self.spec["params"]
-        return [
-            f"collision: {self.state.n} particles ({int((self.state.pile_id == 0).sum())} target + "
-            f"{int((self.state.pile_id == 1).sum())} projectile), eta {meta['eta']:.6g}, speed {meta['speed']:.6g} cm/s, "
-            f"theta {meta['theta_deg']:g} deg, b {meta['impact_parameter']:.6g} cm"
-            + (f", piles turned by random rotations of orientation_seed {meta['orientation_seed']}" if "orientation_seed" in meta else ""),
-            *self.notes,
-            f"parameters: k_in {params['k_in']:.6g} dyne/cm, dt {params['dt']:.6g} s, {self.spec['run']['steps']} steps "
-            f"({self.spec['run']['steps'] * params['dt']:.6g} s)"
-            + (f", force layout {self.spec['run']['layout']}" if self.spec["run"]["layout"] != "auto" else ""),
-            f"stability: {self.stability.summary()}",
-            f"compression: {self.forecast.summary()}",
-        ]
-
-
-def plan_start(spec: dict, device: str | None = None) -> Plan:
-    """Set up a resolved ``spec``'s collision and check it (eqs. 12, 15, 17), compiling and writing nothing."""
-    device = _device(spec, device)
-    state, pile_info = prepare_collision(spec, device)
-    check_particles(state, "the collision set-up")  # a speed or spin beyond the model's subsonic regime
-    spec, notes = specs.settle_auto(spec, state, resolve_device(device))
-    params = specs.params_of(spec)
-    return Plan(spec, state, pile_info, check_stability(state, params), predict_compression(state, params.k_in), notes)
+    @property
+    def run_dir(self) -> Path:
+        return self.plan.run_dir
 
 
 def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None) -> PreparedRun:
-    """Check a resolved ``spec`` and set up its collision, writing nothing."""
+    """Check a resolved ``spec``, plan it (:func:`plan_start`) and build its simulation, writing nothing."""
     run_dir = run_dir_of(spec)
     if run_dir.exists() and (not run_dir.is_dir() or any(run_dir.iterdir())) and not overwrite:
         raise RunError(f"run folder {run_dir} already exists; use --overwrite to replace it or resume to continue it")
@@ -266,28 +154,28 @@ def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None
     lock = RunFolderLock(run_dir).acquire() if run_dir.is_dir() else None
     try:
         plan = plan_start(spec, device)
-        spec = plan.spec
         sim = Simulation(
             plan.state,
-            specs.params_of(spec),
-            device=_device(spec, device),
-            precision=spec["run"]["precision"],
-            layout=_layout(spec, plan.state.n, device),
-            allow_unstable=spec["run"]["allow_unstable"],
+            plan.params,
+            device=plan.device,
+            precision=plan.precision,
+            layout=plan.layout,
+            allow_unstable=plan.allow_unstable,
             ledger=True,
+            stability=plan.stability,
         )
     except BaseException:
         if lock is not None:
             lock.release()
         raise
-    depth, i, j = deepest_rest_overlap(plan.state)
+    depth, i, j = plan.rest_overlap
     extra = {
-        "size_classes": int(plan.state.size_class.max()) + 1,
+        "size_classes": plan.size_classes,
         "wall_seconds": 0.0,
         "start_overlap": depth,
         "start_overlap_pair": np.array([i, j], dtype=np.int64),
     }
-    return PreparedRun(sim, spec, run_dir, extra, resume=False, plan=plan, lock=lock)
+    return PreparedRun(sim, plan, extra, resume=False, lock=lock)
 
 
 def prepare_resume(run_dir, steps: int | None = None, device: str | None = None) -> PreparedRun:
@@ -326,19 +214,11 @@ def _prepare_resume(run_dir, spec_path, checkpoint_path, trajectory_path, steps,
         raise RunError(f"{trajectory_path} and {checkpoint_path} are of different runs (particle counts differ)")
     if specs.resolve_spec(_parse_toml(extra["spec_toml"])) != spec:
         raise RunError(f"{spec_path} changed since the run started; restore it to resume")
-    if steps is not None:
-        if steps < int(snapshot["step"]):
-            raise RunError(f"steps {steps} is below the {int(snapshot['step'])} already taken")
-        spec["run"]["steps"] = steps
-    sim = Simulation.from_snapshot(
-        static,
-        specs.params_of(spec),
-        snapshot,
-        device=_device(spec, device),
-        precision=spec["run"]["precision"],
-        layout=_layout(spec, static.n, device),
-    )
-    return PreparedRun(sim, spec, run_dir, extra, resume=True, lock=lock)
+    if steps is not None and steps < int(snapshot["step"]):
+        raise RunError(f"steps {steps} is below the {int(snapshot['step'])} already taken")
+    plan = plan_resume(spec, static, run_dir, device, steps)
+    sim = Simulation.from_snapshot(static, plan.params, snapshot, device=plan.device, precision=plan.precision, layout=plan.layout)
+    return PreparedRun(sim, plan, extra, resume=True, lock=lock)
 
 
 #: Something that watches frames as a run makes them: (every how many steps, callback(step, time, particles, observables)).
@@ -366,7 +246,7 @@ def _execute(run: PreparedRun, progress, observers) -> RunResult:
 def _open(run: PreparedRun, progress, observers) -> RunDriver:
     """Write a new run folder's first frame and checkpoint, or reopen a resumed one: its driver."""
     observers = observers or []
-    sim, spec, run_dir, extra = run.sim, run.spec, run.run_dir, run.extra
+    sim, plan, spec, run_dir, extra = run.sim, run.plan, run.spec, run.run_dir, run.extra
     spec_text = specs.dumps(spec, header=f"decco-warp run specification, resolved {datetime.now(timezone.utc):%Y-%m-%d %H:%M UTC}")
     if run.resume:
         if spec_text.split("\n", 1)[1] != extra["spec_toml"].split("\n", 1)[1]:  # the total steps changed
@@ -376,19 +256,18 @@ def _open(run: PreparedRun, progress, observers) -> RunDriver:
         for stale in run_dir.glob(".*.tmp"):  # a checkpoint being written when the run was killed
             stale.unlink()
             log(f"resume: removed the unfinished {stale.name}")
-        log(f"resume: from step {sim.step_count} of {spec['run']['steps']} on {sim.device}")
+        log(f"resume: from step {sim.step_count} of {plan.steps} on {sim.device}")
         sample = record(sim, int(extra["size_classes"]))[1]
         trajectory = Trajectory.reopen(run_dir / TRAJECTORY_FILE, keep_through_step=sim.step_count, observables=sample)
-        return RunDriver(sim, trajectory, spec, run_dir, log, extra, progress, observers)
+        return RunDriver(sim, trajectory, plan, run_dir, log, extra, progress, observers)
 
     for name in (TRAJECTORY_FILE, CHECKPOINT_FILE, LOG_FILE):
         (run_dir / name).unlink(missing_ok=True)
     (run_dir / SPEC_FILE).write_text(spec_text)
     extra["spec_toml"] = spec_text
     log = RunLog(run_dir / LOG_FILE)
-    plan = run.plan
     state = plan.state
-    log(f"start: {state.n} particles on {sim.device}, precision {spec['run']['precision']}, {spec['run']['steps']} steps")
+    log(f"start: {state.n} particles on {sim.device}, precision {plan.precision}, {plan.steps} steps")
     for line in plan.lines():
         log(line)
     particles, observables = record(sim, extra["size_classes"])
@@ -410,7 +289,7 @@ def _open(run: PreparedRun, progress, observers) -> RunDriver:
     for _, observe in observers:
         observe(sim.step_count, sim.time, particles, observables)
     write_checkpoint(run_dir / CHECKPOINT_FILE, sim.snapshot(), state, extra)
-    return RunDriver(sim, trajectory, spec, run_dir, log, extra, progress, observers)
+    return RunDriver(sim, trajectory, plan, run_dir, log, extra, progress, observers)
 
 
 def execute_ensemble(runs: list[PreparedRun]) -> list[RunResult | BaseException]:
@@ -498,13 +377,13 @@ class RunDriver:
     checkpoints, progress, the overlap and blow-up watches).  The loop that steps the simulation
     (one run's, or an ensemble's shared by several drivers) belongs to the caller."""
 
-    def __init__(self, sim, trajectory, spec, run_dir: Path, log: RunLog, extra: dict, progress, observers=()):
+    def __init__(self, sim, trajectory, plan: Plan, run_dir: Path, log: RunLog, extra: dict, progress, observers=()):
         self.sim, self.run_dir, self.log, self.extra = sim, run_dir, log, extra
         self.trajectory = BackgroundFrames(trajectory)
         self.progress, self.observers = progress, list(observers)
-        self.total = spec["run"]["steps"]
-        self.output_every = spec["run"]["output_every"]
-        self.checkpoint_every = spec["run"]["checkpoint_every"]
+        self.total = plan.steps
+        self.output_every = plan.outputs.output_every
+        self.checkpoint_every = plan.outputs.checkpoint_every
         self.size_classes = int(extra["size_classes"])
         self.first_step = sim.step_count
         self.wall_before = float(extra["wall_seconds"])
@@ -518,7 +397,7 @@ class RunDriver:
         self.start_energy = sim.energy_start["total_energy"]
         # Dissipation only lowers the total energy; a gain of a fraction of this means the integration broke down.
         self.scale = energy_scale(sim.energy_start)
-        self.overlaps = OverlapWatch(extra, spec["run"].get("max_overlap"), log)
+        self.overlaps = OverlapWatch(extra, plan.max_overlap, log)
         # A frame's deepest overlap is the deepest since the previous frame, which a resumed run may
         # have written before it stopped (checkpoints of decco-warp 0.2 do not say: then its start).
         self.last_frame = int(extra.get("last_frame_step", self.first_step))

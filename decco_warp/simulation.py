@@ -28,8 +28,8 @@ class Simulation:
     >>> later = sim.state           # a host copy, State
     >>> diagnostics(later, sim.params)
 
-    The set-up is checked against paper eqs. 15 and 17 first; an unstable one
-    raises :class:`StabilityError` unless ``allow_unstable=True``.  With
+    The set-up is checked against paper eqs. 15 and 17 first (or ``stability``, that check made
+    already); an unstable one raises :class:`StabilityError` unless ``allow_unstable=True``.  With
     ``ledger=True`` the work of each force channel is tracked, so that
     :meth:`energy_ledger` accounts for every erg.
     """
@@ -45,9 +45,11 @@ class Simulation:
         layout: Layout | None = None,
         ledger: bool = False,
         systems: Sequence[int] | None = None,
+        stability: StabilityReport | None = None,
     ):
         self.params = params
-        self.stability: StabilityReport = check_stability(state, params)
+        # A run's plan has made the report for this state and params already.
+        self.stability: StabilityReport = stability or check_stability(state, params)
         if not self.stability.stable and not allow_unstable:
             raise StabilityError(self.stability)
         self._static = state.copy()

@@ -203,7 +203,7 @@ def simulate_batch(batch: list[dict], max_particles: int | None = None) -> list[
     groups: dict[tuple, list[int]] = {}
     for k, run in enumerate(prepared):
         if run is not None:
-            params = specs.params_of(run.spec)
+            params = run.plan.params
             # The tree steps one system at a time: its runs go alone.
             # Only runs that would be stepped alone with the same kernels go together.
             engine = run.sim.engine
