@@ -80,7 +80,7 @@ def pile_mosaic(n: int, seed: int = 0) -> State:
     """``n`` spheres from copies of the shipped settled target pile, each turned at random, on a
     cubic grid with gaps between them (the last copy cut short): a pile's contacts at any N."""
     from .io import load_pile
-    from .run import builtin_pile
+    from .plan import builtin_pile
 
     pile = load_pile(builtin_pile("target"))
     centred = pile.positions - pile.positions.mean(axis=0)

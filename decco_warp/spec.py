@@ -14,7 +14,8 @@ The resolved form has every default filled in, ``steps`` rather than
 ``duration`` and exactly one of ``eta`` / ``speed``, so that a run folder's
 ``spec.toml`` repeats the run exactly.  ``k_in = "auto"`` (and ``dt = "auto"``,
 which it implies unless dt is given) depend on the collision: they stay "auto",
-with ``duration`` kept, until :func:`settle_auto` fills them in from the set-up.
+with ``duration`` kept, until :func:`settle_auto` fills them in from the set-up
+(decco_warp/plan.py does, once per run).
 """
 
 from __future__ import annotations
