@@ -179,13 +179,21 @@ def _frozen(spec: dict) -> tuple:
     return tuple((table, tuple(values.items())) for table, values in spec.items())
 
 
+def _read_only(state: State) -> State:
+    """A copy of ``state`` whose arrays cannot be written: what executes a plan copies it first."""
+    state = state.copy()
+    for name in ("positions", "velocities", "omegas", "radii", "masses", "pile_id", "size_class"):
+        getattr(state, name).flags.writeable = False
+    return state
+
+
 def _resolved(spec: dict, state: State, device: str, **given) -> Plan:
     """The plan of a settled ``spec`` (no "auto" left) for ``state`` on ``device``."""
     run = spec["run"]
     n = state.n
     return Plan(
         spec_items=_frozen(spec),
-        state=state,
+        state=_read_only(state),
         params=specs.params_of(spec),
         device=device,
         # "auto" is the engine's own choice for one system of n particles, made here once.

@@ -86,6 +86,8 @@ def test_a_spec_is_resolved_once_into_a_frozen_plan_with_no_auto_left(tmp_path, 
         plan.steps = 1
     with pytest.raises(dataclasses.FrozenInstanceError):
         plan.outputs.output_every = 1
+    with pytest.raises(ValueError, match="read-only"):
+        plan.state.positions[0, 0] = 0.0
     settled["run"]["steps"] = 1
     settled["params"]["k_in"] = 1.0
     assert plan.spec["run"]["steps"] == plan.steps != 1 and plan.spec["params"]["k_in"] == plan.params.k_in
