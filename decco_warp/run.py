@@ -61,7 +61,7 @@ class RunResult:
     """Of the wall time over all sessions, the part spent stepping (the rest: frames, checkpoints, set-up)."""
 
 
-# --- piles and folders ---------------------------------------------------------------
+# --- folders ----------------------------------------------------------------------------
 
 
 def check_writable(run_dir: Path) -> None:
