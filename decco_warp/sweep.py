@@ -203,13 +203,12 @@ def simulate_batch(batch: list[dict], max_particles: int | None = None) -> list[
     groups: dict[tuple, list[int]] = {}
     for k, run in enumerate(prepared):
         if run is not None:
-            params = run.plan.params
+            plan = run.plan
             # The tree steps one system at a time: its runs go alone.
             # Only runs that would be stepped alone with the same kernels go together.
-            engine = run.sim.engine
-            key = (params, engine.precision, engine.layout, run.sim.step_count) if params.gravity == "all-pairs" else (k,)
+            key = (plan.params, plan.precision, plan.layout, run.sim.step_count) if plan.params.gravity == "all-pairs" else (k,)
             if max_particles is not None:
-                count = run.sim.engine.count
+                count = plan.state.n
                 key = (*key, count) if count <= max_particles else (k,)
             groups.setdefault(key, []).append(k)
     for members in groups.values():
