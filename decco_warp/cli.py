@@ -35,12 +35,41 @@ def fail(message: str, code: int = EXIT_INPUT) -> None:
     raise typer.Exit(code)
 
 
+def write_failed(error: OSError, kept: str) -> None:
+    """Exit 5 with one line: the write that failed (``error``), and what is kept."""
+    from .io import describe_write_error
+
+    fail(f"{describe_write_error(error)}; {kept}", EXIT_OUTPUT)
+
+
+def _end(code: int) -> None:
+    """Exit with ``code``; at once (os._exit) when HDF5 was cut off inside a write, since closing
+    such a file (as Python's exit would) can crash: what it wrote before stays readable."""
+    import sys
+
+    io = sys.modules.get("decco_warp.io")
+    if io is not None and io.ABANDONED:
+        import os
+
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    raise SystemExit(code)
+
+
 def main_entry() -> None:
     """The console script: typer's app, with usage errors as one line (exit code 2) instead of a panel."""
     try:
         code = app(standalone_mode=False)
     except typer.Exit as done:
-        raise SystemExit(done.exit_code) from None
+        _end(done.exit_code)
+    except OSError as error:  # a write that no command caught (each names what it keeps): still one line
+        from .io import WRITE_ERRNOS, describe_write_error
+
+        if error.errno not in WRITE_ERRNOS:
+            raise
+        typer.echo(f"decco-warp: error: {describe_write_error(error)}; the files written before it are whole", err=True)
+        _end(EXIT_OUTPUT)
     except Exception as error:  # typer's (or click's) usage errors carry a message and an exit code
         if type(error).__name__ == "Abort":
             typer.echo("decco-warp: aborted", err=True)
@@ -52,7 +81,7 @@ def main_entry() -> None:
         message = " ".join(error.format_message().split())
         typer.echo(f"decco-warp{command}: error: {message} (see --help)", err=True)
         raise SystemExit(error.exit_code) from None
-    raise SystemExit(code if isinstance(code, int) else 0)
+    _end(code if isinstance(code, int) else 0)
 
 
 def _version_callback(value: bool) -> None:
@@ -240,7 +269,15 @@ def pile(
         except FormationStopped as error:
             failed = (str(error), EXIT_STOPPED)
         except OSError as error:  # a full disk, say: the last checkpoint (if any) is intact
-            failed = (f"could not write {out} or its checkpoint {partial_path(out)}: {error}", EXIT_OUTPUT)
+            failed = error
+    if isinstance(failed, OSError):
+        partial = partial_path(out)
+        kept = (
+            f"the formation saved in {partial} is kept: free space, then the same command continues it"
+            if partial.is_file()
+            else f"nothing of {out} is kept: free space, then run the same command again"
+        )
+        write_failed(failed, kept)
     if failed:
         fail(*failed)
     from .collision import pile_radius
@@ -608,13 +645,14 @@ def bench(
                 f"{fraction} {baseline_text}  {row.layout}"
             )
     if json_out is not None:
-        json_out.write_text(
-            json.dumps(
-                {"device": chosen, "device_name": d.name, "warp": wp.config.version, "precision": precision,
-                 "limit_pairs_per_s": limit, "limit": how, "rows": [benchmarks.as_dict(r) for r in rows]},
-                indent=2,
-            )
-        )
+        from .io import write_atomic
+
+        table = {"device": chosen, "device_name": d.name, "warp": wp.config.version, "precision": precision,
+                 "limit_pairs_per_s": limit, "limit": how, "rows": [benchmarks.as_dict(r) for r in rows]}  # fmt: skip
+        try:
+            write_atomic(json_out, json.dumps(table, indent=2))
+        except OSError as error:
+            write_failed(error, f"{json_out} is not written (any earlier one is as it was); the table above is the result")
         typer.echo(f"wrote {json_out}")
 
 
@@ -632,13 +670,14 @@ def analyze(
 ) -> None:
     """Fragments, the paper's metrics, conservation and energy of runs: analysis.h5, summary.json, figures."""
     import csv
+    import io
     import json
 
     from .analysis.figures import draw_run, write_cross_run
     from .analysis.runs import analyse_run
     from .checks import InputError, check_destination
     from .device import DeviceError, resolve_device
-    from .io import FileFormatError
+    from .io import FileFormatError, write_atomic
     from .lock import RunFolderLock, ensure_free
 
     if min_members < 1 or every < 1:
@@ -665,6 +704,7 @@ def analyze(
         fail(str(error))
     summaries = []
     bar = _progress_bar("analysing", "frames")
+    failed = None
     with bar:
         for run_dir in runs:
             task = bar.add_task(run_dir.name, total=None, frames="")
@@ -680,7 +720,13 @@ def analyze(
                     draw_run(analysis, run_dir)
             except (FileFormatError, InputError) as error:
                 fail(str(error))
+            except OSError as error:
+                failed = error
+                break
             summaries.append(analysis["summary"])
+    if failed is not None:
+        done = f"the analyses of {len(summaries)} run(s) before it are whole, " if summaries else ""
+        write_failed(failed, f"{done}each output file is whole or absent and the runs are untouched: free space, then decco-warp analyze {path} again")
     for run_dir, summary in zip(runs, summaries):
         typer.echo(
             f"{run_dir}: m_lf/m_t {summary['largest_mass_ratio']:.4g}, particle size change "
@@ -688,12 +734,16 @@ def analyze(
             f"analysis.h5, summary.json and figures/ written"
         )
     if len(runs) > 1:
-        with open(path / "summary.csv", "w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=list(summaries[0]))
-            writer.writeheader()
-            writer.writerows(summaries)
-        write_cross_run(path, summaries)
-        (path / "summaries.json").write_text(json.dumps(summaries, indent=2) + "\n")
+        table = io.StringIO()
+        writer = csv.DictWriter(table, fieldnames=list(summaries[0]))
+        writer.writeheader()
+        writer.writerows(summaries)
+        try:
+            write_atomic(path / "summary.csv", table.getvalue())
+            write_cross_run(path, summaries)
+            write_atomic(path / "summaries.json", json.dumps(summaries, indent=2) + "\n")
+        except OSError as error:
+            write_failed(error, f"every run's own analysis is whole; the cross-run files are whole or absent: free space, then decco-warp analyze {path} again")
         typer.echo(f"{path}: summary.csv and cross-run figures in {path / 'figures'}")
 
 
@@ -707,21 +757,17 @@ def view(
     mode: str = typer.Option("spawn", "--mode", help="Without --save: spawn, connect[=ADDR] or serve."),
 ) -> None:
     """Replay a run into rerun: a local viewer, a recording (.rrd), or a viewer elsewhere."""
-    import contextlib
-
     from .checks import check_destination
-    from .io import FileFormatError
+    from .io import WRITE_ERRNOS, FileFormatError
     from .viz import RerunUnavailable, parse_mode, replay
 
     trajectory = path / "trajectory.h5" if path.is_dir() else path
     if not trajectory.is_file():
         fail(f"{path} is neither a run folder nor a trajectory file")
-    existed = True  # until a recording of ours is started: never delete what was there before
     try:
         chosen, address = ("save", None) if save_to is not None else parse_mode(mode)
         if chosen == "save" and save_to is None:
             save_to = trajectory.parent / "recording.rrd"
-        existed = save_to is not None and save_to.exists()
         if save_to is not None:
             check_destination(save_to, "recording")
         bar = _progress_bar("replaying", "frames")
@@ -731,10 +777,11 @@ def view(
                 trajectory, chosen, address, save_to=save_to,
                 progress=lambda done, total: bar.update(task, total=total, completed=done, frames=f"{done}/{total}"),
             )  # fmt: skip
-    except (ValueError, RerunUnavailable, FileFormatError, OSError) as error:
-        if save_to is not None and not existed:
-            with contextlib.suppress(OSError):
-                save_to.unlink(missing_ok=True)  # no half-written recording left behind
+    except OSError as error:
+        if error.errno not in WRITE_ERRNOS:
+            fail(" ".join(str(error).split()))
+        write_failed(error, f"{save_to} is not written (a recording is renamed into place only when whole; any earlier one is as it was)")
+    except (ValueError, RerunUnavailable, FileFormatError) as error:
         fail(" ".join(str(error).split()))
     if save_to is not None:
         typer.echo(f"wrote {save_to} (view it with: rerun {save_to})")
@@ -807,6 +854,7 @@ def sweep(
     from .device import DeviceError, gpus_to_use
     from .lock import RunFolderLock
     from .spec import SpecError
+    from .run import OUTPUT_FAILURE
     from .sweep import load_sweep, run_sweep, write_record, write_summary
 
     try:
@@ -852,9 +900,14 @@ def sweep(
             rows = run_sweep(settings, runs, scheduler, workers, report, analysis_workers=analysis_workers, gpus=gpus)
         except KeyboardInterrupt:
             rows = None
+        except OSError as error:  # summary.csv could not be written: the runs' own folders are whole
+            write_failed(error, f"the finished runs' folders and the last summary.csv are whole; {_AGAIN}")
         finally:
             signal.signal(signal.SIGTERM, previous)
-    write_record(folder, settings, rows or finished, time.perf_counter() - started)
+    try:
+        write_record(folder, settings, rows or finished, time.perf_counter() - started)
+    except OSError as error:
+        write_failed(error, f"the runs' folders and summary.csv are whole; {_AGAIN}")
     lock.release()
     if rows is None:
         fail(
@@ -862,10 +915,20 @@ def sweep(
             "continue: finished runs are skipped, the stopped one resumes from its checkpoint",
             code=EXIT_STOPPED,
         )
-    summary = write_summary(folder, rows)
-    write_cross_run(folder, [r for r in rows if r.get("status") != "failed"])
+    try:
+        summary = write_summary(folder, rows)
+        write_cross_run(folder, [r for r in rows if r.get("status") != "failed"])
+    except OSError as error:
+        write_failed(error, f"the runs' folders are whole, and summary.csv and each figure whole or absent; {_AGAIN}")
     failed = [r for r in rows if r.get("status") == "failed"]
     typer.echo(f"summary: {summary}, sweep.json; figures in {folder / 'figures'}; {len(failed)} failed")
+    unwritten = [r for r in failed if OUTPUT_FAILURE in r.get("reason", "") or "No space left" in r.get("reason", "")]
+    if unwritten:
+        fail(f"{len(unwritten)} run(s) could not write their folder ({unwritten[0]['run']}: {unwritten[0]['reason']}); {_AGAIN}", EXIT_OUTPUT)
+
+
+#: What a sweep stopped by a failed write says to do.
+_AGAIN = "free space, then run the sweep again: finished runs are skipped, a stopped one resumes from its checkpoint"
 
 
 # --- piles (a list of piles from a TOML file) ------------------------------------------------

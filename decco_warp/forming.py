@@ -67,6 +67,7 @@ def form_pile_file(
     The checkpoint is removed once the pile is written.
     """
     out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
     partial = partial_path(out)
     snapshot = read_partial(partial) if partial.exists() else None
     formation = Formation(**options, snapshot=snapshot)

@@ -21,8 +21,10 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import io as _io
 import os
 import tempfile
+import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
@@ -81,23 +83,92 @@ def _plain(value):
 
 @contextlib.contextmanager
 def atomic_h5(path: Path):
-    """Write an HDF5 file under a temporary name, fsync it, then rename it into place."""
+    """Write an HDF5 file atomically: built in memory, then written whole (see :func:`write_atomic`).
+
+    HDF5 never meets the disk here, so a full disk or an I/O error is one clean OSError and can
+    never leave HDF5's own state broken (which can crash the process when the file is closed)."""
+    buffer = _io.BytesIO()
+    with h5py.File(buffer, "w") as f:
+        yield f
+    write_atomic(path, buffer.getvalue())
+
+
+def write_atomic(path, data: bytes | str, what: str | None = None) -> Path:
+    """Replace ``path`` with ``data`` atomically: a temporary file beside it, fsync, rename.
+
+    A failed write (no space, an I/O error, the folder gone) raises OSError naming the file and
+    leaves the previous file, if any, as it was; the folder is never created here."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    data = data.encode() if isinstance(data, str) else data
+    write_point(what or path.name)
     handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(handle)
     try:
-        with h5py.File(temporary, "w") as f:
-            yield f
-        with open(temporary, "rb") as f:
+        with os.fdopen(handle, "wb") as f:
+            f.write(data)
+            f.flush()
             os.fsync(f.fileno())
         os.chmod(temporary, 0o666 & ~_umask())  # mkstemp made it private; give it the usual mode
         os.replace(temporary, path)
-        _fsync_directory(path.parent)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
+    except BaseException as error:
+        with contextlib.suppress(OSError):
             os.unlink(temporary)
+        if isinstance(error, OSError) and not error.filename:
+            raise OSError(error.errno, error.strerror, str(path)) from None
         raise
+    _fsync_directory(path.parent)
+    return path
+
+
+# --- writes: the fault-injection hook, and files whose writer HDF5 gave up on ---------------
+
+_writes = 0
+_writes_lock = threading.Lock()
+#: HDF5 files whose write failed inside HDF5: never closed (closing one can crash), kept from the
+#: garbage collector; a process holding any ends with os._exit once it has said what happened.
+ABANDONED: list = []
+
+
+def write_point(what: str) -> None:
+    """Every write of every command (a frame, a checkpoint, a log line, a figure, a table) passes
+    here first.  Test hooks: DECCO_TEST_WRITES=FILE appends "k what" for the k-th write of the
+    process; DECCO_TEST_FAIL_WRITE="k[:ENOSPC|:EIO]" fails the k-th write as a full disk (or an
+    I/O error) would."""
+    global _writes
+    with _writes_lock:
+        _writes += 1
+        k = _writes
+    journal = os.environ.get("DECCO_TEST_WRITES")
+    if journal:
+        with open(journal, "a", encoding="utf-8") as f:
+            f.write(f"{k} {what}\n")
+    wanted = os.environ.get("DECCO_TEST_FAIL_WRITE")
+    if wanted:
+        index, _, kind = wanted.partition(":")
+        if index.strip() == str(k):
+            code = errno.EIO if kind.strip().upper() == "EIO" else errno.ENOSPC
+            raise OSError(code, f"{os.strerror(code)} (DECCO_TEST_FAIL_WRITE)", what)
+
+
+def as_os_error(error: BaseException, what) -> OSError:
+    """An HDF5 write error (h5py raises OSError or RuntimeError) as an OSError naming ``what``."""
+    if isinstance(error, OSError) and error.errno:
+        return OSError(error.errno, error.strerror, error.filename or str(what))
+    text = str(error)
+    for code in (errno.ENOSPC, errno.EIO, errno.EDQUOT, errno.EROFS, errno.ENOENT):
+        if f"errno = {code}," in text:
+            return OSError(code, os.strerror(code), str(what))
+    return OSError(errno.EIO, _first_line(error), str(what))
+
+
+def abandon(file) -> None:
+    """Stop using an HDF5 file whose write failed inside HDF5, without closing it."""
+    ABANDONED.append(file)
+
+
+def describe_write_error(error: OSError) -> str:
+    """"No space left on device writing trajectory.h5" from an OSError of a write."""
+    what = f" writing {Path(error.filename).name}" if error.filename else ""
+    return f"{error.strerror or _first_line(error)}{what}"
 
 
 def _umask() -> int:
@@ -159,6 +230,7 @@ def _first_line(error: BaseException) -> str:
 
 def save_pile(pile: State, path) -> None:
     """Write a formed pile (State with size_class and formation metadata) to ``path`` atomically."""
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
     with atomic_h5(Path(path)) as f:
         f.attrs["format"] = PILE_FORMAT
         f.attrs["format_version"] = FORMAT_VERSION
@@ -225,6 +297,7 @@ class Trajectory:
     def __init__(self, file: h5py.File, path: Path):
         self.file = file
         self.path = path
+        self.broken = False
         # (step, time, value) datasets of each element, looked up once: h5py's lookups by
         # name cost more than the writes themselves.
         self._datasets: dict[tuple[str, str], tuple] = {}
@@ -233,7 +306,22 @@ class Trajectory:
     def create(cls, path, state: State, observables: dict, parameters: dict) -> "Trajectory":
         """A new file for ``state``'s particles; ``observables`` gives each series' shape from a sample frame."""
         path = Path(path)
-        f = h5py.File(path, "w", libver="latest")
+        write_point(path.name)
+        try:
+            f = h5py.File(path, "w", libver="latest")
+        except (OSError, RuntimeError) as error:
+            raise as_os_error(error, path) from None
+        try:
+            cls._layout(f, state, observables, parameters)
+        except BaseException as error:
+            abandon(f)  # HDF5 may have been cut off half-way: closing could crash
+            with contextlib.suppress(OSError):
+                path.unlink()
+            raise as_os_error(error, path) if isinstance(error, (OSError, RuntimeError)) else error from None
+        return cls(f, path)
+
+    @classmethod
+    def _layout(cls, f: h5py.File, state: State, observables: dict, parameters: dict) -> None:
         h5md = f.create_group("h5md")
         h5md.attrs["version"] = np.array([1, 1])
         h5md.create_group("author").attrs["name"] = os.environ.get("USER", "decco-warp user")
@@ -264,26 +352,32 @@ class Trajectory:
             _time_series(observables_group, name, value.shape, dtype)
         write_dict(f.create_group("parameters"), parameters)
         f.swmr_mode = True
-        return cls(f, path)
 
     @classmethod
     def reopen(cls, path, keep_through_step: int, observables: dict | None = None) -> "Trajectory":
         """Open an existing trajectory to continue it, dropping frames after ``keep_through_step``;
         ``observables`` (a sample frame) adds the series an older version did not write."""
         path = Path(path)
+        write_point(path.name)
         clear_write_flags(path)  # left set by a writer that was killed
         try:
             f = h5py.File(path, "r+", libver="latest")
         except OSError as error:
+            if error.errno in WRITE_ERRNOS:
+                raise as_os_error(error, path) from None
             raise FileFormatError(f"trajectory {path} cannot be reopened ({_first_line(error)})") from None
         trajectory = cls(f, path)
-        for element in trajectory._elements():
-            keep = _complete_frames(element, keep_through_step)
-            for name in ("step", "time", "value"):
-                element[name].resize(keep, axis=0)
-        if observables:
-            trajectory._add_missing(observables)  # before SWMR mode, which allows no new datasets
-        f.swmr_mode = True
+        try:
+            for element in trajectory._elements():
+                keep = _complete_frames(element, keep_through_step)
+                for name in ("step", "time", "value"):
+                    element[name].resize(keep, axis=0)
+            if observables:
+                trajectory._add_missing(observables)  # before SWMR mode, which allows no new datasets
+            f.swmr_mode = True
+        except (OSError, RuntimeError) as error:
+            abandon(f)  # the frames dropped are dropped again by the next resume
+            raise as_os_error(error, path) from None
         return trajectory
 
     def _elements(self):
@@ -293,10 +387,25 @@ class Trajectory:
 
     def append(self, step: int, time: float, particles: dict, observables: dict) -> None:
         """One frame: particle arrays (position, velocity, omega, stress) and observable values."""
-        for group, values in (("particles/all", particles), ("observables", observables)):
-            for name, value in values.items():
-                self._append(self._element(group, name), step, time, value)
-        self.file.flush()
+        write_point(f"{self.path.name} (frame of step {step})")
+        self.write(step, time, particles, observables)
+
+    def write(self, step: int, time: float, particles: dict, observables: dict) -> None:
+        """:meth:`append` without its write point (counted by the caller).  A failed write raises
+        OSError and leaves the file abandoned, never closed: the frames flushed before it stay
+        readable, and a resume drops whatever of it reached the disk."""
+        if self.broken:
+            raise OSError(errno.EIO, "an earlier write of this file failed", str(self.path))
+        try:
+            check_space(self.path.parent, sum(np.asarray(v).nbytes for v in (*particles.values(), *observables.values())), self.path)
+            for group, values in (("particles/all", particles), ("observables", observables)):
+                for name, value in values.items():
+                    self._append(self._element(group, name), step, time, value)
+            self.file.flush()
+        except (OSError, RuntimeError) as error:
+            self.broken = True
+            abandon(self.file)
+            raise as_os_error(error, self.path) from None
 
     def _element(self, group: str, name: str) -> tuple:
         key = (group, name)
@@ -336,7 +445,31 @@ class Trajectory:
         steps[k] = step
 
     def close(self) -> None:
-        self.file.close()
+        if self.broken:
+            return  # abandoned: see write
+        try:
+            self.file.close()
+        except (OSError, RuntimeError) as error:
+            self.broken = True
+            abandon(self.file)
+            raise as_os_error(error, self.path) from None
+
+
+#: errno values of a write that failed for want of room or of a working disk or folder.
+WRITE_ERRNOS = (errno.ENOSPC, errno.EIO, errno.EDQUOT, errno.EROFS, errno.ENOENT, errno.ESTALE)
+#: Room a frame leaves free for HDF5's own metadata and the file's close [bytes].
+FRAME_HEADROOM = 1 << 20
+
+
+def check_space(folder: Path, frame_bytes: int, path: Path) -> None:
+    """Raise ENOSPC before a frame that the disk has no room for: HDF5 cut off half-way through a
+    frame can be left in a state that crashes at close; a frame refused here never starts."""
+    try:
+        stats = os.statvfs(folder)
+    except OSError as error:  # the folder is gone
+        raise OSError(error.errno, error.strerror, str(path)) from None
+    if stats.f_bavail * stats.f_frsize < 2 * frame_bytes + FRAME_HEADROOM:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
 
 
 class BackgroundFrames:
@@ -355,7 +488,8 @@ class BackgroundFrames:
     def append(self, step: int, time: float, particles: dict, observables: dict) -> None:
         """Queue one frame (its arrays must not change afterwards) once the previous one is written."""
         self.flush()
-        self._pending = self._worker.submit(self.trajectory.append, step, time, particles, observables)
+        write_point(f"{self.trajectory.path.name} (frame of step {step})")  # counted here, in order with the caller's writes
+        self._pending = self._worker.submit(self.trajectory.write, step, time, particles, observables)
 
     def flush(self) -> None:
         """Wait until every queued frame is written and flushed; raises a write's error."""

@@ -50,7 +50,10 @@ class RunFolderLock:
         self._fd = fd
         self._noted = note
         if note:
-            (self.run_dir / LOCK_FILE).write_text(f"{os.getpid()} {socket.gethostname()}\n")
+            try:  # only says who holds the lock (the flock is the lock): a full disk need not stop the work
+                (self.run_dir / LOCK_FILE).write_text(f"{os.getpid()} {socket.gethostname()}\n")
+            except OSError:
+                self._noted = False
         return self
 
     def release(self) -> None:

@@ -19,7 +19,10 @@ import numpy as np
 from . import spec as specs
 from .checks import MAX_REST_OVERLAP, InputError, check_destination
 from .diagnostics import energy_ledger, energy_scale, ledger_closure, stress_shares
-from .io import BackgroundFrames, FileFormatError, Trajectory, pause_point, read_checkpoint, read_frame, write_checkpoint
+from .io import (
+    BackgroundFrames, FileFormatError, Trajectory, describe_write_error, pause_point, read_checkpoint, read_frame, write_atomic,
+    write_checkpoint, write_point,
+)  # fmt: skip
 from .lock import RunFolderLock
 from .plan import Plan, RunError, builtin_pile, pile_path, plan_resume, plan_start, run_dir_of  # noqa: F401 (run's names)
 from .simulation import GRAPH_STEPS, Simulation
@@ -76,15 +79,23 @@ class RunLog:
     """Timestamped lines appended to run.log (and flushed at once)."""
 
     def __init__(self, path: Path):
+        write_point(path.name)
         self.file = open(path, "a", encoding="utf-8")
 
     def __call__(self, message: str) -> None:
+        if self.file.closed:
+            return
+        write_point(self.file.name.rsplit("/", 1)[-1])
         stamp = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
-        self.file.write(f"{stamp} {message}\n")
-        self.file.flush()
+        try:
+            self.file.write(f"{stamp} {message}\n")
+            self.file.flush()
+        except OSError as error:
+            raise OSError(error.errno, error.strerror, self.file.name) from None
 
     def close(self) -> None:
-        self.file.close()
+        with contextlib.suppress(OSError):  # a line that could not be flushed is already reported
+            self.file.close()
 
 
 # --- one frame of output -------------------------------------------------------------
@@ -240,7 +251,44 @@ def execute(
 
 
 def _execute(run: PreparedRun, progress, observers) -> RunResult:
-    return _advance(run.sim, _open(run, progress, observers))
+    return _advance(run.sim, _open_or_clean(run, progress, observers))
+
+
+def _open_or_clean(run: PreparedRun, progress, observers) -> RunDriver:
+    """:func:`_open`, with a failed write as an OutputError saying what is kept: a resumed run keeps
+    its checkpoint; a new run whose first checkpoint was never written is removed, so that the same
+    command starts it again."""
+    try:
+        return _open(run, progress, observers)
+    except OSError as error:
+        if run.resume:
+            raise OutputError(_failed_write(run.run_dir, run.sim.step_count, error)) from None
+        for name in (SPEC_FILE, TRAJECTORY_FILE, CHECKPOINT_FILE, LOG_FILE):
+            with contextlib.suppress(OSError):
+                (run.run_dir / name).unlink(missing_ok=True)
+        raise OutputError(
+            f"writing the run folder {run.run_dir} failed before its first checkpoint ({describe_write_error(error)}); "
+            "nothing of it is kept: free space or fix the folder, then run the same command again"
+        ) from None
+
+
+#: How the one line of a run whose write failed begins (a sweep tells them by it).
+OUTPUT_FAILURE = "writing the run folder"
+
+
+def _failed_write(run_dir: Path, step: int, error: OSError) -> str:
+    """The one line of a run whose write failed at ``step``: what failed and what is kept."""
+    try:
+        kept = int(read_checkpoint(run_dir / CHECKPOINT_FILE)[0]["step"])
+    except (FileFormatError, OSError):
+        return (
+            f"writing the run folder failed at step {step} ({describe_write_error(error)}); no checkpoint is left in "
+            f"{run_dir}: fix the folder, then run the run again with --overwrite"
+        )
+    return (
+        f"writing the run folder failed at step {step} ({describe_write_error(error)}); "
+        f"the checkpoint of step {kept} is intact: free space or fix the folder, then decco-warp resume {run_dir}"
+    )
 
 
 def _open(run: PreparedRun, progress, observers) -> RunDriver:
@@ -251,7 +299,7 @@ def _open(run: PreparedRun, progress, observers) -> RunDriver:
     if run.resume:
         if spec_text.split("\n", 1)[1] != extra["spec_toml"].split("\n", 1)[1]:  # the total steps changed
             extra["spec_toml"] = spec_text
-            (run_dir / SPEC_FILE).write_text(spec_text)
+            write_atomic(run_dir / SPEC_FILE, spec_text)
         log = RunLog(run_dir / LOG_FILE)
         for stale in run_dir.glob(".*.tmp"):  # a checkpoint being written when the run was killed
             stale.unlink()
@@ -263,7 +311,7 @@ def _open(run: PreparedRun, progress, observers) -> RunDriver:
 
     for name in (TRAJECTORY_FILE, CHECKPOINT_FILE, LOG_FILE):
         (run_dir / name).unlink(missing_ok=True)
-    (run_dir / SPEC_FILE).write_text(spec_text)
+    write_atomic(run_dir / SPEC_FILE, spec_text)
     extra["spec_toml"] = spec_text
     log = RunLog(run_dir / LOG_FILE)
     state = plan.state
@@ -312,10 +360,10 @@ def execute_ensemble(runs: list[PreparedRun]) -> list[RunResult | BaseException]
                 run.lock = run.lock or RunFolderLock(run.run_dir)
                 run.lock.acquire()
                 locks.append(run.lock)
-                drivers[k] = _open(run, None, None)
+                drivers[k] = _open_or_clean(run, None, None)
                 others = [other.run_dir.name for other in runs if other is not run]
                 drivers[k].log(f"ensemble: stepped together with {len(others)} other run(s) in one set of launches: {', '.join(others)}")
-            except (RunError, OSError, FileFormatError) as error:
+            except (RunError, OSError, FileFormatError, OutputError) as error:
                 outcomes[k] = error
         stop = StopRequests()
         with stop:
@@ -334,7 +382,9 @@ def execute_ensemble(runs: list[PreparedRun]) -> list[RunResult | BaseException]
                         outcomes[k] = stopped
     finally:
         for k, driver in drivers.items():
-            driver.close()
+            closing = driver.close()
+            if outcomes[k] is None and closing is not None:
+                outcomes[k] = driver.failure(closing, log=False)
             if outcomes[k] is None and driver.done:
                 outcomes[k] = driver.result()
         for lock in locks:
@@ -366,9 +416,15 @@ def _advance(sim, driver: RunDriver) -> RunResult:
                 sim.finish()  # so that the steps' time is counted here, not in the frame that reads them
                 driver.after_steps(_time.perf_counter() - before, stop.signal)
     except (BlowUp, OSError) as error:
-        raise driver.failure(error) from None
-    finally:
+        failure = driver.failure(error)
         driver.close()
+        raise failure from None
+    except BaseException:
+        driver.close()
+        raise
+    closing = driver.close()
+    if closing is not None:
+        raise driver.failure(closing, log=False)
     return driver.result()
 
 
@@ -490,32 +546,43 @@ class RunDriver:
                 "(docs/benchmarks.md)"
             )
 
-    def failure(self, error: BaseException) -> BaseException:
+    def failure(self, error: BaseException, log: bool = True) -> BaseException:
         """What a BlowUp or OSError raised by :meth:`after_steps` means for the user, logged."""
         if isinstance(error, BlowUp):
-            self.log(f"blow-up: {error}; the last checkpoint is kept")
+            with contextlib.suppress(OSError):
+                self.log(f"blow-up: {error}; the last checkpoint is kept")
             return error
-        kept = read_checkpoint(self.run_dir / CHECKPOINT_FILE)[0]["step"]
-        message = (
-            f"writing the run folder failed at step {self.sim.step_count} ({error.strerror or error}); "
-            f"the checkpoint of step {kept} is intact: free space or fix the folder, then decco-warp resume {self.run_dir}"
-        )
-        with contextlib.suppress(OSError):
-            self.log(f"output error: {message}")
+        message = _failed_write(self.run_dir, self.sim.step_count, error)
+        if log:
+            with contextlib.suppress(OSError):
+                self.log(f"output error: {message}")
         return OutputError(message)
 
-    def close(self) -> None:
-        """Close the trajectory and the log (saying so when the run is done)."""
+    def close(self) -> OSError | None:
+        """Close the trajectory and the log (saying so when the run is done); returns the error of a
+        write that failed on the way (the trajectory's last frame, the log's last line), else None."""
+        failed = None
         try:  # a finished or stopped run's frames were flushed by its last checkpoint
             self.trajectory.close()
         except OSError as error:
+            failed = error
             with contextlib.suppress(OSError):
                 self.log(f"output error: the last frame may be missing from the trajectory ({error})")
         try:  # the sidecar through which ParaView and VisIt read the trajectory (decco_warp/xdmf.py)
             write_xdmf(self.run_dir / TRAJECTORY_FILE)
         except (OSError, FileFormatError) as error:
+            if isinstance(error, OSError):
+                failed = failed or error
             with contextlib.suppress(OSError):
                 self.log(f"output error: trajectory.xdmf not written ({error}); decco-warp export {self.run_dir} --xdmf writes it")
+        try:
+            self._log_done()
+        except OSError as error:
+            failed = failed or error
+        self.log.close()
+        return failed
+
+    def _log_done(self) -> None:
         self.wall = _time.perf_counter() - self.started
         if self.done:
             outside = 100.0 * (self.wall - self.stepping) / self.wall if self.wall > 0 else 0.0
@@ -526,7 +593,6 @@ class RunDriver:
                 + "); "
                 f"{self.overlaps.summary()}"
             )
-        self.log.close()
 
     def result(self) -> RunResult:
         sim = self.sim

@@ -478,17 +478,23 @@ POLL_SECONDS = 0.2
 
 def write_summary(folder: Path, rows: list[dict]) -> Path:
     path = folder / "summary.csv"
+    from io import StringIO
+
+    from .io import write_atomic
+
     folder.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=SUMMARY_FIELDS, extrasaction="ignore")
-        writer.writeheader()
-        writer.writerows(rows)
-    return path
+    table = StringIO()
+    writer = csv.DictWriter(table, fieldnames=SUMMARY_FIELDS, extrasaction="ignore")
+    writer.writeheader()
+    writer.writerows(rows)
+    return write_atomic(path, table.getvalue())  # a full disk leaves the previous table whole
 
 
 def write_record(folder: Path, settings: dict, rows: list[dict], wall_seconds: float) -> Path:
     """sweep.json: what ran where, with which versions, and how long it took."""
     import warp as wp
+
+    from .io import write_atomic
 
     devices = sorted({(r.get("device"), r.get("device_name")) for r in rows if r.get("device")})
     record = {
@@ -506,5 +512,4 @@ def write_record(folder: Path, settings: dict, rows: list[dict], wall_seconds: f
         "settings": settings,
     }
     path = folder / "sweep.json"
-    path.write_text(json.dumps(record, indent=2) + "\n")
-    return path
+    return write_atomic(path, json.dumps(record, indent=2) + "\n")

@@ -20,6 +20,9 @@ and ``sim_time``):
 
 from __future__ import annotations
 
+import errno
+import os
+
 from pathlib import Path
 
 import numpy as np
@@ -89,7 +92,10 @@ class RerunLogger:
         if mode == "save":
             self.path = Path(save_to) if save_to is not None else Path(run_dir) / RECORDING_FILE
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self.rec.save(self.path)
+            # Recorded beside its destination and renamed into place when whole: a recording cut
+            # short (a full disk, a stop) never replaces a good one.
+            self._recording = self.path.with_name(f".{self.path.name}.tmp")
+            self.rec.save(self._recording)
         elif mode == "spawn":
             self.rec.spawn()
         elif mode == "connect":
@@ -186,9 +192,29 @@ class RerunLogger:
         self.rec.log("conservation/momentum_drift", self.rr.Scalars(float(np.linalg.norm(momentum - p0) / p_scale)))
         self.rec.log("conservation/angular_momentum_drift", self.rr.Scalars(float(np.linalg.norm(angular - l0) / l_scale)))
 
+    def abort(self) -> None:
+        """Stop recording, leaving nothing behind (a half-made recording is dropped)."""
+        self.rec.disconnect()
+        recording, self._recording = getattr(self, "_recording", None), None
+        if recording is not None:
+            recording.unlink(missing_ok=True)
+
     def close(self) -> None:
         self.rec.flush()
         self.rec.disconnect()
+        recording = getattr(self, "_recording", None)
+        if recording is not None:
+            self._recording = None
+            from .io import write_point
+
+            try:
+                write_point(self.path.name)
+                if not recording.is_file():
+                    raise OSError(errno.EIO, "the recording was not written", str(self.path))
+                os.replace(recording, self.path)
+            except OSError as error:
+                recording.unlink(missing_ok=True)
+                raise OSError(error.errno, error.strerror, str(self.path)) from None
 
 
 def replay(trajectory_path: Path, mode: str, address: str | None, save_to: Path | None = None, progress=None) -> RerunLogger:
@@ -201,12 +227,16 @@ def replay(trajectory_path: Path, mode: str, address: str | None, save_to: Path 
     largest = _largest_fragments(run_dir, data)
     logger = RerunLogger(mode, address, run_dir, data["static"], name=run_dir.name, save_to=save_to)
     frames = len(data["step"])
-    for k in range(frames):
-        particles = {name: data["particles"][name][k] for name in data["particles"]}
-        observables = {name: data["observables"][name][k] for name in data["observables"]}
-        logger.log_frame(int(data["step"][k]), float(data["time"][k]), particles, observables, largest.get(int(data["step"][k])))
-        if progress is not None:
-            progress(k + 1, frames)
+    try:
+        for k in range(frames):
+            particles = {name: data["particles"][name][k] for name in data["particles"]}
+            observables = {name: data["observables"][name][k] for name in data["observables"]}
+            logger.log_frame(int(data["step"][k]), float(data["time"][k]), particles, observables, largest.get(int(data["step"][k])))
+            if progress is not None:
+                progress(k + 1, frames)
+    except BaseException:
+        logger.abort()
+        raise
     logger.close()
     return logger
 

@@ -20,7 +20,7 @@ from xml.etree import ElementTree as ET
 
 import h5py
 
-from .io import FileFormatError, Trajectory, _complete_frames, open_trajectory
+from .io import FileFormatError, Trajectory, _complete_frames, open_trajectory, write_atomic
 
 XDMF_FILE = "trajectory.xdmf"
 
@@ -95,6 +95,4 @@ def _dimensions(shape) -> str:
 
 
 def _replace(path: Path, text: str) -> None:
-    temporary = path.with_name(f".{path.name}.tmp")
-    temporary.write_text(text)
-    os.replace(temporary, path)
+    write_atomic(path, text)  # a full disk leaves the previous file, and no temporary, behind

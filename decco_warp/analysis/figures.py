@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import matplotlib
@@ -19,12 +20,18 @@ def _size_label(k: int) -> str:
 
 
 def save(fig, folder: Path, name: str) -> list[Path]:
-    """Write ``name``.png and ``name``.pdf into ``folder``; returns the paths."""
+    """Write ``name``.png and ``name``.pdf into ``folder``, each atomically; returns the paths."""
+    from ..io import write_atomic
+
     folder.mkdir(parents=True, exist_ok=True)
     paths = [folder / f"{name}.png", folder / f"{name}.pdf"]
-    for path in paths:
-        fig.savefig(path, dpi=150, bbox_inches="tight")
-    plt.close(fig)
+    try:
+        for path in paths:
+            image = io.BytesIO()
+            fig.savefig(image, format=path.suffix[1:], dpi=150, bbox_inches="tight")
+            write_atomic(path, image.getvalue())
+    finally:
+        plt.close(fig)
     return paths
 
 

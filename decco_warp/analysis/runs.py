@@ -14,7 +14,7 @@ import h5py
 import numpy as np
 
 from ..diagnostics import energy_scale, ledger_closure
-from ..io import read_trajectory
+from ..io import read_trajectory, write_atomic
 from ..params import G_CGS
 from ..state import State
 from .clusters import find_clusters
@@ -207,7 +207,7 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
     summary["analysis_seconds"] = round(time.perf_counter() - started, 3)
     analysis["summary"] = summary
     write_analysis(run_dir / "analysis.h5", analysis)
-    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    write_atomic(run_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
     return analysis
 
 
