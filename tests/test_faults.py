@@ -340,3 +340,39 @@ def test_a_frame_cut_off_inside_hdf5_is_abandoned_unclosed_and_the_file_stays_re
         capture_output=True, text=True,
     )  # fmt: skip
     assert read.stdout.strip() == "[0]", read.stderr
+
+
+# --- sweep --------------------------------------------------------------------------------------------
+
+SWEEP = """
+[sweep]
+name = "grid"
+out = "{out}"
+min_members = 20
+[sweep.grid]
+"collision.eta" = [0.5]
+[run]
+steps = 200
+output_every = 50
+checkpoint_every = 100
+device = "cpu"
+"""
+
+
+def test_a_sweep_whose_writes_fail_ends_with_exit_5_and_runs_again_to_the_end(reference, tmp_path):
+    """The first write of every process of the sweep fails: the run's on its worker (its spec.toml),
+    and the sweep's own (summary.csv).  Run again, the sweep finishes its run as if never stopped."""
+    pytest.importorskip("distributed")
+    path = tmp_path / "s.toml"
+    path.write_text(SWEEP.format(out=tmp_path))
+    failed = cli("sweep", str(path), "--workers", "1", "--analysis-workers", "1", env={**os.environ, "DECCO_TEST_FAIL_WRITE": "1:ENOSPC"})
+    assert failed.returncode == EXIT_OUTPUT, failed.stderr
+    errors = [line for line in failed.stderr.splitlines() if line.startswith("decco-warp")]
+    assert len(errors) == 1 and "Traceback" not in failed.stderr, failed.stderr
+    assert "No space left on device" in errors[0] and "writing summary.csv" in errors[0] and "run the sweep again" in errors[0], errors[0]
+    again = cli("sweep", str(path), "--workers", "1", "--analysis-workers", "1")
+    assert again.returncode == 0, again.stderr
+    run_dir = next((tmp_path / "grid").glob("*/checkpoint.h5")).parent
+    assert json.loads((run_dir / "summary.json").read_text())["steps"] == 200
+    assert read_checkpoint(run_dir / "checkpoint.h5")[0]["step"] == 200
+    assert_no_leftovers(tmp_path / "grid")
