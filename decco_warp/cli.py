@@ -661,27 +661,32 @@ def bench(
 
 @app.command()
 def analyze(
-    path: Path = typer.Argument(..., help="A run folder, or a folder of run folders (a sweep)."),
+    path: Path = typer.Argument(..., help="A run folder (finished or still running), or a folder of run folders (a sweep)."),
     min_members: int = typer.Option(50, "--min-members", help="Smallest cluster counted (paper Fig. 2: 50)."),
     every: int = typer.Option(1, "--every", help="Analyse every Nth frame (the last one always)."),
+    follow: bool = typer.Option(False, "--follow", help="Of a running run: analyse again as new frames arrive, until the run ends."),
+    poll: float = typer.Option(10.0, "--poll", help="With --follow: seconds between looks for new frames."),
     device: Optional[str] = typer.Option(
         None, "--device", help="Where the cluster finder's O(N^2) smoothed density is summed: cpu (NumPy, all cores) or cuda[:N] (default: $DECCO_DEVICE, else CUDA if present, else cpu)."
     ),
 ) -> None:
-    """Fragments, the paper's metrics, conservation and energy of runs: analysis.h5, summary.json, figures."""
+    """Fragments, the paper's metrics, conservation and energy of runs: analysis.h5, summary.json, figures.
+
+    A run still being written is analysed as far as its frames go (its writer is never touched)."""
     import csv
     import io
     import json
+    import time
 
     from .analysis.figures import draw_run, write_cross_run
     from .analysis.runs import analyse_run
     from .checks import InputError, check_destination
     from .device import DeviceError, resolve_device
     from .io import FileFormatError, write_atomic
-    from .lock import RunFolderLock, ensure_free
+    from .lock import AnalysisLock, RunFolderBusy, RunFolderLock, ensure_not_analysed
 
-    if min_members < 1 or every < 1:
-        fail("--min-members and --every must be >= 1")
+    if min_members < 1 or every < 1 or not poll > 0:
+        fail("--min-members and --every must be >= 1, --poll > 0")
     try:
         device = resolve_device(device)
     except DeviceError as error:
@@ -694,43 +699,68 @@ def analyze(
             fail(f"{path} holds no trajectory.h5 and no run folders with one")
     else:
         fail(f"{path} is not a run folder")
-    try:  # every destination, and no run still being written, before the first analysis
+    if follow and len(runs) > 1:
+        fail("--follow follows one run folder")
+    try:  # every destination, and no other analysis of these runs, before the first analysis
         for run_dir in runs:
             check_destination(run_dir, "run folder", folder=True)
-            ensure_free(run_dir)
+            ensure_not_analysed(run_dir)
         if len(runs) > 1:
             check_destination(path / "summary.csv", "cross-run table")
     except InputError as error:
         fail(str(error))
-    summaries = []
-    bar = _progress_bar("analysing", "frames")
+
+    def analyse(run_dir: Path, task) -> tuple[dict, bool]:
+        """One analysis of a run, and whether the run was still being written."""
+        writer = RunFolderLock(run_dir)
+        try:  # a finished run: held, so that no run starts writing there meanwhile
+            writer.acquire()
+        except RunFolderBusy:
+            writer = None  # a running one: its frames so far, read as a SWMR reader
+        try:
+            analysis = analyse_run(
+                run_dir,
+                min_members=min_members,
+                every=every,
+                progress=lambda done, total: bar.update(task, total=total, completed=done, frames=f"{done}/{total} frames"),
+                device=device,
+            )
+            draw_run(analysis, run_dir)
+        finally:
+            if writer is not None:
+                writer.release()
+        return analysis, writer is None
+
+    summaries, states = [], []
     failed = None
+    bar = _progress_bar("analysing", "frames")
     with bar:
         for run_dir in runs:
             task = bar.add_task(run_dir.name, total=None, frames="")
             try:
-                with RunFolderLock(run_dir):
-                    analysis = analyse_run(
-                        run_dir,
-                        min_members=min_members,
-                        every=every,
-                        progress=lambda done, total, task=task: bar.update(task, total=total, completed=done, frames=f"{done}/{total} frames"),
-                        device=device,
-                    )
-                    draw_run(analysis, run_dir)
+                with AnalysisLock(run_dir):
+                    analysis, live = analyse(run_dir, task)
+                    while follow and live:
+                        seen = analysis["summary"]["steps"]
+                        bar.console.print(f"{run_dir}: analysed to step {seen}; following the run", soft_wrap=True, highlight=False)
+                        while _running(run_dir) and _last_step(run_dir) == seen:
+                            time.sleep(poll)
+                        analysis, live = analyse(run_dir, task)
             except (FileFormatError, InputError) as error:
                 fail(str(error))
             except OSError as error:
                 failed = error
                 break
             summaries.append(analysis["summary"])
+            frames = len(analysis["conservation"]["time"])
+            states.append(f" (still running: the {frames} frames written so far, to step {analysis['summary']['steps']})" if live else "")
     if failed is not None:
         done = f"the analyses of {len(summaries)} run(s) before it are whole, " if summaries else ""
         write_failed(failed, f"{done}each output file is whole or absent and the runs are untouched: free space, then decco-warp analyze {path} again")
-    for run_dir, summary in zip(runs, summaries):
+    for run_dir, summary, state in zip(runs, summaries, states):
         typer.echo(
             f"{run_dir}: m_lf/m_t {summary['largest_mass_ratio']:.4g}, particle size change "
-            f"{summary['particle_size_change']:.3g} %, {summary['clusters']} cluster(s); "
+            f"{summary['particle_size_change']:.3g} %, {summary['clusters']} cluster(s){state}; "
             f"analysis.h5, summary.json and figures/ written"
         )
     if len(runs) > 1:
@@ -745,6 +775,27 @@ def analyze(
         except OSError as error:
             write_failed(error, f"every run's own analysis is whole; the cross-run files are whole or absent: free space, then decco-warp analyze {path} again")
         typer.echo(f"{path}: summary.csv and cross-run figures in {path / 'figures'}")
+
+
+def _running(run_dir: Path) -> bool:
+    """Whether a process is writing ``run_dir`` (holds its lock)."""
+    from .lock import RunFolderBusy, ensure_free
+
+    try:
+        ensure_free(run_dir)
+    except RunFolderBusy:
+        return True
+    return False
+
+
+def _last_step(run_dir: Path) -> int:
+    """The step of the last whole frame of a run's trajectory (-1 while none can be read)."""
+    from .io import FileFormatError, last_frame_step
+
+    try:
+        return last_frame_step(run_dir / "trajectory.h5")
+    except FileFormatError:
+        return -1
 
 
 # --- view --------------------------------------------------------------------------------

@@ -523,8 +523,9 @@ def _complete_frames(element: h5py.Group, keep_through_step: int) -> int:
 def pause_point(phase: str, step: int) -> None:
     """Test hooks at the risky moments of a run (phases: step, trajectory-write, checkpoint-write).
 
-    With DECCO_TEST_PAUSE="phase@step" the run stops here (forever) so that a test can
-    kill it, after creating the file named by DECCO_TEST_PAUSE_MARK; with
+    With DECCO_TEST_PAUSE="phase@step" the run stops here so that a test can kill it (or look
+    at it), after creating the file named by DECCO_TEST_PAUSE_MARK, until that file is removed
+    (forever without one); with
     DECCO_TEST_FAIL="phase@step" the write fails here as on a full disk.
     """
     here = f"{phase}@{step}"
@@ -538,8 +539,8 @@ def pause_point(phase: str, step: int) -> None:
         Path(mark).write_text(wanted)
     import time
 
-    while True:
-        time.sleep(1.0)
+    while not mark or Path(mark).exists():
+        time.sleep(0.1)
 
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
@@ -567,19 +568,32 @@ def check_complete(path, what: str) -> None:
 
 
 def read_trajectory(path) -> dict:
-    """A finished or running trajectory as NumPy arrays: steps, times, particle frames, observables, parameters."""
+    """A finished or running trajectory as NumPy arrays: steps, times, particle frames, observables, parameters.
+
+    Of a run still being written, the frames whole in every element so far (a frame being
+    written is left out)."""
     with open_trajectory(path) as f:
         particles = f["particles/all"]
+        elements = [particles[name] for name in Trajectory.PARTICLE_ELEMENTS] + list(f["observables"].values())
+        n = min(_complete_frames(element, np.iinfo(np.int64).max) for element in elements)
         result = {
-            "step": particles["position/step"][()],
-            "time": particles["position/time"][()],
-            "particles": {name: particles[name]["value"][()] for name in Trajectory.PARTICLE_ELEMENTS},
+            "step": particles["position/step"][:n],
+            "time": particles["position/time"][:n],
+            "particles": {name: particles[name]["value"][:n] for name in Trajectory.PARTICLE_ELEMENTS},
             "static": {name: particles[name][()] for name in ("radius", "mass", "species", "pile_id")},
-            "observables": {name: group["value"][()] for name, group in f["observables"].items()},
-            "observable_step": {name: group["step"][()] for name, group in f["observables"].items()},
+            "observables": {name: group["value"][:n] for name, group in f["observables"].items()},
+            "observable_step": {name: group["step"][:n] for name, group in f["observables"].items()},
             "parameters": read_dict(f["parameters"]),
         }
     return result
+
+
+def last_frame_step(path) -> int:
+    """The step of a trajectory's last whole frame (of its positions; -1 before the first)."""
+    with open_trajectory(path) as f:
+        element = f["particles/all/position"]
+        n = _complete_frames(element, np.iinfo(np.int64).max)
+        return int(element["step"][n - 1]) if n else -1
 
 
 def read_frame(path, index: int = 0) -> tuple[dict, dict, dict]:

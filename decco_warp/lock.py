@@ -85,3 +85,63 @@ def ensure_free(run_dir) -> None:
     """Raise RunFolderBusy if a process holds ``run_dir``'s lock (a folder that does not exist is free)."""
     if Path(run_dir).is_dir():
         RunFolderLock(run_dir).acquire(note=False).release()
+
+
+ANALYSIS_LOCK_FILE = ".analysis.lock"
+
+
+class AnalysisLock:
+    """The lock of one run folder's analysis, apart from its writer's: two analyses of a run
+    exclude each other, while the run itself may still be writing its trajectory.
+
+    The lock is ``flock`` on ``.analysis.lock`` in the folder, which holds its holder's pid and
+    host and is removed on release (a holder checks that the file it locked is still the one
+    named so, since a release may remove it in between)."""
+
+    def __init__(self, run_dir):
+        self.run_dir = Path(run_dir)
+        self.path = self.run_dir / ANALYSIS_LOCK_FILE
+        self._fd: int | None = None
+
+    def acquire(self) -> "AnalysisLock":
+        while self._fd is None:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                text = os.pread(fd, 200, 0).decode(errors="replace").split()
+                os.close(fd)
+                pid, host = (text + ["?", "?"])[:2]
+                raise RunFolderBusy(f"run folder {self.run_dir} is being analysed by pid {pid} on {host}") from None
+            try:
+                same = os.fstat(fd).st_ino == os.stat(self.path).st_ino
+            except FileNotFoundError:
+                same = False
+            if not same:  # released and removed by its holder while this one waited: try again
+                os.close(fd)
+                continue
+            with contextlib.suppress(OSError):  # only says who holds it: a full disk need not stop the work
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, f"{os.getpid()} {socket.gethostname()}\n".encode(), 0)
+            self._fd = fd
+        return self
+
+    def release(self) -> None:
+        if self._fd is None:
+            return
+        with contextlib.suppress(OSError):
+            self.path.unlink()
+        os.close(self._fd)
+        self._fd = None
+
+    def __enter__(self) -> "AnalysisLock":
+        return self.acquire()
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+def ensure_not_analysed(run_dir) -> None:
+    """Raise RunFolderBusy if another process is analysing ``run_dir``."""
+    if Path(run_dir).is_dir():
+        AnalysisLock(run_dir).acquire().release()
