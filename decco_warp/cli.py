@@ -209,7 +209,8 @@ def pile(
     from .checks import InputError, check_destination
     from .device import DeviceError, resolve_device
     from .params import GRAVITY_CHOICES, Params, choose_gravity
-    from .forming import FormationStopped, form_pile_file, partial_path
+    from .engine import check_fits
+    from .forming import TYPICAL_FORMATION_STEPS, FormationStopped, form_pile_file, partial_path
     from .pile import FormationError, check_formation_inputs
 
     if out.exists() and not overwrite:
@@ -224,8 +225,11 @@ def pile(
         params = Params(k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt, gravity=gravity)
         size_radii = _floats(radii, "--radii")
         check_formation_inputs(particles, size_radii, density, ke_threshold, fill, max_steps=max_steps)
+        note = check_fits(particles, gravity, chosen, min(max_steps, TYPICAL_FORMATION_STEPS), "forming a pile")
     except (DeviceError, InputError, ValueError) as error:
         fail(str(error))
+    if note:
+        typer.echo(f"{note} (a pile takes ~{TYPICAL_FORMATION_STEPS:.0e} steps to settle)", err=True)
     typer.echo(f"forming a {particles}-particle pile on {chosen} (seed {seed}, {gravity} gravity)", err=True)
     bar = _progress_bar("forming", "step", "ratio")
     with bar:
@@ -356,6 +360,8 @@ def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: in
         fail(f"{error}; set allow_unstable = true in [run] to run it anyway")
     except (SpecError, RunError, FileFormatError, DeviceError, ValueError) as error:
         fail(str(error))
+    if prepared.note:
+        typer.echo(prepared.note, err=True)
     logger, observers = _rerun_observer(prepared, rerun, rerun_every)
     bar = _progress_bar("simulating", "step", "time", "overlap")
     try:

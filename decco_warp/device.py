@@ -98,3 +98,9 @@ def gpus_to_use(requested: int | None = None) -> int:
     if requested > visible:
         raise DeviceError(f"--gpus {requested}: only {visible} GPU(s) visible here, cuda:0 to cuda:{visible - 1}")
     return requested
+
+
+def free_memory(device: str) -> int:
+    """Bytes free on ``device`` now: a GPU's free memory, or the host's available memory for the CPU."""
+    init_warp()
+    return int(wp.get_device(device).free_memory)

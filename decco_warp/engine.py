@@ -8,6 +8,7 @@ are built on it, and the cluster finder's smoothed density on a GPU (:func:`smoo
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
@@ -15,7 +16,7 @@ import numpy as np
 import warp as wp
 
 from .device import resolve_device
-from .gravity_tree import GravityTree
+from .gravity_tree import GravityTree, walk_parts
 from .kernels import integrate, observables
 from .kernels.bodies import BODY_TYPES, PACK_KERNELS, PRECISIONS
 from .kernels.contacts import CANDIDATES, LEDGER_CHANNELS, contact_pass, unpack_depth
@@ -552,3 +553,77 @@ def smoothed_density(sources: np.ndarray, norm: np.ndarray, inv_two_var: np.ndar
     inputs = [array(sources, wp.vec3d), array(norm, wp.float64), array(inv_two_var, wp.float64), array(targets, wp.vec3d)]
     wp.launch(observables.smoothed_density, dim=len(targets), inputs=inputs, outputs=[density], device=device)
     return density.numpy()
+
+
+# --- what a job needs, before it starts ---------------------------------------------------------
+
+#: Bytes a particle takes on the host beside the engine's arrays: the State, a frame's record, a
+#: snapshot, the checks (NumPy copies of a few vectors each), with room.
+HOST_BYTES_PER_PARTICLE = 600
+#: Bytes of a job whatever its size: Warp's modules, the hash grid's cells, launch bookkeeping.
+FIXED_BYTES = 256 << 20
+#: CPU step time of this project's 2-core CI-class machine (docs/benchmarks.md, the tree section):
+#: all-pairs ~5 ns a pair (8 000 particles: 0.31 s a step); the tree ~7.5 us a particle at 8 000,
+#: growing as log N.  Scaled by the cores here.
+CPU_SECONDS_PER_PAIR = 5e-9
+CPU_TREE_SECONDS_PER_PARTICLE = 7.5e-6
+
+
+def memory_estimate(n: int, gravity: str, device: str = "cpu", ledger: bool = True) -> int:
+    """Bytes a job of ``n`` particles needs on its device (and on the host), an upper estimate:
+    the arrays Engine and GravityTree allocate, taken as for the largest layout."""
+    vec3d, f64, i32 = 24, 8, 4
+    per = 3 * f64 + 5 * vec3d  # radius, mass, inertia; position, velocity, omega, force, torque
+    per += (len(LEDGER_CHANNELS) * vec3d + 32) if ledger else 0  # channels, work
+    per += 8 + 32 + 8  # deepest contact, packed body, system range
+    per += i32 * (1 + CANDIDATES)  # the contact candidates of a split layout or the tree
+    per += len(PAIR_OBSERVABLES) * f64  # a frame's pair observables
+    if gravity == "tree":  # nodes (2n): mass, centre, quadrupole, box, size, offset, links (16), child, first,
+        # last, parent, escape; keys, order (2n); leaf positions, grid points; each walk part's field and potential
+        per += 2 * (f64 + vec3d + 72 + 2 * vec3d + 2 * f64 + 16 + 5 * i32) + 4 * i32 + vec3d + 12
+        per += walk_parts(n, device) * (vec3d + f64)
+    return int(n * (per + HOST_BYTES_PER_PARTICLE) + FIXED_BYTES)
+
+
+def cpu_step_seconds(n: int, gravity: str) -> float:
+    """About how long one step of ``n`` particles takes on this machine's CPU."""
+    cores = max(1, os.cpu_count() or 1) / 2.0
+    if gravity == "tree":
+        return CPU_TREE_SECONDS_PER_PARTICLE * n * max(1.0, np.log2(max(n, 2)) / np.log2(8000)) / cores
+    return CPU_SECONDS_PER_PAIR * float(n) * float(n) / cores
+
+
+#: A CPU job expected to take longer than this says so before it starts [s].
+LONG_ON_CPU = 3600.0
+
+
+def check_fits(n: int, gravity: str, device: str, steps: int, what: str) -> str | None:
+    """Refuse (InputError) a job whose memory estimate passes the device's free memory; for one that
+    fits but would take hours on the CPU, the line that says so (else None)."""
+    from .checks import InputError
+    from .device import free_memory
+
+    need = memory_estimate(n, gravity, device)
+    free = free_memory(device)
+    if need > free:
+        raise InputError(
+            f"{what} of {n} particles needs about {need / 2**30:.3g} GiB on {device}, which has {free / 2**30:.3g} GiB free; "
+            "use fewer particles or a device with more memory"
+        )
+    if device.startswith("cuda"):
+        return None
+    seconds = steps * cpu_step_seconds(n, gravity)
+    if seconds < LONG_ON_CPU:
+        return None
+    return (
+        f"note: {what} of {n} particles ({gravity} gravity) will take about {_duration(seconds)} on the CPU "
+        f"({cpu_step_seconds(n, gravity):.3g} s a step, {steps} steps); a GPU (--device cuda) is far faster"
+    )
+
+
+def _duration(seconds: float) -> str:
+    hours = seconds / 3600.0
+    if hours < 48:
+        return f"{hours:.3g} hours"
+    days = hours / 24.0
+    return f"{days:.3g} days" if days < 730 else f"{days / 365.25:.3g} years"

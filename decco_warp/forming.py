@@ -16,6 +16,9 @@ from .stops import StopRequests
 
 #: A forming pile's checkpoint is its file's name plus this.
 FORMING_SUFFIX = ".forming"
+#: Steps a pile typically takes to settle (the paper's 5 000-particle piles: ~1.5e5), for the
+#: estimate of its time before it starts.
+TYPICAL_FORMATION_STEPS = 150_000
 #: Wall seconds between checkpoints of a forming pile.
 CHECKPOINT_SECONDS = 60.0
 

@@ -144,6 +144,8 @@ class PreparedRun:
     resume: bool
     lock: RunFolderLock | None = None
     """The run folder's lock, once taken (execute takes it for a new folder and releases it at the end)."""
+    note: str | None = None
+    """A line to show before the run starts (a run that will take hours on the CPU), else None."""
 
     @property
     def spec(self) -> dict:
@@ -165,6 +167,7 @@ def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None
     lock = RunFolderLock(run_dir).acquire() if run_dir.is_dir() else None
     try:
         plan = plan_start(spec, device)
+        note = _check_fits(plan, plan.state.n, plan.steps)
         sim = Simulation(
             plan.state,
             plan.params,
@@ -186,7 +189,17 @@ def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None
         "start_overlap": depth,
         "start_overlap_pair": np.array([i, j], dtype=np.int64),
     }
-    return PreparedRun(sim, plan, extra, resume=False, lock=lock)
+    return PreparedRun(sim, plan, extra, resume=False, lock=lock, note=note)
+
+
+def _check_fits(plan: Plan, n: int, steps: int) -> str | None:
+    """Refuse (RunError) a run that its device has no memory for; a line for one that takes hours on the CPU."""
+    from .engine import check_fits
+
+    try:
+        return check_fits(n, plan.params.gravity, plan.device, steps, "a run")
+    except InputError as error:
+        raise RunError(str(error)) from None
 
 
 def prepare_resume(run_dir, steps: int | None = None, device: str | None = None) -> PreparedRun:
@@ -228,8 +241,9 @@ def _prepare_resume(run_dir, spec_path, checkpoint_path, trajectory_path, steps,
     if steps is not None and steps < int(snapshot["step"]):
         raise RunError(f"steps {steps} is below the {int(snapshot['step'])} already taken")
     plan = plan_resume(spec, static, run_dir, device, steps)
+    note = _check_fits(plan, static.n, max(0, plan.steps - int(snapshot["step"])))
     sim = Simulation.from_snapshot(static, plan.params, snapshot, device=plan.device, precision=plan.precision, layout=plan.layout)
-    return PreparedRun(sim, plan, extra, resume=True, lock=lock)
+    return PreparedRun(sim, plan, extra, resume=True, lock=lock, note=note)
 
 
 #: Something that watches frames as a run makes them: (every how many steps, callback(step, time, particles, observables)).

@@ -1,0 +1,69 @@
+"""A job's memory and time, estimated before it starts: refused past the device's free memory
+(exit 2), a line when it would take hours on the CPU."""
+
+import numpy as np
+import pytest
+import warp as wp
+from typer.testing import CliRunner
+
+import decco_warp as dw
+from decco_warp import engine as engines
+from decco_warp.cli import EXIT_INPUT, app
+from decco_warp.run import builtin_pile
+
+
+def _array_bytes(holder) -> int:
+    """Bytes of the Warp arrays an object holds as its attributes."""
+    arrays = {id(a): a for a in (getattr(holder, name, None) for name in dir(holder) if not name.startswith("__"))
+              if isinstance(a, wp.array)}  # fmt: skip
+    return sum(a.capacity for a in arrays.values())
+
+
+@pytest.mark.parametrize("gravity", ["all-pairs", "tree"])
+def test_the_memory_estimate_bounds_the_engines_arrays(gravity):
+    pile = dw.load_pile(builtin_pile("target"))
+    sim = dw.Simulation(pile, dw.Params(gravity=gravity), device="cpu", ledger=True)
+    engine = sim.engine
+    held = _array_bytes(engine) + (_array_bytes(engine.tree) + _array_bytes(engine.tree.nodes) if engine.tree is not None else 0)
+    device_part = engines.memory_estimate(pile.n, gravity) - engines.FIXED_BYTES - pile.n * engines.HOST_BYTES_PER_PARTICLE
+    # An upper estimate (the largest layout), but not a loose one: within a factor of 3.
+    assert held <= device_part <= 3 * held, (held, device_part)
+
+
+def test_the_cpu_time_estimate_follows_the_benchmarks_two_core_steps(monkeypatch):
+    monkeypatch.setattr(engines.os, "cpu_count", lambda: 2)
+    # docs/benchmarks.md, 2-core CPU: all-pairs 8 000: 308 to 341 ms; tree (piles) 8 000: 60.6 ms.
+    assert 0.25 < engines.cpu_step_seconds(8000, "all-pairs") < 0.4
+    assert 0.05 < engines.cpu_step_seconds(8000, "tree") < 0.075
+    assert engines.cpu_step_seconds(16000, "all-pairs") == pytest.approx(4 * engines.cpu_step_seconds(8000, "all-pairs"))
+
+
+def test_a_job_too_large_for_the_device_is_refused_with_the_estimate_and_the_free_memory(tmp_path, monkeypatch):
+    import decco_warp.device as devices
+
+    monkeypatch.setattr(devices, "free_memory", lambda device: 300 << 20)  # 300 MiB
+    need = engines.memory_estimate(200_000, "tree") / 2**30
+    result = CliRunner().invoke(app, ["pile", "--particles", "200000", "--out", str(tmp_path / "p.h5"), "--device", "cpu"])
+    assert result.exit_code == EXIT_INPUT, result.stderr
+    line = result.stderr.strip().splitlines()[-1]
+    assert f"needs about {need:.3g} GiB on cpu, which has 0.293 GiB free" in line, line
+    run = CliRunner().invoke(app, ["simulate", "--out", str(tmp_path), "--name", "big", "--steps", "10", "--device", "cpu"])
+    assert run.exit_code == 0, run.stderr  # the demo's 450 particles fit
+    monkeypatch.setattr(devices, "free_memory", lambda device: 1 << 20)
+    refused = CliRunner().invoke(app, ["simulate", "--out", str(tmp_path), "--name", "small", "--steps", "10", "--device", "cpu"])
+    assert refused.exit_code == EXIT_INPUT and "a run of 450 particles needs about" in refused.stderr, refused.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["big"]
+
+
+def test_a_job_of_hours_on_the_cpu_says_so_and_goes_on(tmp_path, monkeypatch):
+    note = engines.check_fits(50_000, "tree", "cpu", 150_000, "forming a pile")
+    hours = 150_000 * engines.cpu_step_seconds(50_000, "tree") / 3600
+    assert note.startswith("note: forming a pile of 50000 particles (tree gravity) will take about") and hours > 1
+    assert engines.check_fits(450, "all-pairs", "cpu", 2400, "a run") is None  # the demo: seconds
+    monkeypatch.setattr(engines, "LONG_ON_CPU", 0.0)  # every CPU job counts as long: the line, then the work
+    result = CliRunner().invoke(
+        app, ["pile", "--particles", "12", "--seed", "9", "--dt", "0.2", "--ke-threshold", "1e-4", "--out", str(tmp_path / "p.h5"), "--device", "cpu"]
+    )
+    assert result.exit_code == 0, result.stderr
+    assert "note: forming a pile of 12 particles (all-pairs gravity) will take about" in result.stderr
+    assert np.isfinite(dw.load_pile(tmp_path / "p.h5").positions).all()
