@@ -42,13 +42,14 @@ def write_failed(error: OSError, kept: str) -> None:
     fail(f"{describe_write_error(error)}; {kept}", EXIT_OUTPUT)
 
 
-def _end(code: int) -> None:
-    """Exit with ``code``; at once (os._exit) when HDF5 was cut off inside a write, since closing
-    such a file (as Python's exit would) can crash: what it wrote before stays readable."""
+def _end(code: int, abandoned_before: int = 0) -> None:
+    """Exit with ``code``; at once (os._exit) when HDF5 was cut off inside a write (since
+    ``abandoned_before`` files were), since closing such a file (as Python's exit would) can crash:
+    what it wrote before stays readable."""
     import sys
 
     io = sys.modules.get("decco_warp.io")
-    if io is not None and io.ABANDONED:
+    if io is not None and len(io.ABANDONED) > abandoned_before:
         import os
 
         sys.stdout.flush()
@@ -59,17 +60,21 @@ def _end(code: int) -> None:
 
 def main_entry() -> None:
     """The console script: typer's app, with usage errors as one line (exit code 2) instead of a panel."""
+    import sys
+
+    io = sys.modules.get("decco_warp.io")
+    before = len(io.ABANDONED) if io is not None else 0
     try:
         code = app(standalone_mode=False)
     except typer.Exit as done:
-        _end(done.exit_code)
+        _end(done.exit_code, before)
     except OSError as error:  # a write that no command caught (each names what it keeps): still one line
         from .io import WRITE_ERRNOS, describe_write_error
 
         if error.errno not in WRITE_ERRNOS:
             raise
         typer.echo(f"decco-warp: error: {describe_write_error(error)}; the files written before it are whole", err=True)
-        _end(EXIT_OUTPUT)
+        _end(EXIT_OUTPUT, before)
     except Exception as error:  # typer's (or click's) usage errors carry a message and an exit code
         if type(error).__name__ == "Abort":
             typer.echo("decco-warp: aborted", err=True)
@@ -81,7 +86,7 @@ def main_entry() -> None:
         message = " ".join(error.format_message().split())
         typer.echo(f"decco-warp{command}: error: {message} (see --help)", err=True)
         raise SystemExit(error.exit_code) from None
-    _end(code if isinstance(code, int) else 0)
+    _end(code if isinstance(code, int) else 0, before)
 
 
 def _version_callback(value: bool) -> None:
@@ -395,7 +400,10 @@ def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: in
         fail(*stopped_by)
     finally:
         if logger is not None:
-            logger.close()
+            try:
+                logger.close()
+            except OSError as error:
+                write_failed(error, f"the run folder is as the run left it; {logger.path} is not written")
             if getattr(logger, "path", None):
                 typer.echo(f"rerun recording: {logger.path} (view it with: rerun {logger.path})")
 

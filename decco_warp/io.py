@@ -146,7 +146,14 @@ def write_point(what: str) -> None:
         index, _, kind = wanted.partition(":")
         if index.strip() == str(k):
             code = errno.EIO if kind.strip().upper() == "EIO" else errno.ENOSPC
-            raise OSError(code, f"{os.strerror(code)} (DECCO_TEST_FAIL_WRITE)", what)
+            raise outside_hdf5(OSError(code, f"{os.strerror(code)} (DECCO_TEST_FAIL_WRITE)", what))
+
+
+def outside_hdf5(error: OSError) -> OSError:
+    """Mark a write error raised before HDF5 was called (a hook, the room check): HDF5's own state
+    is whole, so the file may still be closed as usual."""
+    error.outside_hdf5 = True
+    return error
 
 
 def as_os_error(error: BaseException, what) -> OSError:
@@ -297,7 +304,8 @@ class Trajectory:
     def __init__(self, file: h5py.File, path: Path):
         self.file = file
         self.path = path
-        self.broken = False
+        self.broken = False  # a write failed: no more frames
+        self.abandoned = False  # ... inside HDF5: never closed either
         # (step, time, value) datasets of each element, looked up once: h5py's lookups by
         # name cost more than the writes themselves.
         self._datasets: dict[tuple[str, str], tuple] = {}
@@ -392,8 +400,9 @@ class Trajectory:
 
     def write(self, step: int, time: float, particles: dict, observables: dict) -> None:
         """:meth:`append` without its write point (counted by the caller).  A failed write raises
-        OSError and leaves the file abandoned, never closed: the frames flushed before it stay
-        readable, and a resume drops whatever of it reached the disk."""
+        OSError and ends the file's frames; one that failed inside HDF5 leaves the file abandoned,
+        never closed: the frames flushed before it stay readable, and a resume drops whatever of
+        the failed frame reached the disk."""
         if self.broken:
             raise OSError(errno.EIO, "an earlier write of this file failed", str(self.path))
         try:
@@ -404,7 +413,9 @@ class Trajectory:
             self.file.flush()
         except (OSError, RuntimeError) as error:
             self.broken = True
-            abandon(self.file)
+            if not getattr(error, "outside_hdf5", False):
+                self.abandoned = True
+                abandon(self.file)
             raise as_os_error(error, self.path) from None
 
     def _element(self, group: str, name: str) -> tuple:
@@ -445,12 +456,12 @@ class Trajectory:
         steps[k] = step
 
     def close(self) -> None:
-        if self.broken:
-            return  # abandoned: see write
+        if self.abandoned:
+            return  # see write
         try:
             self.file.close()
         except (OSError, RuntimeError) as error:
-            self.broken = True
+            self.broken = self.abandoned = True
             abandon(self.file)
             raise as_os_error(error, self.path) from None
 
@@ -467,9 +478,9 @@ def check_space(folder: Path, frame_bytes: int, path: Path) -> None:
     try:
         stats = os.statvfs(folder)
     except OSError as error:  # the folder is gone
-        raise OSError(error.errno, error.strerror, str(path)) from None
+        raise outside_hdf5(OSError(error.errno, error.strerror, str(path))) from None
     if stats.f_bavail * stats.f_frsize < 2 * frame_bytes + FRAME_HEADROOM:
-        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+        raise outside_hdf5(OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path)))
 
 
 class BackgroundFrames:
@@ -530,7 +541,7 @@ def pause_point(phase: str, step: int) -> None:
     """
     here = f"{phase}@{step}"
     if os.environ.get("DECCO_TEST_FAIL") == here:
-        raise OSError(errno.ENOSPC, "No space left on device (DECCO_TEST_FAIL)")
+        raise outside_hdf5(OSError(errno.ENOSPC, "No space left on device (DECCO_TEST_FAIL)"))
     wanted = os.environ.get("DECCO_TEST_PAUSE")
     if not wanted or wanted != here:
         return

@@ -24,7 +24,17 @@ class RunFolderBusy(InputError):
     """Another process writes into this run folder."""
 
 
-class RunFolderLock:
+class _Lock:
+    """``with``: acquire on entry, release on exit."""
+
+    def __enter__(self):
+        return self.acquire()
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+class RunFolderLock(_Lock):
     """The exclusive lock of one run folder; ``acquire`` raises RunFolderBusy if it is held."""
 
     def __init__(self, run_dir):
@@ -65,13 +75,6 @@ class RunFolderLock:
         os.close(self._fd)
         self._fd = None
 
-    def __enter__(self) -> "RunFolderLock":
-        return self.acquire()
-
-    def __exit__(self, *exc) -> None:
-        self.release()
-
-
 def holder(run_dir) -> tuple[str, str]:
     """(pid, host) written by the process holding the lock, or ("?", "?") when unreadable."""
     try:
@@ -90,7 +93,7 @@ def ensure_free(run_dir) -> None:
 ANALYSIS_LOCK_FILE = ".analysis.lock"
 
 
-class AnalysisLock:
+class AnalysisLock(_Lock):
     """The lock of one run folder's analysis, apart from its writer's: two analyses of a run
     exclude each other, while the run itself may still be writing its trajectory.
 
@@ -133,13 +136,6 @@ class AnalysisLock:
             self.path.unlink()
         os.close(self._fd)
         self._fd = None
-
-    def __enter__(self) -> "AnalysisLock":
-        return self.acquire()
-
-    def __exit__(self, *exc) -> None:
-        self.release()
-
 
 def ensure_not_analysed(run_dir) -> None:
     """Raise RunFolderBusy if another process is analysing ``run_dir``."""

@@ -272,9 +272,13 @@ def _open_or_clean(run: PreparedRun, progress, observers) -> RunDriver:
     """:func:`_open`, with a failed write as an OutputError saying what is kept: a resumed run keeps
     its checkpoint; a new run whose first checkpoint was never written is removed, so that the same
     command starts it again."""
+    opened: list = []
     try:
-        return _open(run, progress, observers)
+        return _open(run, progress, observers, opened)
     except OSError as error:
+        for thing in reversed(opened):  # the log and the trajectory, unless a driver owns them
+            with contextlib.suppress(OSError):
+                thing.close()
         if run.resume:
             raise OutputError(_failed_write(run.run_dir, run.sim.step_count, error)) from None
         for name in (SPEC_FILE, TRAJECTORY_FILE, CHECKPOINT_FILE, LOG_FILE):
@@ -305,8 +309,9 @@ def _failed_write(run_dir: Path, step: int, error: OSError) -> str:
     )
 
 
-def _open(run: PreparedRun, progress, observers) -> RunDriver:
-    """Write a new run folder's first frame and checkpoint, or reopen a resumed one: its driver."""
+def _open(run: PreparedRun, progress, observers, opened: list) -> RunDriver:
+    """Write a new run folder's first frame and checkpoint, or reopen a resumed one: its driver.
+    What it opens (the log, the trajectory) is added to ``opened`` as it goes."""
     observers = observers or []
     sim, plan, spec, run_dir, extra = run.sim, run.plan, run.spec, run.run_dir, run.extra
     spec_text = specs.dumps(spec, header=f"decco-warp run specification, resolved {datetime.now(timezone.utc):%Y-%m-%d %H:%M UTC}")
@@ -315,12 +320,14 @@ def _open(run: PreparedRun, progress, observers) -> RunDriver:
             extra["spec_toml"] = spec_text
             write_atomic(run_dir / SPEC_FILE, spec_text)
         log = RunLog(run_dir / LOG_FILE)
+        opened.append(log)
         for stale in run_dir.glob(".*.tmp"):  # a checkpoint being written when the run was killed
             stale.unlink()
             log(f"resume: removed the unfinished {stale.name}")
         log(f"resume: from step {sim.step_count} of {plan.steps} on {sim.device}")
         sample = record(sim, int(extra["size_classes"]))[1]
         trajectory = Trajectory.reopen(run_dir / TRAJECTORY_FILE, keep_through_step=sim.step_count, observables=sample)
+        opened.append(trajectory)
         return RunDriver(sim, trajectory, plan, run_dir, log, extra, progress, observers)
 
     for name in (TRAJECTORY_FILE, CHECKPOINT_FILE, LOG_FILE):
@@ -328,6 +335,7 @@ def _open(run: PreparedRun, progress, observers) -> RunDriver:
     write_atomic(run_dir / SPEC_FILE, spec_text)
     extra["spec_toml"] = spec_text
     log = RunLog(run_dir / LOG_FILE)
+    opened.append(log)
     state = plan.state
     log(f"start: {state.n} particles on {sim.device}, precision {plan.precision}, {plan.steps} steps")
     for line in plan.lines():
@@ -347,6 +355,7 @@ def _open(run: PreparedRun, progress, observers) -> RunDriver:
         },
     }
     trajectory = Trajectory.create(run_dir / TRAJECTORY_FILE, state, observables, parameters)
+    opened.append(trajectory)
     trajectory.append(sim.step_count, sim.time, particles, observables)
     for _, observe in observers:
         observe(sim.step_count, sim.time, particles, observables)
