@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import gc
 import io as _io
 import os
 import tempfile
@@ -154,6 +155,29 @@ def outside_hdf5(error: OSError) -> OSError:
     is whole, so the file may still be closed as usual."""
     error.outside_hdf5 = True
     return error
+
+
+@contextlib.contextmanager
+def _complaints_held():
+    """Hold what is printed to stderr during an HDF5 write, printed at the end unless ``drop`` is
+    set: a write cut off inside HDF5 makes h5py print a traceback for every id it then fails to
+    free, which the write's own one-line error already says.  (Lines printed meanwhile by other
+    threads, a progress bar, are held with them.)"""
+    import sys
+
+    with _stderr_lock:
+        real, held = sys.stderr, _io.StringIO()
+        held.drop = False
+        sys.stderr = held
+        try:
+            yield held
+        finally:
+            sys.stderr = real
+            if not held.drop:
+                real.write(held.getvalue())
+
+
+_stderr_lock = threading.Lock()
 
 
 def as_os_error(error: BaseException, what) -> OSError:
@@ -405,18 +429,26 @@ class Trajectory:
         the failed frame reached the disk."""
         if self.broken:
             raise OSError(errno.EIO, "an earlier write of this file failed", str(self.path))
-        try:
-            check_space(self.path.parent, sum(np.asarray(v).nbytes for v in (*particles.values(), *observables.values())), self.path)
-            for group, values in (("particles/all", particles), ("observables", observables)):
-                for name, value in values.items():
-                    self._append(self._element(group, name), step, time, value)
-            self.file.flush()
-        except (OSError, RuntimeError) as error:
-            self.broken = True
-            if not getattr(error, "outside_hdf5", False):
-                self.abandoned = True
-                abandon(self.file)
-            raise as_os_error(error, self.path) from None
+        check_space(self.path.parent, sum(np.asarray(v).nbytes for v in (*particles.values(), *observables.values())), self.path)
+        failure = None
+        with _complaints_held() as held:
+            try:
+                for group, values in (("particles/all", particles), ("observables", observables)):
+                    for name, value in values.items():
+                        self._append(self._element(group, name), step, time, value)
+                self.file.flush()
+            except (OSError, RuntimeError) as error:
+                failure, outside = as_os_error(error, self.path), getattr(error, "outside_hdf5", False)
+            if failure is not None:  # (the error and its frames are freed here, inside the hold)
+                held.drop = True
+                gc.collect()
+        if failure is None:
+            return
+        self.broken = True
+        if not outside:
+            self.abandoned = True
+            abandon(self.file)
+        raise failure
 
     def _element(self, group: str, name: str) -> tuple:
         key = (group, name)
