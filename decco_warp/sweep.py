@@ -307,9 +307,10 @@ def analyse_one(run_dir: str, min_members: int, analyse_every: int, keep_traject
     took when it ran, also for a run found analysed).  Runs in a process of this machine; the
     cluster finder's O(N^2) density is summed on ``device`` (default as for runs: this machine's
     GPU when it has one, where a 6 250-particle frame takes milliseconds, else NumPy)."""
-    from .lock import RunFolderLock
+    from .lock import AnalysisLock, RunFolderLock
 
-    with RunFolderLock(run_dir):  # the run has finished: no one else should be writing there
+    # The run has finished: no one else should be writing there, nor analysing it (decco-warp analyze).
+    with RunFolderLock(run_dir), AnalysisLock(run_dir):
         return _analyse(Path(run_dir), min_members, analyse_every, keep_trajectory, device)
 
 
