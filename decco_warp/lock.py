@@ -75,6 +75,7 @@ class RunFolderLock(_Lock):
         os.close(self._fd)
         self._fd = None
 
+
 def holder(run_dir) -> tuple[str, str]:
     """(pid, host) written by the process holding the lock, or ("?", "?") when unreadable."""
     try:
@@ -136,6 +137,7 @@ class AnalysisLock(_Lock):
             self.path.unlink()
         os.close(self._fd)
         self._fd = None
+
 
 def ensure_not_analysed(run_dir) -> None:
     """Raise RunFolderBusy if another process is analysing ``run_dir``."""

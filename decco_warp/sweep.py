@@ -170,15 +170,6 @@ def _slug(value) -> str:
 # --- one run: simulated on a worker, analysed here ----------------------------------------
 
 
-def simulate_one(spec: dict) -> dict:
-    """Run (or resume, or skip) one run of a sweep on a Dask worker; never raises.
-
-    Returns a row with ``status`` (ok, skipped (complete) or failed, with ``reason``),
-    the run folder, the device, and the run's own wall time over all its sessions.
-    """
-    return simulate_batch([spec])[0]
-
-
 def ensemble_plan(setting, gpus: int, runs: int = AUTO_ENSEMBLE, workers: int = 1) -> tuple[int, int | None]:
     """``[sweep] ensemble`` as (runs handed to a worker at a time, the largest particle count
     stepped with others, None for any): ``"auto"`` packs the small runs on a GPU only, up to
@@ -193,8 +184,10 @@ def ensemble_plan(setting, gpus: int, runs: int = AUTO_ENSEMBLE, workers: int = 
 def simulate_batch(batch: list[dict], max_particles: int | None = None) -> list[dict]:
     """Run (or resume, or skip) several runs of a sweep on one Dask worker, those that share their
     Params and step advanced together as one ensemble (decco_warp/ensemble.py: each writes what it
-    would alone); never raises.  One row per run, as :func:`simulate_one` gives.  With
-    ``max_particles`` only runs of the same particle count, up to that many, go together."""
+    would alone); never raises.  One row per run: ``status`` (ok, skipped (complete) or failed,
+    with ``reason``), the run folder, the device, and the run's own wall time over all its
+    sessions.  With ``max_particles`` only runs of the same particle count, up to that many, go
+    together."""
     from .run import RUN_FAILURES, execute, execute_ensemble
 
     device = _worker_device()
