@@ -57,9 +57,10 @@ def ls12_curve(summary: dict, etas: np.ndarray) -> np.ndarray:
     return np.array([scaling.largest_mass_ratio({**collision, "kinetic_energy": kinetic_per_eta * e}) for e in etas])
 
 
-def draw_points(ax, summaries: list[dict], metric: str, colour: str, label: str) -> None:
-    """Each point's mean (marker and line), every realization faintly, a bar from the smallest to the largest."""
-    points = realization_points(summaries, metric)
+def draw_points(ax, summaries: list[dict], metric: str, colour: str, label: str, shift: float = 1.0) -> None:
+    """Each point's mean (marker and line), every realization faintly, a bar from the smallest to the
+    largest; ``shift`` multiplies eta, to set families at the same eta side by side."""
+    points = [{**p, "eta": p["eta"] * shift} for p in realization_points(summaries, metric)]
     etas, means = [p["eta"] for p in points], [p["mean"] for p in points]
     spread = [[m - p["low"] for m, p in zip(means, points)], [p["high"] - m for m, p in zip(means, points)]]
     ax.errorbar(etas, means, yerr=spread, marker="o", color=colour, capsize=3, label=label)
@@ -110,9 +111,9 @@ def spins():
     for k, kind in enumerate(("none", "parallel", "anti-parallel", "perpendicular")):
         mine = still if kind == "none" else [s for s in spinning if s.get("spin_kind") == kind]
         if mine:
-            draw_points(ax, mine, "largest_mass_ratio", f"C{k}", "no spin" if kind == "none" else f"{kind} spins")
+            draw_points(ax, mine, "largest_mass_ratio", f"C{k}", "no spin" if kind == "none" else f"{kind} spins", 1 + 0.03 * (k - 1.5))
     ax.set_xscale("log")
-    ax.set_xlabel("eta = KE / |U|")
+    ax.set_xlabel("eta = KE / |U| (the kinds set 3 % apart to be seen)")
     ax.set_ylabel("m_lf / m_t")
     ax.set_title("equal masses, head-on, spins at half breakup")
     ax.legend(fontsize=8)
