@@ -10,7 +10,7 @@ A sweep specification is a run specification plus a ``[sweep]`` table:
     keep_trajectory = true         # false: delete trajectory.h5 once the run is analysed
     ensemble = "auto"              # runs handed to a worker at a time; those sharing Params step together
                                    # (auto: up to 8 at a time on a GPU, runs of the same particle count up to
-                                   # 8 000 particles stepped together, larger ones alone; 1 on a CPU)
+                                   # 10 240 particles stepped together, larger ones alone; 1 on a CPU)
     realizations = 1               # runs of each grid point: the piles as their files hold them, then
                                    # turned by random rotations (orientation_seed derived from the point)
     [sweep.grid]                   # the cartesian product of these lists
@@ -46,12 +46,15 @@ from . import spec as specs
 from ._version import __version__
 
 #: ``ensemble = "auto"`` on a GPU: runs go to a worker up to 8 at a time (fewer where that leaves a
-#: worker idle), and those of the same particle count up to 8 000 are stepped together.  On an H100,
-#: systems of 5 500 to 6 250 particles step 1.42 to 1.54 times as fast as one at a time 4 together,
-#: 1.52 to 1.67 times 8 together (bench), and whole sweeps 1.45 to 1.55x with 4, 1.68 to 1.86x with 6
-#: (docs/benchmarks.md); at 10 000 one run nearly fills the GPU (1.07x for 2).
+#: worker idle), and those of the same particle count up to ENSEMBLE_MAX_PARTICLES are stepped
+#: together.  On an H100 (docs/benchmarks.md), systems of 5 500 to 6 250 particles step 1.43 to 1.54
+#: times as fast as one at a time 4 together, 1.53 to 1.67 times 8 together (bench, piles), and whole
+#: sweeps 1.45 to 1.55x with 4, 1.68 to 1.86x with 6.
 AUTO_ENSEMBLE = 8
-ENSEMBLE_MAX_PARTICLES = 8_000
+#: The largest particle count measured to gain from stepping together: at 10 000 and 10 240 the bench
+#: gains 1.16x for 2, 1.25x for 4 and 1.28x for 8 (piles), and a sweep stepped 4 runs of 10 000
+#: together in 505 s against ~668 s one at a time (~167 s each): 1.32x.  Larger runs go alone.
+ENSEMBLE_MAX_PARTICLES = 10_240
 SWEEP_KEYS = {"name", "out", "min_members", "analyse_every", "keep_trajectory", "ensemble", "realizations", "grid"}
 SUMMARY_FIELDS = [
     "run", "status", "reason", "n_particles", "mass_ratio", "theta_deg", "eta", "speed", "spin_kind", "realization", "orientation_seed",
@@ -181,6 +184,23 @@ def ensemble_plan(setting, gpus: int, runs: int = AUTO_ENSEMBLE, workers: int = 
     return max(1, min(AUTO_ENSEMBLE, math.ceil(runs / max(1, workers)))), ENSEMBLE_MAX_PARTICLES
 
 
+def ensemble_groups(prepared, max_particles: int | None = None) -> list[list[int]]:
+    """The indices of ``prepared`` runs (PreparedRun, or None for one not to step) as the groups
+    :func:`simulate_batch` steps together, in order of first member: runs that would be stepped
+    alone with the same kernels (Params, precision, layout, step), all-pairs only (the tree steps
+    one system at a time), and with ``max_particles`` of the same particle count, up to that many."""
+    groups: dict[tuple, list[int]] = {}
+    for k, run in enumerate(prepared):
+        if run is not None:
+            plan = run.plan
+            key = (plan.params, plan.precision, plan.layout, run.sim.step_count) if plan.params.gravity == "all-pairs" else (k,)
+            if max_particles is not None:
+                count = plan.state.n
+                key = (*key, count) if count <= max_particles else (k,)
+            groups.setdefault(key, []).append(k)
+    return list(groups.values())
+
+
 def simulate_batch(batch: list[dict], max_particles: int | None = None) -> list[dict]:
     """Run (or resume, or skip) several runs of a sweep on one Dask worker, those that share their
     Params and step advanced together as one ensemble (decco_warp/ensemble.py: each writes what it
@@ -193,18 +213,7 @@ def simulate_batch(batch: list[dict], max_particles: int | None = None) -> list[
     device = _worker_device()
     rows, prepared = zip(*(_prepare(spec, device) for spec in batch))
     rows = list(rows)
-    groups: dict[tuple, list[int]] = {}
-    for k, run in enumerate(prepared):
-        if run is not None:
-            plan = run.plan
-            # The tree steps one system at a time: its runs go alone.
-            # Only runs that would be stepped alone with the same kernels go together.
-            key = (plan.params, plan.precision, plan.layout, run.sim.step_count) if plan.params.gravity == "all-pairs" else (k,)
-            if max_particles is not None:
-                count = plan.state.n
-                key = (*key, count) if count <= max_particles else (k,)
-            groups.setdefault(key, []).append(k)
-    for members in groups.values():
+    for members in ensemble_groups(prepared, max_particles):
         try:
             if len(members) == 1:
                 outcomes = [execute(prepared[members[0]])]

@@ -209,7 +209,7 @@ def test_a_sweep_packs_runs_into_ensembles_with_the_results_of_runs_alone(tmp_pa
 def test_ensemble_auto_packs_small_runs_on_a_gpu_only_and_alike_in_size(tmp_path):
     """[sweep] ensemble defaults to "auto": one run at a time on a CPU; on a GPU up to 8 to a worker
     (fewer when that would leave a worker without runs), stepped together only when they have the
-    same particle count, up to 8 000."""
+    same particle count, up to 10 240."""
     from decco_warp.sweep import ENSEMBLE_MAX_PARTICLES, ensemble_plan, simulate_batch
 
     path = tmp_path / "s.toml"
@@ -217,7 +217,8 @@ def test_ensemble_auto_packs_small_runs_on_a_gpu_only_and_alike_in_size(tmp_path
     settings, runs = load_sweep(path)
     assert settings["ensemble"] == "auto"
     assert ensemble_plan("auto", 0) == (1, None)
-    assert ensemble_plan("auto", 1, runs=42) == (8, ENSEMBLE_MAX_PARTICLES)
+    assert ENSEMBLE_MAX_PARTICLES == 10_240  # the largest count measured to gain on an H100 (docs/benchmarks.md)
+    assert ensemble_plan("auto", 1, runs=42) == (8, 10_240)
     assert ensemble_plan("auto", 8, runs=42, workers=8) == (6, ENSEMBLE_MAX_PARTICLES)  # every GPU gets runs
     assert ensemble_plan("auto", 2, runs=3, workers=2) == (2, ENSEMBLE_MAX_PARTICLES)
     assert ensemble_plan("auto", 2, runs=0, workers=2) == (1, ENSEMBLE_MAX_PARTICLES)
@@ -235,6 +236,24 @@ def test_ensemble_auto_packs_small_runs_on_a_gpu_only_and_alike_in_size(tmp_path
     mixed = [{**r, "run": {**r["run"], "out": str(tmp_path / "c"), **extra}} for r, extra in zip(pair, ({"layout": "split"}, {}))]
     assert [row["ensemble"] for row in simulate_batch(mixed)] == [1, 1]
     assert all(row["status"] == "ok" for row in together + alone)
+
+
+def test_auto_ensembles_group_runs_of_10000_particles_and_keep_larger_ones_alone():
+    """simulate_batch's groups under ensemble = "auto" (ensemble_groups on stand-ins for prepared
+    runs, nothing stepped): the paper's 10 000-particle runs go together, one count per group."""
+    from types import SimpleNamespace
+
+    from decco_warp.params import Params
+    from decco_warp.sweep import ensemble_groups, ensemble_plan
+
+    def run(n, gravity="all-pairs"):
+        plan = SimpleNamespace(params=Params(gravity=gravity), precision="mixed", layout=None, state=SimpleNamespace(n=n))
+        return SimpleNamespace(plan=plan, sim=SimpleNamespace(step_count=0))
+
+    cap = ensemble_plan("auto", 1, runs=8)[1]
+    batch = [run(10_000), run(6_250), run(10_000), None, run(10_240), run(10_241), run(10_240), run(10_241), run(10_000, "tree")]
+    assert ensemble_groups(batch, cap) == [[0, 2], [1], [4, 6], [5], [7], [8]]
+    assert ensemble_groups(batch, None) == [[0, 1, 2, 4, 5, 6, 7], [8]]
 
 
 def test_shipped_large_pile_list_and_collision_are_valid():
