@@ -10,7 +10,7 @@ A sweep specification is a run specification plus a ``[sweep]`` table:
     keep_trajectory = true         # false: delete trajectory.h5 once the run is analysed
     ensemble = "auto"              # runs handed to a worker at a time; those sharing Params step together
                                    # (auto: up to 8 at a time on a GPU, runs of the same particle count up to
-                                   # 10 240 particles stepped together, larger ones alone; 1 on a CPU)
+                                   # 20 000 particles stepped together, larger ones alone; 1 on a CPU)
     realizations = 1               # runs of each grid point: the piles as their files hold them, then
                                    # turned by random rotations (orientation_seed derived from the point)
     [sweep.grid]                   # the cartesian product of these lists
@@ -51,10 +51,10 @@ from ._version import __version__
 #: times as fast as one at a time 4 together, 1.53 to 1.67 times 8 together (bench, piles), and whole
 #: sweeps 1.45 to 1.55x with 4, 1.68 to 1.86x with 6.
 AUTO_ENSEMBLE = 8
-#: The largest particle count measured to gain from stepping together: at 10 000 and 10 240 the bench
-#: gains 1.16x for 2, 1.25x for 4 and 1.28x for 8 (piles), and a sweep stepped 4 runs of 10 000
-#: together in 505 s against ~668 s one at a time (~167 s each): 1.32x.  Larger runs go alone.
-ENSEMBLE_MAX_PARTICLES = 10_240
+#: The largest particle count measured to gain from stepping together (H100, piles): 4 together gain
+#: 1.25x at 10 000 (a sweep: 4 runs of 10 000 in 505 s against ~668 s one at a time), 1.14x at
+#: 16 384 and 1.09x at 20 000, as one system fills more of the GPU.  Larger runs go alone.
+ENSEMBLE_MAX_PARTICLES = 20_000
 SWEEP_KEYS = {"name", "out", "min_members", "analyse_every", "keep_trajectory", "ensemble", "realizations", "grid"}
 SUMMARY_FIELDS = [
     "run", "status", "reason", "n_particles", "mass_ratio", "theta_deg", "eta", "speed", "spin_kind", "realization", "orientation_seed",

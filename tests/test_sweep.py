@@ -209,7 +209,7 @@ def test_a_sweep_packs_runs_into_ensembles_with_the_results_of_runs_alone(tmp_pa
 def test_ensemble_auto_packs_small_runs_on_a_gpu_only_and_alike_in_size(tmp_path):
     """[sweep] ensemble defaults to "auto": one run at a time on a CPU; on a GPU up to 8 to a worker
     (fewer when that would leave a worker without runs), stepped together only when they have the
-    same particle count, up to 10 240."""
+    same particle count, up to 20 000."""
     from decco_warp.sweep import ENSEMBLE_MAX_PARTICLES, ensemble_plan, simulate_batch
 
     path = tmp_path / "s.toml"
@@ -217,8 +217,8 @@ def test_ensemble_auto_packs_small_runs_on_a_gpu_only_and_alike_in_size(tmp_path
     settings, runs = load_sweep(path)
     assert settings["ensemble"] == "auto"
     assert ensemble_plan("auto", 0) == (1, None)
-    assert ENSEMBLE_MAX_PARTICLES == 10_240  # the largest count measured to gain on an H100 (docs/benchmarks.md)
-    assert ensemble_plan("auto", 1, runs=42) == (8, 10_240)
+    assert ENSEMBLE_MAX_PARTICLES == 20_000  # the largest count measured to gain on an H100 (docs/benchmarks.md)
+    assert ensemble_plan("auto", 1, runs=42) == (8, 20_000)
     assert ensemble_plan("auto", 8, runs=42, workers=8) == (6, ENSEMBLE_MAX_PARTICLES)  # every GPU gets runs
     assert ensemble_plan("auto", 2, runs=3, workers=2) == (2, ENSEMBLE_MAX_PARTICLES)
     assert ensemble_plan("auto", 2, runs=0, workers=2) == (1, ENSEMBLE_MAX_PARTICLES)
@@ -251,7 +251,7 @@ def test_auto_ensembles_group_runs_of_10000_particles_and_keep_larger_ones_alone
         return SimpleNamespace(plan=plan, sim=SimpleNamespace(step_count=0))
 
     cap = ensemble_plan("auto", 1, runs=8)[1]
-    batch = [run(10_000), run(6_250), run(10_000), None, run(10_240), run(10_241), run(10_240), run(10_241), run(10_000, "tree")]
+    batch = [run(10_000), run(6_250), run(10_000), None, run(20_000), run(20_001), run(20_000), run(20_001), run(10_000, "tree")]
     assert ensemble_groups(batch, cap) == [[0, 2], [1], [4, 6], [5], [7], [8]]
     assert ensemble_groups(batch, None) == [[0, 1, 2, 4, 5, 6, 7], [8]]
 
