@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
+from typing import List, Optional
 
 import typer
 
@@ -909,6 +909,10 @@ def sweep(
     analysis_workers: Optional[int] = typer.Option(
         None, "--analysis-workers", help="Processes analysing finished runs here (default: this machine's cores)."
     ),
+    only: Optional[List[str]] = typer.Option(
+        None, "--only", help="Run only the runs whose names match this glob, e.g. '*eta6' (repeatable); complete runs stay in the table."
+    ),
+    check: bool = typer.Option(False, "--check", help="List the runs and where each stands (complete, resumes, to run), then stop."),
 ) -> None:
     """Run a grid of collisions with Dask (skipping finished runs), analysing each as it finishes."""
     import signal
@@ -920,12 +924,23 @@ def sweep(
     from .lock import RunFolderLock
     from .spec import SpecError
     from .run import OUTPUT_FAILURE
-    from .sweep import load_sweep, run_sweep, write_record, write_summary
+    from .sweep import load_sweep, run_state, run_sweep, select_runs, write_record, write_summary
 
     try:
         settings, runs = load_sweep(spec_file)
+        if only:
+            runs = select_runs(runs, only)
     except SpecError as error:
         fail(str(error))
+    if check:
+        states = [run_state(run) for run in runs]
+        counts = {kind: sum(s.startswith(kind) for s in states) for kind in ("complete", "resumes", "to run")}
+        typer.echo(f"sweep {settings['name']}: {len(runs)} runs into {Path(settings['out']) / settings['name']} "
+                   f"({counts['complete']} complete, {counts['resumes']} to resume, {counts['to run']} to run)")  # fmt: skip
+        width = max(len(run["run"]["name"]) for run in runs)
+        for run, state in zip(runs, states):
+            typer.echo(f"  {run['run']['name']:<{width}}  {state}")
+        return
     if workers is not None and workers < 1 or analysis_workers is not None and analysis_workers < 1:
         fail("--workers and --analysis-workers must be >= 1")
     if gpus is not None and scheduler:

@@ -30,6 +30,7 @@ without stopping the others.
 from __future__ import annotations
 
 import csv
+import fnmatch
 import hashlib
 import itertools
 import math
@@ -242,6 +243,33 @@ def _complete_row(spec: dict) -> dict | None:
     except (*RUN_FAILURES, specs.SpecError):
         return None
     return _timed({"run": spec["run"]["name"], "run_dir": str(run_dir), "device": "auto", "status": "skipped (complete)"})
+
+
+def run_state(spec: dict) -> str:
+    """Where a sweep's run stands: "complete", "resumes at step K" (its checkpoint is short of its
+    steps) or "to run"."""
+    from .io import read_checkpoint
+    from .run import run_dir_of
+
+    if _complete_row(spec) is not None:
+        return "complete"
+    checkpoint = run_dir_of(spec) / CHECKPOINT_FILE
+    if checkpoint.is_file():
+        try:
+            return f"resumes at step {int(read_checkpoint(checkpoint)[0]['step'])}"
+        except Exception:  # the worker will report what is wrong with it
+            return "to run (its checkpoint cannot be read)"
+    return "to run"
+
+
+def select_runs(runs: list[dict], patterns: list[str]) -> list[dict]:
+    """The runs whose names match any of the glob ``patterns``, and every run already complete (only
+    reported, so that the sweep's table and figures stay whole).  A pattern that matches no run is
+    an error: it is most likely a typing slip."""
+    for pattern in patterns:
+        if not any(fnmatch.fnmatchcase(r["run"]["name"], pattern) for r in runs):
+            raise specs.SpecError(f"--only {pattern!r} matches none of the sweep's {len(runs)} runs (the first is {runs[0]['run']['name']})")
+    return [r for r in runs if any(fnmatch.fnmatchcase(r["run"]["name"], p) for p in patterns) or _complete_row(r) is not None]
 
 
 def _prepare(spec: dict, device: str | None) -> tuple[dict, object]:

@@ -294,3 +294,27 @@ def test_committed_results_are_runs_of_the_shipped_sweeps(folder, sweeps):
         assert shared >= {"k_in", "restitution", "mu_k", "mu_r", "dt"}
         assert {key: spec["params"][key] for key in shared} == {key: run["params"][key] for key in shared}, path.parent.name
         assert spec["run"]["steps"] == run["run"]["steps"]
+
+
+def test_sweep_check_lists_where_runs_stand_and_only_runs_a_part(tmp_path):
+    """`--check` lists the runs and their state without starting anything; `--only` steps the runs
+    whose names match, while complete runs stay in summary.csv; a pattern matching nothing is refused."""
+    path = tmp_path / "s.toml"
+    path.write_text(SWEEP.format(out=tmp_path))
+    result = cli("sweep", str(path), "--only", "*dt9", "--check")
+    assert result.returncode == 2 and "matches none" in result.stderr
+    result = cli("sweep", str(path), "--check")
+    assert result.returncode == 0, result.stderr
+    assert "4 runs" in result.stdout and "0 complete, 0 to resume, 4 to run" in result.stdout
+    assert not (tmp_path / "grid").exists()  # nothing started
+    result = cli("sweep", str(path), "--only", "eta0.5_dt0.04", "--workers", "1")
+    assert result.returncode == 0, result.stderr
+    assert list(_rows(tmp_path / "grid" / "summary.csv")) == ["eta0.5_dt0.04"]
+    result = cli("sweep", str(path), "--check")
+    lines = {line.split()[0]: line.split(None, 1)[1] for line in result.stdout.splitlines()[1:]}
+    assert lines == {"eta0.5_dt0.04": "complete", "eta0.5_dt5": "to run", "eta1_dt0.04": "to run", "eta1_dt5": "to run"}
+    result = cli("sweep", str(path), "--only", "eta1_dt0*", "--workers", "1")
+    assert result.returncode == 0, result.stderr
+    rows = _rows(tmp_path / "grid" / "summary.csv")
+    assert set(rows) == {"eta0.5_dt0.04", "eta1_dt0.04"}
+    assert rows["eta0.5_dt0.04"]["status"] == "skipped (complete)" and rows["eta1_dt0.04"]["status"] == "ok"
