@@ -111,9 +111,9 @@ def spins():
     for k, kind in enumerate(("none", "parallel", "anti-parallel", "perpendicular")):
         mine = still if kind == "none" else [s for s in spinning if s.get("spin_kind") == kind]
         if mine:
-            draw_points(ax, mine, "largest_mass_ratio", f"C{k}", "no spin" if kind == "none" else f"{kind} spins", 1 + 0.03 * (k - 1.5))
+            draw_points(ax, mine, "largest_mass_ratio", f"C{k}", "no spin" if kind == "none" else f"{kind} spins", 1 + 0.025 * k)
     ax.set_xscale("log")
-    ax.set_xlabel("eta = KE / |U| (the kinds set 3 % apart to be seen)")
+    ax.set_xlabel("eta = KE / |U| (spinning kinds set 2.5 % apart to be seen)")
     ax.set_ylabel("m_lf / m_t")
     ax.set_title("equal masses, head-on, spins at half breakup")
     ax.legend(fontsize=8)
