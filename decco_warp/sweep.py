@@ -248,17 +248,17 @@ def _complete_row(spec: dict) -> dict | None:
 def run_state(spec: dict) -> str:
     """Where a sweep's run stands: "complete", "resumes at step K" (its checkpoint is short of its
     steps) or "to run"."""
-    from .io import read_checkpoint
-    from .run import run_dir_of
+    from .run import RUN_FAILURES, run_dir_of
 
-    if _complete_row(spec) is not None:
+    run_dir = run_dir_of(spec)
+    try:
+        progress = _progress(run_dir)
+    except (*RUN_FAILURES, specs.SpecError):  # the worker will report what is wrong with the folder
+        return "to run (its folder cannot be read)"
+    if progress is not None and progress[0] >= progress[1]:
         return "complete"
-    checkpoint = run_dir_of(spec) / CHECKPOINT_FILE
-    if checkpoint.is_file():
-        try:
-            return f"resumes at step {int(read_checkpoint(checkpoint)[0]['step'])}"
-        except Exception:  # the worker will report what is wrong with it
-            return "to run (its checkpoint cannot be read)"
+    if progress is not None and (run_dir / CHECKPOINT_FILE).is_file():
+        return f"resumes at step {progress[0]}"
     return "to run"
 
 
@@ -266,10 +266,12 @@ def select_runs(runs: list[dict], patterns: list[str]) -> list[dict]:
     """The runs whose names match any of the glob ``patterns``, and every run already complete (only
     reported, so that the sweep's table and figures stay whole).  A pattern that matches no run is
     an error: it is most likely a typing slip."""
+    names = [r["run"]["name"] for r in runs]
     for pattern in patterns:
-        if not any(fnmatch.fnmatchcase(r["run"]["name"], pattern) for r in runs):
-            raise specs.SpecError(f"--only {pattern!r} matches none of the sweep's {len(runs)} runs (the first is {runs[0]['run']['name']})")
-    return [r for r in runs if any(fnmatch.fnmatchcase(r["run"]["name"], p) for p in patterns) or _complete_row(r) is not None]
+        if not fnmatch.filter(names, pattern):
+            raise specs.SpecError(f"--only {pattern!r} matches none of the sweep's {len(runs)} runs (the first is {names[0]})")
+    chosen = {name for pattern in patterns for name in fnmatch.filter(names, pattern)}
+    return [r for r in runs if r["run"]["name"] in chosen or _complete_row(r) is not None]
 
 
 def _prepare(spec: dict, device: str | None) -> tuple[dict, object]:
@@ -311,15 +313,22 @@ def _timed(row: dict) -> dict:
 def _run_complete(run_dir: Path) -> bool:
     """True when the run folder's checkpoint has reached the steps of its own spec.toml, or, for a run
     kept without its checkpoint (the committed results), when its analysis reached them."""
+    progress = _progress(run_dir)
+    return progress is not None and progress[0] >= progress[1]
+
+
+def _progress(run_dir: Path) -> tuple[int, int] | None:
+    """(steps made, steps its spec.toml asks for) of a run folder, by its checkpoint or, kept without
+    one, by its analysis; None when it holds neither."""
     from .io import read_checkpoint
 
     checkpoint, summary = run_dir / CHECKPOINT_FILE, run_dir / SUMMARY_FILE
     if not checkpoint.is_file() and not summary.is_file():
-        return False
-    spec = specs.resolve_spec(specs.load_spec_file(run_dir / "spec.toml"))
+        return None
+    needed = specs.resolve_spec(specs.load_spec_file(run_dir / "spec.toml"))["run"]["steps"]
     if checkpoint.is_file():
-        return int(read_checkpoint(checkpoint)[0]["step"]) >= spec["run"]["steps"]
-    return int(json.loads(summary.read_text()).get("steps", -1)) >= spec["run"]["steps"]
+        return int(read_checkpoint(checkpoint)[0]["step"]), needed
+    return int(json.loads(summary.read_text()).get("steps", -1)), needed
 
 
 def _device_name(device: str) -> str:

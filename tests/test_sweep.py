@@ -318,3 +318,11 @@ def test_sweep_check_lists_where_runs_stand_and_only_runs_a_part(tmp_path):
     rows = _rows(tmp_path / "grid" / "summary.csv")
     assert set(rows) == {"eta0.5_dt0.04", "eta1_dt0.04"}
     assert rows["eta0.5_dt0.04"]["status"] == "skipped (complete)" and rows["eta1_dt0.04"]["status"] == "ok"
+    # A run whose checkpoint is short of its steps (here: asked for more) resumes from it.
+    spec_file = tmp_path / "grid" / "eta1_dt0.04" / "spec.toml"
+    spec_file.write_text(spec_file.read_text().replace("steps = 200", "steps = 400"))
+    result = cli("sweep", str(path), "--check", "--only", "eta1_dt0.04")
+    assert result.returncode == 0, result.stderr
+    lines = {line.split()[0]: line.split(None, 1)[1] for line in result.stdout.splitlines()[1:]}
+    assert lines == {"eta0.5_dt0.04": "complete", "eta1_dt0.04": "resumes at step 200"}
+    assert "1 complete, 1 to resume, 0 to run" in result.stdout
