@@ -38,30 +38,23 @@ BODY_TYPES = {"mixed": BodyMixed, "float64": BodyDouble}
 CONTACT_CANDIDATE = 1.0 + 1e-5
 
 
-@wp.kernel
-def pack_bodies_mixed(
-    # Model:
-    G: wp.float64,
-    radius_in: wp.array(dtype=wp.float64),
-    mass_in: wp.array(dtype=wp.float64),
-    # State in:
-    position_in: wp.array(dtype=wp.vec3d),
-    # Out:
-    body_out: wp.array(dtype=BodyMixed),
-):
-    """Split each float64 position into float32 hi + lo: (hi_i - hi_j) + (lo_i - lo_j) is then
-    accurate to float32 relative precision of the separation itself."""
-    i = wp.tid()
-    x = position_in[i]
+@wp.func
+def pack_body(G: wp.float64, radius: wp.float64, mass: wp.float64, x: wp.vec3d, body_out: wp.array(dtype=BodyMixed), i: int):
+    """Write particle i's packed body: its float64 position split into float32 hi + lo, so that
+    (hi_i - hi_j) + (lo_i - lo_j) is accurate to float32 relative precision of the separation itself."""
     hi = wp.vec3f(x)
     lo = wp.vec3f(x - wp.vec3d(hi))
-    body_out[i] = BodyMixed(
-        hi[0], hi[1], hi[2], lo[0], lo[1], lo[2], wp.float32(radius_in[i]), wp.float32(G * mass_in[i])
-    )
+    body_out[i] = BodyMixed(hi[0], hi[1], hi[2], lo[0], lo[1], lo[2], wp.float32(radius), wp.float32(G * mass))
+
+
+@wp.func
+def pack_body(G: wp.float64, radius: wp.float64, mass: wp.float64, x: wp.vec3d, body_out: wp.array(dtype=BodyDouble), i: int):
+    """Write particle i's packed body in float64."""
+    body_out[i] = BodyDouble(x[0], x[1], x[2], radius, G * mass)
 
 
 @wp.kernel
-def pack_bodies_double(
+def pack_bodies(
     # Model:
     G: wp.float64,
     radius_in: wp.array(dtype=wp.float64),
@@ -69,14 +62,21 @@ def pack_bodies_double(
     # State in:
     position_in: wp.array(dtype=wp.vec3d),
     # Out:
-    body_out: wp.array(dtype=BodyDouble),
+    body_out: wp.array(dtype=Any),  # BodyMixed or BodyDouble: the overload of the run's precision
 ):
     i = wp.tid()
-    x = position_in[i]
-    body_out[i] = BodyDouble(x[0], x[1], x[2], radius_in[i], G * mass_in[i])
+    pack_body(G, radius_in[i], mass_in[i], position_in[i], body_out, i)
 
 
-PACK_KERNELS = {"mixed": pack_bodies_mixed, "float64": pack_bodies_double}
+def body_overloads(kernel) -> dict:
+    """A kernel generic in its ``body_out`` (an array of BodyMixed or BodyDouble), overloaded for each
+    precision: precision -> overload (a launch of the generic kernel picks it by the array's type)."""
+    return {precision: wp.overload(kernel, {"body_out": wp.array(dtype=Body)}) for precision, Body in BODY_TYPES.items()}
+
+
+#: The kernel that packs the bodies before a sweep, per precision (kernels/integrate.py also packs
+#: them, after the drift, when a step's kicks share launches).
+PACK_KERNELS = body_overloads(pack_bodies)
 
 
 @wp.func
