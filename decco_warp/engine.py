@@ -72,6 +72,10 @@ class Layout:
     warp (``block_dim`` 32 on a GPU, 1 on the CPU) meeting two tiles of ``particles_per_block``
     particles, gravity given to both sides, then the contacts in their own pass as with
     ``contact_pass``.  ``contact_slots`` and ``prefetch`` are unused."""
+    fuse_kicks: bool = True
+    """Steps share launches (:meth:`Engine.advance`): the last half kick of a step, the next one's
+    first half kick and drift and the packing of the bodies for its sweep are one kernel; the same
+    numbers, bit for bit, as the launches of :meth:`Engine.step` (False: those, for comparison)."""
 
     def __post_init__(self):
         for name in ("block_dim", "particles_per_block", "contact_slots"):
@@ -80,7 +84,7 @@ class Layout:
                 raise ValueError(f"Layout.{name} must be a positive integer; got {value!r}")
         if not isinstance(self.max_registers, int) or self.max_registers < 0:
             raise ValueError(f"Layout.max_registers must be an integer >= 0; got {self.max_registers!r}")
-        for name in ("contact_pass", "prefetch", "newton"):
+        for name in ("contact_pass", "prefetch", "newton", "fuse_kicks"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"Layout.{name} must be true or false; got {getattr(self, name)!r}")
         if self.newton and (
@@ -95,13 +99,15 @@ class Layout:
     def describe(self) -> str:
         """In words, for ``decco-warp bench`` and ``info``."""
         registers = f", <= {self.max_registers} registers" if self.max_registers else ""
+        kicks = "" if self.fuse_kicks else ", kicks unfused"
         if self.newton:
-            return f"each pair once: a warp of {self.block_dim} meets tiles of {self.particles_per_block}" + registers
+            return f"each pair once: a warp of {self.block_dim} meets tiles of {self.particles_per_block}" + registers + kicks
         return (
             f"{self.block_dim} threads x {self.particles_per_block} per block, "
             + ("contacts in their own pass" if self.contact_pass else f"{self.contact_slots} slots")
             + registers
             + (", j a tile ahead" if self.prefetch else "")
+            + kicks
         )
 
 
@@ -273,9 +279,11 @@ class Engine:
         # (kernels/contacts.py note_depth): frames report the peak between them, not a sample.
         self.deepest_contact = wp.zeros(self.count, dtype=wp.int64, device=self.device)
 
-        # The tiled sweep reads packed bodies (kernels/bodies.py), refreshed before each sweep.
+        # The tiled sweep reads packed bodies (kernels/bodies.py), refreshed before each sweep (the
+        # reference kernel and the tree path read the positions: none for them).
         tiled = force_kernel == "tiled"
-        self.body = wp.zeros(self.count if tiled else 0, dtype=BODY_TYPES[precision], device=self.device)
+        sweep = tiled and params.gravity != "tree"
+        self.body = wp.zeros(self.count if sweep else 0, dtype=BODY_TYPES[precision], device=self.device)
         # The tree path: gravity from a radix tree, contacts from a hash grid, both into the contact pass.
         # (A "reference" engine is the all-pairs yardstick, also for diagnostics: it never builds a tree.)
         self.tree = GravityTree(self.count, self.device, precision) if params.gravity == "tree" and tiled else None
@@ -350,6 +358,18 @@ class Engine:
 
     def eval_forces(self) -> None:
         """Force and torque on every particle at the current positions and velocities."""
+        if self.body.shape[0] > 0:
+            wp.launch(
+                PACK_KERNELS[self.precision],
+                dim=self.count,
+                inputs=[wp.float64(self.params.G), self.radius, self.mass, self.position],
+                outputs=[self.body],
+                device=self.device,
+            )
+        self._forces()
+
+    def _forces(self) -> None:
+        """:meth:`eval_forces` with the bodies packed already (by the pack kernel or a fused kick)."""
         outputs = [self.force, self.torque, self.channels, self.deepest_contact]
         if self.ledger and self._contact_kernel is None:  # the fused kernel adds to them; a contact pass writes them whole
             self.channels.zero_()
@@ -363,13 +383,6 @@ class Engine:
         if self.force_kernel == "reference":
             wp.launch(self._force_kernel, dim=self.count, inputs=[self.model, self.ranges, *state], outputs=outputs, device=self.device)
             return
-        wp.launch(
-            PACK_KERNELS[self.precision],
-            dim=self.count,
-            inputs=[wp.float64(self.params.G), self.radius, self.mass, self.position],
-            outputs=[self.body],
-            device=self.device,
-        )
         if self.layout.newton:
             # Each pair once, per particle and tile; then each particle's gravity and sorted candidates.
             wp.launch_tiled(
@@ -444,6 +457,27 @@ class Engine:
         self.kick_drift()
         self.eval_forces()
         self.kick()
+
+    def advance(self, steps: int) -> None:
+        """``steps`` steps, ending at a whole step as :meth:`step` does, bit for bit the same: with
+        ``layout.fuse_kicks``, a step's last half kick, the next one's first half kick and drift and
+        the packing of its bodies are one launch (kernels/integrate.py ``kick_drift_pack``)."""
+        if not self.layout.fuse_kicks:
+            for _ in range(steps):
+                self.step()
+            return
+        for k in range(steps):
+            wp.launch(
+                integrate.KICK_DRIFT_PACK[self.precision],
+                dim=self.count,
+                inputs=[wp.float64(self.params.dt), wp.float64(self.params.G), self.radius, self.mass, self.inertia,
+                        self.force, self.torque, self.channels, k > 0],
+                outputs=[self.position, self.velocity, self.omega, self.work, self.body],
+                device=self.device,
+            )  # fmt: skip
+            self._forces()
+        if steps > 0:
+            self.kick()
 
     # -- host side ----------------------------------------------------------------
 

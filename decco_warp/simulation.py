@@ -114,7 +114,8 @@ class Simulation:
         return self._time_origin + self._step * self.params.dt
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` steps of ``params.dt``: whole blocks of steps replay a recorded graph."""
+        """Advance ``n`` steps of ``params.dt``: whole blocks of steps replay a recorded graph (the
+        steps of a block, and those left over, share launches: :meth:`Engine.advance`)."""
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise ValueError(f"step count must be a non-negative integer; got {n!r}")
         n = int(n)
@@ -125,9 +126,8 @@ class Simulation:
             wp.capture_launch(graph)
             n -= GRAPH_STEPS
             self._step += GRAPH_STEPS
-        for _ in range(n):
-            self.engine.step()
-            self._step += 1
+        self.engine.advance(n)
+        self._step += n
 
     def finish(self) -> None:
         """Wait until the device has done every step asked of it (steps on CUDA return at once)."""
@@ -139,8 +139,7 @@ class Simulation:
         if self._graph is None:
             try:
                 with wp.ScopedCapture(device=self.engine.device) as capture:
-                    for _ in range(GRAPH_STEPS):
-                        self.engine.step()
+                    self.engine.advance(GRAPH_STEPS)
             except Exception as error:  # e.g. a driver without conditional graph nodes for the tree
                 warnings.warn(f"steps are launched one by one: recording them in a graph failed ({error})", stacklevel=3)
                 self._record = False

@@ -9,9 +9,19 @@ F . (v_old + v_new)/2 dt/2 (and T . (w_old + w_new)/2 dt/2), which is linear in
 F and T and so splits exactly into the work of each force channel.  With the
 ledger on, each kick adds those works to ``work_inout`` per particle, as
 (gravity, spring, sliding friction, rolling friction).
+
+Fused kicks: the second half kick of a step and the first of the next use the same forces, and
+the sweep's packed bodies (kernels/bodies.py) follow right after the drift, so ``Engine.advance``
+does k steps as ``kick_drift_pack``, then k - 1 times the same with ``close_step`` (each after a
+force evaluation), then ``kick``: per particle the same expressions in the same order as ``kick``,
+``kick_drift`` and the pack kernel one after another, in fewer launches.
 """
 
+from typing import Any
+
 import warp as wp
+
+from .bodies import body_overloads, pack_body
 
 wp.set_module_options({"enable_backward": False})
 
@@ -81,6 +91,29 @@ def half_kick(
     return velocity
 
 
+@wp.func
+def kick_and_drift(
+    i: int,
+    dt: wp.float64,
+    mass_in: wp.array(dtype=wp.float64),
+    inertia_in: wp.array(dtype=wp.float64),
+    force_in: wp.array(dtype=wp.vec3d),
+    torque_in: wp.array(dtype=wp.vec3d),
+    channels_in: wp.array2d(dtype=wp.vec3d),
+    position_inout: wp.array(dtype=wp.vec3d),
+    velocity_inout: wp.array(dtype=wp.vec3d),
+    omega_inout: wp.array(dtype=wp.vec3d),
+    work_inout: wp.array(dtype=wp.vec4d),
+) -> wp.vec3d:
+    """Half kick of particle i with its current force, then a full drift; returns its new position."""
+    velocity = half_kick(
+        i, wp.float64(0.5) * dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout
+    )
+    position = position_inout[i] + dt * velocity
+    position_inout[i] = position
+    return position
+
+
 @wp.kernel
 def kick_drift(
     # Model:
@@ -98,10 +131,7 @@ def kick_drift(
     work_inout: wp.array(dtype=wp.vec4d),  # (N,) with the ledger, else empty
 ):
     i = wp.tid()
-    velocity = half_kick(
-        i, wp.float64(0.5) * dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout
-    )
-    position_inout[i] = position_inout[i] + dt * velocity
+    kick_and_drift(i, dt, mass_in, inertia_in, force_in, torque_in, channels_in, position_inout, velocity_inout, omega_inout, work_inout)
 
 
 @wp.kernel
@@ -123,3 +153,39 @@ def kick(
     half_kick(
         i, wp.float64(0.5) * dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout
     )
+
+
+@wp.kernel
+def kick_drift_pack(
+    # Model:
+    dt: wp.float64,
+    G: wp.float64,
+    radius_in: wp.array(dtype=wp.float64),
+    mass_in: wp.array(dtype=wp.float64),
+    inertia_in: wp.array(dtype=wp.float64),
+    # Data in:
+    force_in: wp.array(dtype=wp.vec3d),
+    torque_in: wp.array(dtype=wp.vec3d),
+    channels_in: wp.array2d(dtype=wp.vec3d),
+    close_step: bool,  # first the last half kick of the step before (the same forces: those just evaluated)
+    # Data in/out:
+    position_inout: wp.array(dtype=wp.vec3d),
+    velocity_inout: wp.array(dtype=wp.vec3d),
+    omega_inout: wp.array(dtype=wp.vec3d),
+    work_inout: wp.array(dtype=wp.vec4d),
+    # Out:
+    body_out: wp.array(dtype=Any),  # the sweep's packed bodies; empty where no sweep reads them
+):
+    """``kick`` (with ``close_step``), ``kick_drift`` and the pack kernel in one launch."""
+    i = wp.tid()
+    if close_step:
+        half_kick(i, wp.float64(0.5) * dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout)
+    position = kick_and_drift(
+        i, dt, mass_in, inertia_in, force_in, torque_in, channels_in, position_inout, velocity_inout, omega_inout, work_inout
+    )
+    if body_out.shape[0] > 0:
+        pack_body(G, radius_in[i], mass_in[i], position, body_out, i)
+
+
+#: ``kick_drift_pack`` per precision (the packed body's type), for ``Engine.advance``.
+KICK_DRIFT_PACK = body_overloads(kick_drift_pack)

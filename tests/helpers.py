@@ -26,3 +26,27 @@ def assert_same_run(a: dict, b: dict) -> None:
         assert np.array_equal(a["observables"][name], b["observables"][name], equal_nan=True), name
         for data in (a, b):
             assert data["observable_step"][name].tolist() == data["step"].tolist(), name
+
+
+#: Step counts of one Simulation.step call after another: one step, none, then a recorded block of
+#: 50 (simulation.py GRAPH_STEPS) and two steps left over.
+FUSED_PIECES = (1, 0, 52)
+
+
+def assert_fused_steps_equal_one_step_at_a_time(make, pieces=FUSED_PIECES):
+    """``make()`` gives a fresh Simulation.  Stepped ``sum(pieces)`` times by Engine.step (a step's
+    launches one after another: kick_drift, pack, forces, kick) and by Simulation.step(piece) for
+    each piece (Engine.advance: the kicks of two steps and the packing in one launch), every array
+    the next step depends on (positions, velocities, spins, forces, torques, the ledger's channels
+    and work, the deepest-contact records) is the same, bit for bit."""
+    launched, fused = make(), make()
+    for _ in range(sum(pieces)):
+        launched.engine.step()
+    for steps in pieces:
+        fused.step(steps)
+    assert fused.step_count - launched.step_count == sum(pieces)
+    want, got = launched.engine.snapshot(), fused.engine.snapshot()
+    for name, values in want.items():
+        assert np.array_equal(got[name], values), name
+    # The scene did something: contacts met and the ledger counting.
+    assert want["deepest_contact"].max() > 0 and np.abs(want["work"]).max() > 0

@@ -60,6 +60,25 @@ def test_each_system_of_an_ensemble_moves_bit_for_bit_as_it_would_alone(device, 
     assert np.abs(force).max() > 0 and pairs["contacts"].sum() > 0  # gravity and contacts at work
 
 
+#: With the Newton layout on the CPU too (the default on CUDA).
+FUSED_ENGINES = ENGINES + [("cpu", "newton", {"layout": dw.Layout(1, 4, newton=True)})]
+
+
+@pytest.mark.parametrize("precision", ["mixed", "float64"])
+@pytest.mark.parametrize(("device", "name", "options"), FUSED_ENGINES, ids=[f"{d}-{n}" for d, n, _ in FUSED_ENGINES])
+def test_an_ensemble_steps_sharing_launches_bit_for_bit_as_one_step_at_a_time(device, name, options, precision):
+    """Engine.advance (a step's kicks and the packing in one launch) moves an ensemble exactly as
+    Engine.step does: every array of its snapshot, bit for bit."""
+    from helpers import assert_fused_steps_equal_one_step_at_a_time
+
+    state = _together(_systems())
+
+    def make():
+        return dw.Simulation(state, dw.Params(), device=device, precision=precision, systems=SIZES, ledger=True, **options)
+
+    assert_fused_steps_equal_one_step_at_a_time(make)
+
+
 def test_ensemble_sizes_are_checked_and_the_tree_steps_one_system():
     state = _together(_systems())
     for sizes in ((37, 64), (37, 64, 23, 1), (0, 101, 23), ()):

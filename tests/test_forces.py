@@ -205,6 +205,37 @@ def test_each_pair_once_gives_both_sides_and_repeats_bit_for_bit(precision, devi
         np.testing.assert_array_equal(got, want)
 
 
+def _fused_cases():
+    """Every layout of LAYOUTS, the reference kernel and the tree path, on each device."""
+    cases = [(_layout_id(case), case[0], {"layout": case[1]}) for case in LAYOUTS]
+    for device in DEVICES:
+        cases += [(f"{device}-reference", device, {"force_kernel": "reference"}), (f"{device}-tree", device, {"gravity": "tree"})]
+    return cases
+
+
+FUSED_CASES = _fused_cases()
+
+
+@pytest.mark.parametrize("precision", ["mixed", "float64"])
+@pytest.mark.parametrize(("device", "options"), [c[1:] for c in FUSED_CASES], ids=[c[0] for c in FUSED_CASES])
+def test_steps_sharing_launches_equal_the_launches_of_a_step_bit_for_bit(device, options, precision):
+    """Engine.advance fuses a step's last half kick, the next one's first half kick and drift and the
+    packing of its bodies (kernels/integrate.py kick_drift_pack): positions, velocities, spins,
+    forces, torques, the ledger and the deepest contacts equal those of Engine.step, bit for bit,
+    in every layout (the reference kernel and the tree path pack nothing: their kicks alone fuse).
+    On CUDA too: both compile the same expressions, whose multiply-adds should contract alike."""
+    from helpers import assert_fused_steps_equal_one_step_at_a_time
+
+    options = dict(options)
+    params = dw.Params(gravity=options.pop("gravity", "all-pairs"))
+    state = contact_cluster(40, seed=6, speed=1e3)
+
+    def make():
+        return dw.Simulation(state, params, device=device, precision=precision, ledger=True, allow_unstable=True, **options)
+
+    assert_fused_steps_equal_one_step_at_a_time(make)
+
+
 def _contact_counts(state, margin):
     """Per particle, how many others lie closer than (R_i + R_j) * margin (float64 NumPy)."""
     r = state.positions[:, None, :] - state.positions[None, :, :]
