@@ -56,6 +56,9 @@ class BenchRow:
     not compute the pairs); ``versus_all_pairs`` compares it with all-pairs where both were timed."""
     versus_all_pairs: float | None = None
     """All-pairs step time over this row's, at the same N in the same call (tree rows)."""
+    fuse_kicks: bool = True
+    """The steps shared launches (Layout.fuse_kicks); False: each step's kicks and packing in
+    launches of their own (``--layouts ...:unfused``)."""
 
 
 #: The test systems of :func:`bench_size`.
@@ -207,6 +210,7 @@ def bench_size(
         system=system,
         particles_per_s=n * systems / step_seconds,
         gravity=gravity,
+        fuse_kicks=layout.fuse_kicks,
     )
 
 

@@ -117,3 +117,16 @@ def test_bench_cli_times_both_test_systems_side_by_side(tmp_path):
     rows = json.loads(out.read_text())["rows"]
     assert [(r["system"], r["layout"].split(", ")[-1]) for r in rows] == [("lattice", "lattice"), ("piles", "piles")]
     assert all(r["baseline_pairs_per_s"] > 0 for r in rows)  # each system gets its own baseline
+
+
+def test_bench_times_steps_with_their_kicks_unfused_beside_the_default(tmp_path):
+    """``--layouts ...:unfused``: the CPU's default layout with each step's kicks and packing in
+    launches of their own, timed in the same call as the default (fused) steps."""
+    out = tmp_path / "bench.json"
+    result = cli("bench", "--device", "cpu", "--n", "64", "--seconds", "0.02", "--steps", "2", "--layouts", "1:4:16:unfused", "--json", str(out))
+    assert result.returncode == 0, result.stderr
+    fused, unfused = json.loads(out.read_text())["rows"]
+    assert (fused["fuse_kicks"], unfused["fuse_kicks"]) == (True, False)
+    assert "kicks unfused" in unfused["layout"] and "kicks unfused" not in fused["layout"]
+    assert fused["layout"] == unfused["layout"].replace(", kicks unfused", "")  # the same layout otherwise
+    assert fused["step_seconds"] > 0 and unfused["step_seconds"] > 0
