@@ -284,6 +284,7 @@ class Engine:
         tiled = force_kernel == "tiled"
         sweep = tiled and params.gravity != "tree"
         self.body = wp.zeros(self.count if sweep else 0, dtype=BODY_TYPES[precision], device=self.device)
+        self._no_body = wp.zeros(0, dtype=BODY_TYPES[precision], device=self.device)  # a kick_drift that packs none
         # The tree path: gravity from a radix tree, contacts from a hash grid, both into the contact pass.
         # (A "reference" engine is the all-pairs yardstick, also for diagnostics: it never builds a tree.)
         self.tree = GravityTree(self.count, self.device, precision) if params.gravity == "tree" and tiled else None
@@ -432,15 +433,18 @@ class Engine:
         else:
             wp.launch(self._contact_kernel, dim=self.count, inputs=inputs, outputs=outputs, device=self.device)
 
-    def kick_drift(self) -> None:
-        """Half kick with the current forces, then a full drift."""
+    def kick_drift(self, close_step: bool = False, pack: bool = False) -> None:
+        """Half kick with the current forces, then a full drift; with ``close_step`` first the last
+        half kick of the step before (:meth:`kick`), with ``pack`` then the packing of the bodies
+        for the sweep (the first stage of :meth:`eval_forces`), in the same launch."""
         wp.launch(
-            integrate.kick_drift,
+            integrate.KICK_DRIFT[self.precision],
             dim=self.count,
-            inputs=[wp.float64(self.params.dt), self.mass, self.inertia, self.force, self.torque, self.channels],
-            outputs=[self.position, self.velocity, self.omega, self.work],
+            inputs=[wp.float64(self.params.dt), wp.float64(self.params.G), self.radius, self.mass, self.inertia,
+                    self.force, self.torque, self.channels, close_step],
+            outputs=[self.position, self.velocity, self.omega, self.work, self.body if pack else self._no_body],
             device=self.device,
-        )
+        )  # fmt: skip
 
     def kick(self) -> None:
         """Second half kick with the forces at the new positions."""
@@ -461,20 +465,13 @@ class Engine:
     def advance(self, steps: int) -> None:
         """``steps`` steps, ending at a whole step as :meth:`step` does, bit for bit the same: with
         ``layout.fuse_kicks``, a step's last half kick, the next one's first half kick and drift and
-        the packing of its bodies are one launch (kernels/integrate.py ``kick_drift_pack``)."""
+        the packing of its bodies are one launch (kernels/integrate.py ``kick_drift``)."""
         if not self.layout.fuse_kicks:
             for _ in range(steps):
                 self.step()
             return
         for k in range(steps):
-            wp.launch(
-                integrate.KICK_DRIFT_PACK[self.precision],
-                dim=self.count,
-                inputs=[wp.float64(self.params.dt), wp.float64(self.params.G), self.radius, self.mass, self.inertia,
-                        self.force, self.torque, self.channels, k > 0],
-                outputs=[self.position, self.velocity, self.omega, self.work, self.body],
-                device=self.device,
-            )  # fmt: skip
+            self.kick_drift(close_step=k > 0, pack=True)
             self._forces()
         if steps > 0:
             self.kick()

@@ -12,9 +12,9 @@ ledger on, each kick adds those works to ``work_inout`` per particle, as
 
 Fused kicks: the second half kick of a step and the first of the next use the same forces, and
 the sweep's packed bodies (kernels/bodies.py) follow right after the drift, so ``Engine.advance``
-does k steps as ``kick_drift_pack``, then k - 1 times the same with ``close_step`` (each after a
-force evaluation), then ``kick``: per particle the same expressions in the same order as ``kick``,
-``kick_drift`` and the pack kernel one after another, in fewer launches.
+does k steps as ``kick_drift`` with the packing, then k - 1 times the same with ``close_step``
+(each after a force evaluation), then ``kick``: per particle the same expressions in the same order
+as ``kick``, ``kick_drift`` and the pack kernel one after another, in fewer launches.
 """
 
 from typing import Any
@@ -91,49 +91,6 @@ def half_kick(
     return velocity
 
 
-@wp.func
-def kick_and_drift(
-    i: int,
-    dt: wp.float64,
-    mass_in: wp.array(dtype=wp.float64),
-    inertia_in: wp.array(dtype=wp.float64),
-    force_in: wp.array(dtype=wp.vec3d),
-    torque_in: wp.array(dtype=wp.vec3d),
-    channels_in: wp.array2d(dtype=wp.vec3d),
-    position_inout: wp.array(dtype=wp.vec3d),
-    velocity_inout: wp.array(dtype=wp.vec3d),
-    omega_inout: wp.array(dtype=wp.vec3d),
-    work_inout: wp.array(dtype=wp.vec4d),
-) -> wp.vec3d:
-    """Half kick of particle i with its current force, then a full drift; returns its new position."""
-    velocity = half_kick(
-        i, wp.float64(0.5) * dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout
-    )
-    position = position_inout[i] + dt * velocity
-    position_inout[i] = position
-    return position
-
-
-@wp.kernel
-def kick_drift(
-    # Model:
-    dt: wp.float64,
-    mass_in: wp.array(dtype=wp.float64),
-    inertia_in: wp.array(dtype=wp.float64),
-    # Data in:
-    force_in: wp.array(dtype=wp.vec3d),
-    torque_in: wp.array(dtype=wp.vec3d),
-    channels_in: wp.array2d(dtype=wp.vec3d),  # (N, 4) with the ledger, else empty
-    # Data in/out:
-    position_inout: wp.array(dtype=wp.vec3d),
-    velocity_inout: wp.array(dtype=wp.vec3d),
-    omega_inout: wp.array(dtype=wp.vec3d),
-    work_inout: wp.array(dtype=wp.vec4d),  # (N,) with the ledger, else empty
-):
-    i = wp.tid()
-    kick_and_drift(i, dt, mass_in, inertia_in, force_in, torque_in, channels_in, position_inout, velocity_inout, omega_inout, work_inout)
-
-
 @wp.kernel
 def kick(
     # Model:
@@ -156,7 +113,7 @@ def kick(
 
 
 @wp.kernel
-def kick_drift_pack(
+def kick_drift(
     # Model:
     dt: wp.float64,
     G: wp.float64,
@@ -166,26 +123,28 @@ def kick_drift_pack(
     # Data in:
     force_in: wp.array(dtype=wp.vec3d),
     torque_in: wp.array(dtype=wp.vec3d),
-    channels_in: wp.array2d(dtype=wp.vec3d),
+    channels_in: wp.array2d(dtype=wp.vec3d),  # (N, 4) with the ledger, else empty
     close_step: bool,  # first the last half kick of the step before (the same forces: those just evaluated)
     # Data in/out:
     position_inout: wp.array(dtype=wp.vec3d),
     velocity_inout: wp.array(dtype=wp.vec3d),
     omega_inout: wp.array(dtype=wp.vec3d),
-    work_inout: wp.array(dtype=wp.vec4d),
+    work_inout: wp.array(dtype=wp.vec4d),  # (N,) with the ledger, else empty
     # Out:
-    body_out: wp.array(dtype=Any),  # the sweep's packed bodies; empty where no sweep reads them
+    body_out: wp.array(dtype=Any),  # the sweep's packed bodies (kernels/bodies.py), or empty: none packed
 ):
-    """``kick`` (with ``close_step``), ``kick_drift`` and the pack kernel in one launch."""
+    """Half kick with the current forces, then a full drift; with ``close_step`` first ``kick``, and
+    with a ``body_out`` then the pack kernel, in the same launch."""
     i = wp.tid()
+    half_dt = wp.float64(0.5) * dt
     if close_step:
-        half_kick(i, wp.float64(0.5) * dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout)
-    position = kick_and_drift(
-        i, dt, mass_in, inertia_in, force_in, torque_in, channels_in, position_inout, velocity_inout, omega_inout, work_inout
-    )
+        half_kick(i, half_dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout)
+    velocity = half_kick(i, half_dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout)
+    position = position_inout[i] + dt * velocity
+    position_inout[i] = position
     if body_out.shape[0] > 0:
         pack_body(G, radius_in[i], mass_in[i], position, body_out, i)
 
 
-#: ``kick_drift_pack`` per precision (the packed body's type), for ``Engine.advance``.
-KICK_DRIFT_PACK = body_overloads(kick_drift_pack)
+#: ``kick_drift`` per precision (the type of its packed bodies).
+KICK_DRIFT = body_overloads(kick_drift)

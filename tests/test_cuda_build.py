@@ -28,7 +28,7 @@ SCRIPT = textwrap.dedent(
         kernels += [(newton.pair_gravity_newton(2, precision), 32), (newton.gather_newton(precision), 256)]
     kernels += [(contacts.contact_pass(rolling), 256) for rolling in ("couple", "paper")]
     kernels += [(newton.contact_pass_ordered(rolling, 32), 32) for rolling in ("couple", "paper")]
-    kernels += [(bodies.pack_bodies, 256), (integrate.kick_drift_pack, 256), (observables.pair_observables, 256), (observables.pair_observables_tiled(128), 128),
+    kernels += [(bodies.pack_bodies, 256), (integrate.kick_drift, 256), (observables.pair_observables, 256), (observables.pair_observables_tiled(128), 128),
                 (observables.candidate_observables, 256), (tree.tree_gravity("mixed"), 256), (tree.tree_gravity("float64"), 256), (tree.tree_potential, 256),
                 (tree.walk_records("mixed"), 256), (tree.walk_records("float64"), 256)]
     folder = tempfile.mkdtemp()

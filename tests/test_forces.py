@@ -220,7 +220,7 @@ FUSED_CASES = _fused_cases()
 @pytest.mark.parametrize(("device", "options"), [c[1:] for c in FUSED_CASES], ids=[c[0] for c in FUSED_CASES])
 def test_steps_sharing_launches_equal_the_launches_of_a_step_bit_for_bit(device, options, precision):
     """Engine.advance fuses a step's last half kick, the next one's first half kick and drift and the
-    packing of its bodies (kernels/integrate.py kick_drift_pack): positions, velocities, spins,
+    packing of its bodies (kernels/integrate.py kick_drift): positions, velocities, spins,
     forces, torques, the ledger and the deepest contacts equal those of Engine.step, bit for bit,
     in every layout (the reference kernel and the tree path pack nothing: their kicks alone fuse).
     On CUDA too: both compile the same expressions, whose multiply-adds should contract alike."""
