@@ -96,12 +96,12 @@ def test_bad_sweep_files_are_exit_2(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "name", ["fig3_validation", "fig3_headon", "fig3_oblique", "fig3_reduced", "fig8_stress", "fig8_reduced", "fig9_spin", "fig9_reduced", "realizations", "size_change_causes"]
+    "name", ["fig3_validation", "fig3_headon", "fig3_oblique", "fig3_reduced", "fig8_stress", "fig8_reduced", "fig9_spin", "fig9_reduced", "realizations", "size_change_causes", "spin_friction"]
 )
 def test_shipped_paper_sweeps_are_valid(name):
     settings, runs = load_sweep(Path(__file__).parent.parent / "runs" / "paper" / f"{name}.toml")
     assert runs and len({r["run"]["name"] for r in runs}) == len(runs)
-    expected = {"fig3_validation": 63, "fig3_headon": 21, "fig3_oblique": 42, "fig8_stress": 3, "fig9_spin": 24, "realizations": 33}
+    expected = {"fig3_validation": 63, "fig3_headon": 21, "fig3_oblique": 42, "fig8_stress": 3, "fig9_spin": 24, "realizations": 33, "spin_friction": 4}
     if name in expected:
         assert len(runs) == expected[name]
     if name == "fig9_spin":  # two axis pairs of each kind of spin, at every eta
@@ -269,7 +269,7 @@ def test_shipped_large_pile_list_and_collision_are_valid():
 
 
 @pytest.mark.parametrize(
-    "folder, sweeps", [("fig3", ["fig3_validation", "realizations"]), ("fig9", ["fig9_spin"]), ("causes", ["size_change_causes"])]
+    "folder, sweeps", [("fig3", ["fig3_validation", "realizations"]), ("fig9", ["fig9_spin"]), ("causes", ["size_change_causes"]), ("spin_friction", ["spin_friction"])]
 )
 def test_committed_results_are_runs_of_the_shipped_sweeps(folder, sweeps):
     """Every run kept under runs/results/ is, name and set-up (piles, collision with its orientation
