@@ -372,8 +372,6 @@ class Engine:
     def _forces(self) -> None:
         """:meth:`eval_forces` with the bodies packed already (by the pack kernel or a fused kick)."""
         outputs = [self.force, self.torque, self.channels, self.deepest_contact]
-        if self.ledger and self._contact_kernel is None:  # the fused kernel adds to them; a contact pass writes them whole
-            self.channels.zero_()
         if self.tree is not None:
             self.tree.build(self.position, self.mass)
             self.tree.gravity(self.params.G, self.params.theta_open, self.mass, self.force)

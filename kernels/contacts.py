@@ -153,6 +153,17 @@ def write_contacts(total: ContactSum, i: int, torque_out: wp.array(dtype=wp.vec3
 #: force, rolling torque (the order of :func:`contact_function`'s results).
 ContactRows = wp.types.matrix(shape=(5, 3), dtype=wp.float64)
 
+#: The ledger's channels on i, one per row (the order of LEDGER_CHANNELS): one value, so that the
+#: lanes of a block can sum them with one reduction (kernels/fused.py).
+LedgerRows = wp.types.matrix(shape=(len(LEDGER_CHANNELS), 3), dtype=wp.float64)
+
+
+@wp.func
+def write_channels(rows: LedgerRows, i: int, channels_out: wp.array2d(dtype=wp.vec3d)):
+    """Write i's ledger channels whole."""
+    for k in range(wp.static(len(LEDGER_CHANNELS))):
+        channels_out[i, k] = rows[k]
+
 
 @wp.func
 def contact_sum_of(rows: ContactRows) -> ContactSum:

@@ -7,9 +7,9 @@ on the CPU, so the same source serves both).  Each j load serves every particle 
 sweep itself is gravity only, plus a cheap test that notes contact candidates in a few slots; the
 contacts, which are few, are evaluated in float64 after the sweep (:mod:`.contacts`), so that the
 hot loop stays small.  Per-thread sums are reduced with ``wp.tile_sum`` and lane 0 writes each
-particle's force and torque: no atomics, and the motion does not depend on scheduling.  (The energy
-ledger's contact channels are added with atomics; on a GPU their last bits may vary from run to run,
-the motion's never.)
+particle's force and torque: no atomics, and the motion does not depend on scheduling.  The energy
+ledger's contact channels, float64, get a reduction of their own per particle, so the ledger does
+not either.
 
 Two options tune it to a GPU: ``max_registers`` caps the registers per thread, so that the rarely
 run float64 contact code spills rather than the sweep losing occupancy; ``prefetch`` loads each
@@ -22,7 +22,7 @@ import functools
 import warp as wp
 
 from .bodies import is_candidate, near_bound, separation, sweep_of, unpack_block
-from .contacts import contact_function
+from .contacts import LedgerRows, contact_function, write_channels
 from .pair import ContactModel
 
 wp.set_module_options({"enable_backward": False})
@@ -84,7 +84,7 @@ def pair_forces_tiled(
         # Out:
         force_out: wp.array(dtype=wp.vec3d),
         torque_out: wp.array(dtype=wp.vec3d),
-        channels_out: wp.array2d(dtype=wp.vec3d),  # (N, 4) with the ledger, else empty; zeroed by the caller
+        channels_out: wp.array2d(dtype=wp.vec3d),  # (N, 4) with the ledger (written whole), else empty
         deepest_out: wp.array(dtype=wp.int64),  # raised to each contact's depth (note_depth), or empty
     ):
         block, lane = wp.tid()
@@ -130,11 +130,14 @@ def pair_forces_tiled(
                                 candidates[p] = noted + 1
 
         # Contacts, in float64: the noted candidates, or after an overflow of the slots,
-        # this thread's share of j looked at again; either way in increasing j.  The
-        # loop over the block's particles is deliberately not unrolled: one copy of the
-        # contact code keeps the kernel's register count (and so the sweep's occupancy) low.
+        # this thread's share of j looked at again; either way in increasing j.  The loop over
+        # the block's particles is unrolled, as nvcc unrolled it anyway with a run-time bound:
+        # a run-time loop holding the ledger's block reduction (a barrier) stays rolled, and its
+        # counts and sums indexed at run time then spill the sweep's sums (sm_90 SASS).
         contacts = Contacts()
-        for p in range(wp.min(wp.static(P), end - first)):  # a run-time bound: not unrolled
+        for p in range(wp.static(P)):
+            if p >= end - first:  # rows past the end
+                continue
             i = first + p
             noted = candidates[p]
             overflow = noted > wp.static(K)
@@ -142,6 +145,8 @@ def pair_forces_tiled(
             body_i = body_in[i]
             if overflow:
                 walk = (j_end - j_first - lane + wp.static(T) - 1) // wp.static(T)
+            if wp.static(ledger):
+                channels = LedgerRows()
             for s in range(walk):
                 j = 0
                 if overflow:
@@ -162,12 +167,16 @@ def pair_forces_tiled(
                     contacts[p, k] += real(force[k])
                     contacts[p, 3 + k] += real(torque[k])
                 if wp.static(ledger):
-                    # Atomics: the channel sums feed only the energy ledger, never the motion,
-                    # and keeping them out of the reduction keeps the kernel lean.
-                    wp.atomic_add(channels_out, i, 0, spring)
-                    wp.atomic_add(channels_out, i, 1, sliding)
-                    wp.atomic_add(channels_out, i, 2, sliding_torque)
-                    wp.atomic_add(channels_out, i, 3, rolling)
+                    channels += wp.matrix_from_rows(spring, sliding, sliding_torque, rolling)
+            if wp.static(ledger):
+                # The lanes' channels summed in a fixed order, not with atomics: i's contacts
+                # are met by several lanes, in a block of more than 32 by several warps, whose
+                # float64 atomics landed in whatever order the warps ran (the ledger's last
+                # bits varied from run to run).  A reduction of its own: the sweep's is float32
+                # in mixed precision.
+                total_channels = wp.tile_sum(wp.tile(channels, preserve_type=True))[0]
+                if lane == 0:
+                    write_channels(total_channels, i, channels_out)
 
         sums = Sums()
         for p in range(wp.static(P)):

@@ -294,6 +294,7 @@ wp.config.enable_cpu_blocks = True  # the CPU runs every lane of a block, as a G
 wp.config.kernel_cache_dir = sys.argv[1]
 sys.path.insert(0, sys.argv[2])
 import decco_warp as dw
+from decco_warp.engine import Engine
 from scenes import overlapping_cloud
 state = overlapping_cloud(400, seed=3)
 params = dw.Params()
@@ -304,6 +305,17 @@ for precision, tolerance in (("float64", 1e-12), ("mixed", 1e-5)):
         got = dw.compute_forces(state, params, device="cpu", precision=precision, layout=layout)
         for g, w in zip(got, want):
             assert np.abs(g - w).max() <= tolerance * np.abs(w).max(), (precision, layout)
+# The ledger's channels (float64 in either precision), summed over a block's lanes by the fused
+# layout's own reduction: lanes past 32 (two warps on a GPU), four particles a block, slots overflowing.
+def channels(precision, **options):
+    engine = Engine(state, params, "cpu", precision, ledger=True, **options)
+    engine.eval_forces()
+    return engine.channels.numpy()
+want = channels("float64", force_kernel="reference")
+for precision in ("float64", "mixed"):
+    for layout in (dw.Layout(64, 1, 2), dw.Layout(16, 4, 1)):
+        got = channels(precision, layout=layout)
+        assert np.abs(got - want).max() <= 1e-12 * np.abs(want).max(), (precision, layout)
 print("SAME")
 """
 
@@ -312,7 +324,8 @@ def test_gpu_layouts_run_lane_by_lane_on_the_cpu_equal_the_reference_kernel(tmp_
     """The GPU's layouts (blocks of 16 and 32 lanes striding over j, the slots' overflow, the split
     contact pass, the Newton layout's contact pass of 32 lanes a particle, prefetch, the block
     reductions) run with Warp's CPU blocks in a fresh interpreter:
-    forces and torques equal the plain kernel's (float64 to round-off; mixed within 1e-5)."""
+    forces and torques equal the plain kernel's (float64 to round-off; mixed within 1e-5), and so
+    do the ledger's channels of the fused layout (float64 in both)."""
     import subprocess
     import sys
     from pathlib import Path
