@@ -112,6 +112,10 @@ def spins():
         mine = still if kind == "none" else [s for s in spinning if s.get("spin_kind") == kind]
         if mine:
             draw_points(ax, mine, "largest_mass_ratio", f"C{k}", "no spin" if kind == "none" else f"{kind} spins", 1 + 0.025 * k)
+        # spin_friction.toml: the same set-up at eta 3 without friction, to see whether friction hides the spin
+        loose = [r["summary"] for r in runs("spin_friction") if r["summary"].get("spin_kind") == kind]
+        label = "open squares: without friction (mu_k = mu_r = 0)" if k == 0 else None
+        ax.plot([s["eta"] * (1 + 0.025 * k) for s in loose], [s["largest_mass_ratio"] for s in loose], "s", mfc="none", color=f"C{k}", label=label)
     ax.set_xscale("log")
     ax.set_xlabel("eta = KE / |U| (spinning kinds set 2.5 % apart to be seen)")
     ax.set_ylabel("m_lf / m_t")
