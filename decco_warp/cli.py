@@ -15,6 +15,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # help texts are plain: units like [cm] and TOML tables like [sweep] print as written
 )
 
 DeviceOption = typer.Option(

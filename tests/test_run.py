@@ -338,3 +338,25 @@ def test_a_run_written_before_the_deepest_overlap_series_resumes_and_gains_them(
     written_before = data["step"] <= 200
     assert np.isnan(depth[written_before]).all() and (pairs[written_before] == -1).all()
     assert (depth[~written_before] > 0).all() and (pairs[~written_before] >= 0).all()
+
+
+def test_help_prints_units_and_toml_tables_as_written():
+    """Every bracketed word of an option's or argument's help ([cm], [s], [sweep.grid], [[pile]])
+    appears in its command's --help: help is plain text, not markup that swallows brackets."""
+    import re
+
+    from typer.main import get_command
+    from typer.testing import CliRunner
+
+    from decco_warp.cli import app
+
+    group = get_command(app)
+    checked = 0
+    for name, command in group.commands.items():
+        shown = CliRunner().invoke(app, [name, "--help"], terminal_width=200).output
+        for param in command.params:
+            text = getattr(param, "help", None) or ""
+            for token in re.findall(r"\[+[^\]\s]+\]+", text):
+                assert token in shown, (name, param.name, token)
+                checked += 1
+    assert checked >= 5  # units of pile and simulate, the sweep's and piles' TOML tables
