@@ -964,8 +964,17 @@ def sweep(
     typer.echo(f"sweep {settings['name']}: {len(runs)} runs into {folder}")
     bar = _progress_bar("sweep", "runs")
     finished = []
+    stepped = [0.0]  # runs' worth of steps made (sweep.run_sweep's on_progress)
     with bar:
         task = bar.add_task(settings["name"], total=len(runs), runs="")
+
+        def show() -> None:
+            runs_field = f"{len(finished)}/{len(runs)} runs, {100 * stepped[0] / len(runs):.0f} % of the steps made"
+            bar.update(task, completed=max(stepped[0], len(finished)), runs=runs_field)
+
+        def progress(made: float) -> None:
+            stepped[0] = made
+            show()
 
         def report(row):
             finished.append(row)
@@ -977,11 +986,11 @@ def sweep(
             detail += f", deepest overlap {depth:.2f}" if isinstance(depth, float) else ""
             together = f", {row['ensemble']} runs together" if (row.get("ensemble") or 1) > 1 else ""
             bar.console.print(f"{row['run']}: {outcome}{detail} ({row.get('wall_seconds') or 0:.1f} s on {row.get('device')}{together})")
-            bar.update(task, completed=len(finished), runs=f"{len(finished)}/{len(runs)} runs")
+            show()
 
         previous = signal.signal(signal.SIGTERM, signal.default_int_handler)  # a batch scheduler's stop, as Ctrl-C
         try:
-            rows = run_sweep(settings, runs, scheduler, workers, report, analysis_workers=analysis_workers, gpus=gpus)
+            rows = run_sweep(settings, runs, scheduler, workers, report, analysis_workers=analysis_workers, gpus=gpus, on_progress=progress)
         except KeyboardInterrupt:
             rows = None
         except OSError as error:  # summary.csv could not be written: the runs' own folders are whole

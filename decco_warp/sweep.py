@@ -331,6 +331,18 @@ def _progress(run_dir: Path) -> tuple[int, int] | None:
     return int(json.loads(summary.read_text()).get("steps", -1)), needed
 
 
+def stepped_fraction(spec: dict) -> float:
+    """How far a sweep's run has stepped, 0 to 1, by its folder's last checkpoint (0 while it has
+    none, or its folder cannot be read just now)."""
+    from .run import RUN_FAILURES, run_dir_of
+
+    try:
+        progress = _progress(run_dir_of(spec))
+    except (*RUN_FAILURES, specs.SpecError, OSError):
+        return 0.0
+    return 0.0 if progress is None else min(1.0, progress[0] / max(1, progress[1]))
+
+
 def _device_name(device: str) -> str:
     try:
         import warp as wp
@@ -430,10 +442,13 @@ def run_sweep(
     on_result=None,
     analysis_workers: int | None = None,
     gpus: int | None = None,
+    on_progress=None,
 ) -> list[dict]:
     """Simulate every run with Dask and analyse each here as it finishes; one row per run, in grid order.
     Local workers: one per GPU (the first ``gpus``, default all, see :func:`local_cluster`), else
-    ``workers`` (default 2) on the CPU; a ``scheduler``'s workers each use their own device."""
+    ``workers`` (default 2) on the CPU; a ``scheduler``'s workers each use their own device.
+    ``on_progress(runs_stepped)`` hears, every PROGRESS_SECONDS and as runs finish, how many runs'
+    worth of steps are made (complete runs count whole, stepping ones by their last checkpoint)."""
     from distributed import Client, as_completed
 
     from .device import cuda_device_count, gpus_to_use
@@ -480,7 +495,14 @@ def run_sweep(
         futures = {client.submit(simulate_batch, [runs[k] for k in batch], max_particles, pure=False): batch for batch in batches}
         simulations = as_completed(futures)
         arrived = [([k for k, row in done.items() if row is not None], [row for row in done.values() if row is not None])]
+        stepped = {k: 0.0 for k in todo}  # never lowered: a checkpoint being replaced reads as none
+        looked = -math.inf
         while not simulations.is_empty() or pending or arrived:
+            if on_progress is not None and (arrived or time.monotonic() - looked >= PROGRESS_SECONDS):
+                looked = time.monotonic()
+                for k in todo:
+                    stepped[k] = max(stepped[k], stepped_fraction(runs[k]) if stepped[k] < 1.0 else 1.0)
+                on_progress(len(runs) - len(todo) + sum(stepped.values()))
             # Poll both kinds of work, so that each run is reported as soon as its analysis ends.
             for future in simulations.next_batch(block=False):
                 batch = futures[future]
@@ -491,6 +513,9 @@ def run_sweep(
             while arrived:
                 batch, results = arrived.pop(0)
                 for k, row in zip(batch, results):
+                    if k in stepped:
+                        stepped[k] = 1.0
+                        looked = -math.inf  # reported at the next poll
                     collision = runs[k]["collision"]
                     row.update(eta=collision.get("eta"), speed=collision.get("speed"), theta_deg=collision["theta_deg"])
                     row.update(realization=realization_of(runs[k]), orientation_seed=collision.get("orientation_seed"))
@@ -514,6 +539,9 @@ WORKER_START_SECONDS = 300
 
 #: How often the sweep looks for finished simulations and analyses [s].
 POLL_SECONDS = 0.2
+
+#: How often the sweep reads its stepping runs' checkpoints to report their progress [s].
+PROGRESS_SECONDS = 10.0
 
 
 def write_summary(folder: Path, rows: list[dict]) -> Path:

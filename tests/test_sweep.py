@@ -2,6 +2,7 @@
 
 import csv
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -11,7 +12,7 @@ import decco_warp as dw
 from decco_warp import spec as specs
 from decco_warp.analysis.runs import spin_kind
 from decco_warp.collision import SPIN_AXES
-from decco_warp.sweep import load_sweep
+from decco_warp.sweep import load_sweep, stepped_fraction
 
 pytest.importorskip("distributed")
 
@@ -313,8 +314,10 @@ def test_sweep_check_lists_where_runs_stand_and_only_runs_a_part(tmp_path):
     result = cli("sweep", str(path), "--check")
     lines = {line.split()[0]: line.split(None, 1)[1] for line in result.stdout.splitlines()[1:]}
     assert lines == {"eta0.5_dt0.04": "complete", "eta0.5_dt5": "to run", "eta1_dt0.04": "to run", "eta1_dt5": "to run"}
-    result = cli("sweep", str(path), "--only", "eta1_dt0*", "--workers", "1")
+    result = cli("sweep", str(path), "--only", "eta1_dt0*", "--workers", "1", env={**os.environ, "DECCO_LOG_EVERY": "0"})
     assert result.returncode == 0, result.stderr
+    made = [int(line.split("runs, ")[1].split(" %")[0]) for line in result.stderr.splitlines() if "% of the steps made" in line]
+    assert made[0] == 50 and made[-1] == 100 and made == sorted(made)  # the complete run counts from the start
     rows = _rows(tmp_path / "grid" / "summary.csv")
     assert set(rows) == {"eta0.5_dt0.04", "eta1_dt0.04"}
     assert rows["eta0.5_dt0.04"]["status"] == "skipped (complete)" and rows["eta1_dt0.04"]["status"] == "ok"
@@ -326,3 +329,6 @@ def test_sweep_check_lists_where_runs_stand_and_only_runs_a_part(tmp_path):
     lines = {line.split()[0]: line.split(None, 1)[1] for line in result.stdout.splitlines()[1:]}
     assert lines == {"eta0.5_dt0.04": "complete", "eta1_dt0.04": "resumes at step 200"}
     assert "1 complete, 1 to resume, 0 to run" in result.stdout
+    # The progress a sweep reports while its runs step: each run by its last checkpoint.
+    fractions = {run["run"]["name"]: stepped_fraction(run) for run in load_sweep(path)[1]}
+    assert fractions == {"eta0.5_dt0.04": 1.0, "eta0.5_dt5": 0.0, "eta1_dt0.04": 0.5, "eta1_dt5": 0.0}
