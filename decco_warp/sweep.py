@@ -498,10 +498,11 @@ def run_sweep(
         stepped = {k: 0.0 for k in todo}  # never lowered: a checkpoint being replaced reads as none
         looked = -math.inf
         while not simulations.is_empty() or pending or arrived:
-            if on_progress is not None and (arrived or time.monotonic() - looked >= PROGRESS_SECONDS):
+            if on_progress is not None and time.monotonic() - looked >= PROGRESS_SECONDS:
                 looked = time.monotonic()
                 for k in todo:
-                    stepped[k] = max(stepped[k], stepped_fraction(runs[k]) if stepped[k] < 1.0 else 1.0)
+                    if stepped[k] < 1.0:
+                        stepped[k] = max(stepped[k], stepped_fraction(runs[k]))
                 on_progress(len(runs) - len(todo) + sum(stepped.values()))
             # Poll both kinds of work, so that each run is reported as soon as its analysis ends.
             for future in simulations.next_batch(block=False):
