@@ -113,6 +113,51 @@ def test_minimum_member_count_cuts_off_small_clumps(piles):
         dw.find_clusters(state, min_members=0)
 
 
+def _grains(positions, velocity, radius=1e5):
+    """Equal spheres (radius [cm], rho 2.7) at ``positions``, all moving at ``velocity``."""
+    positions = np.asarray(positions, dtype=float)
+    count = len(positions)
+    radii = np.full(count, radius)
+    velocities = np.tile(np.asarray(velocity, dtype=float), (count, 1))
+    return dw.State.from_arrays(positions, velocities, np.zeros((count, 3)), radii, 4 / 3 * np.pi * 2.7 * radii**3)
+
+
+def _sparse_and_dense(offset, velocity):
+    """A sparse cluster (100 grains 30 radii apart, at rest: bound only by the escape-speed rule, its
+    smoothed density ~1 grain's) and a dense group (20 touching grains: ~17 grains' density) at
+    ``offset`` from it, the sparse cluster moving at ``velocity`` relative to the group."""
+    radius = 1e5
+    lattice = np.stack(np.meshgrid(np.arange(5), np.arange(5), np.arange(4), indexing="ij"), axis=-1).reshape(-1, 3)
+    sparse = _grains(30 * radius * lattice, velocity, radius)
+    packed = np.stack(np.meshgrid(np.arange(3), np.arange(3), np.arange(2), indexing="ij"), axis=-1).reshape(-1, 3)
+    packed = np.concatenate([packed, [[3, 0, 0], [3, 1, 0]]])  # 20 grains, neighbours 1.99 radii apart
+    dense = _grains(sparse.centre_of_mass + np.asarray(offset) + 1.99 * radius * packed, (0, 0, 0), radius)
+    return _combine(dense, sparse)
+
+
+def test_a_small_dense_group_met_first_does_not_end_the_search():
+    """The densest seed's group (20 grains) is short of min_members: the search goes on and finds
+    the sparse cluster of 100 behind it (the paper's sentence read literally finds nothing)."""
+    state = _sparse_and_dense(offset=(1e9, 0, 0), velocity=(1e3, 0, 0))  # far apart and unbound
+    clusters = dw.find_clusters(state, min_members=50)
+    assert [c.members.size for c in clusters] == [100]
+    assert clusters[0].members.tolist() == list(range(20, 120))
+
+
+def test_a_short_groups_grains_join_a_later_cluster_but_never_seed_again():
+    """The dense group alone cannot hold the sparse grains (they pass it at 45 cm/s, above its escape
+    speed of <= 30 cm/s), so its seed fails; the sparse cluster, seeded next, is heavy enough to bind
+    the group (61 cm/s at its distance): one cluster of all 120."""
+    state = _sparse_and_dense(offset=(4e7, 0, 0), velocity=(45.0, 0, 0))
+    clusters = dw.find_clusters(state, min_members=50)
+    assert [c.members.size for c in clusters] == [120]
+    # With the sparse grains fast enough to escape both, each part stands alone: one cluster of 100,
+    # and the dense group (a failed seed) stays free, never seeded again.
+    fast = _sparse_and_dense(offset=(4e7, 0, 0), velocity=(200.0, 0, 0))
+    assert [c.members.tolist() for c in dw.find_clusters(fast, min_members=50)] == [list(range(20, 120))]
+    assert [c.members.size for c in dw.find_clusters(fast, min_members=20)] == [100, 20]
+
+
 def test_result_does_not_depend_on_particle_order(piles):
     target, projectile = piles
     distance = 3 * (pile_radius(target) + pile_radius(projectile))

@@ -6,8 +6,11 @@
 3. Add every particle slower, relative to the cluster's centre of mass, than the
    escape speed sqrt(2 G M / |x - x_cm|); repeat until none is added (mass and
    centre of mass updated as members join).  Back to 2 while 3 added anyone.
-4. Repeat 1-3 on the particles left, until a new cluster would have fewer than
-   ``min_members`` members.
+4. Repeat 1-3 on the particles left.  A seed whose group ends with fewer than
+   ``min_members`` members makes no cluster: its particles stay free to join a later
+   cluster but never seed again.  Stop when no free particle is left to seed.  (Stopping at
+   the first short group, the literal reading of the paper, loses the remnant whenever a
+   small dense group holds the density peak.)
 
 Vectorised: contacts come from a k-d tree (scipy.spatial.cKDTree) as a sparse
 graph, growth is sparse matrix-vector products, binding is one array test per pass.
@@ -128,18 +131,20 @@ def find_clusters(state: State, min_members: int = 50, G: float = G_CGS, device:
     sigmas = SMOOTHING_RADII * radii
     # The density of the particles left: computed once, then each cluster's share is taken off.
     density = smoothed_density(x, m, sigmas, device=device)
-    left = np.ones(n, dtype=bool)
+    left = np.ones(n, dtype=bool)  # free: in no cluster yet
+    may_seed = np.ones(n, dtype=bool)  # free and never in a group that fell short
     clusters: list[Cluster] = []
-    while left.sum() >= min_members:
-        remaining = np.flatnonzero(left)
+    while left.sum() >= min_members and may_seed.any():
+        seeds = np.flatnonzero(may_seed)
         member = np.zeros(n, dtype=bool)
-        member[remaining[int(np.argmax(density[remaining]))]] = True
+        member[seeds[int(np.argmax(density[seeds]))]] = True
         while True:
             _grow_by_contact(member, left, contacts)
             if not _bind_by_escape_speed(member, left, x, v, m, G):
                 break
         if member.sum() < min_members:
-            break
+            may_seed &= ~member  # free to join a later cluster, never a seed again
+            continue
         indices = np.flatnonzero(member)
         mass = float(m[indices].sum())
         clusters.append(
@@ -151,6 +156,7 @@ def find_clusters(state: State, min_members: int = 50, G: float = G_CGS, device:
             )
         )
         left &= ~member
+        may_seed &= ~member
         rest = np.flatnonzero(left)
         if rest.size:
             density[rest] -= smoothed_density(x[indices], m[indices], sigmas[indices], at=x[rest], device=device)
