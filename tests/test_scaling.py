@@ -16,16 +16,31 @@ def test_interacting_fraction():
     assert scaling.interacting_fraction(2e7, 1e7, 89.999999) == pytest.approx(0.0, abs=1e-9)
 
 
-def test_equal_mass_head_on_disruption_energy_is_the_principal_curve():
+@pytest.mark.parametrize("law, c_star, mu_bar", [(scaling.SMALL_BODIES, 5.0, 0.37), (scaling.PLANETS, 1.9, 0.36)])
+def test_equal_mass_head_on_disruption_energy_is_the_principal_curve(law, c_star, mu_bar):
+    """LS12's two fits (physics.md): small bodies c* = 5, mu_bar = 0.37 (the default), planets 1.9, 0.36."""
     mass = 6e22
     radius_c1 = (3 * 2 * mass / (4 * math.pi * 1.0)) ** (1 / 3)
-    expected = 1.9 * 0.8 * math.pi * 1.0 * G_CGS * radius_c1**2
-    assert scaling.disruption_energy(mass, mass, 2e7, 2e7, 0.0) == pytest.approx(expected, rel=1e-12)
+    expected = c_star * 0.8 * math.pi * 1.0 * G_CGS * radius_c1**2
+    assert scaling.disruption_energy(mass, mass, 2e7, 2e7, 0.0, law=law) == pytest.approx(expected, rel=1e-12)
+    if law is scaling.SMALL_BODIES:
+        assert scaling.disruption_energy(mass, mass, 2e7, 2e7, 0.0) == pytest.approx(expected, rel=1e-12)
     # A smaller projectile needs more specific energy: ((1 + g)^2 / 4g)^(2/(3 mu) - 1).
-    quarter = scaling.disruption_energy(mass, mass / 4, 2e7, 1.3e7, 0.0)
+    quarter = scaling.disruption_energy(mass, mass / 4, 2e7, 1.3e7, 0.0, law=law)
     radius_c1 = (3 * 1.25 * mass / (4 * math.pi)) ** (1 / 3)
-    principal = 1.9 * 0.8 * math.pi * G_CGS * radius_c1**2
-    assert quarter == pytest.approx(principal * (1.25**2 / 1.0) ** (2 / (3 * 0.36) - 1), rel=1e-12)
+    principal = c_star * 0.8 * math.pi * G_CGS * radius_c1**2
+    assert quarter == pytest.approx(principal * (1.25**2 / 1.0) ** (2 / (3 * mu_bar) - 1), rel=1e-12)
+
+
+def test_the_small_body_band_brackets_the_law_and_the_planets_fit_lies_below():
+    """c* = 3 (weaker) gives a smaller remnant than c* = 5, c* = 7 a larger one; the planets' c* = 1.9
+    gives a smaller remnant still.  A collision past the criterion, where all four differ."""
+    collision = {"target_mass": 6e22, "projectile_mass": 1.5e22, "target_radius": 2.03e7, "projectile_radius": 1.29e7, "theta_deg": 0.0}
+    collision["kinetic_energy"] = 1.2 * scaling.disruption_energy(6e22, 1.5e22, 2.03e7, 1.29e7, 0.0) * 7.5e22
+    columns = scaling.law_columns(collision)
+    assert columns["ls12_largest_mass_ratio"] == pytest.approx((1 - 0.6) * 7.5 / 6, rel=1e-12)
+    assert columns["ls12_planets_largest_mass_ratio"] < columns["ls12_band_low"] < columns["ls12_largest_mass_ratio"] < columns["ls12_band_high"]
+    assert scaling.law_columns({"theta_deg": 0.0}) == dict.fromkeys(columns)
 
 
 def test_universal_law_half_mass_at_the_criterion_and_continuous_at_1_8():

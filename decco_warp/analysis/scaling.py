@@ -13,20 +13,40 @@ with, for equal masses, Q*_RD,1 = c* 4/5 pi rho1 G R_C1^2 (R_C1 the radius of M_
 rho1 = 1 g/cm^3), for projectile-to-target mass ratio gamma
 Q*_RD = Q*_RD,1 ((gamma + 1)^2 / (4 gamma))^(2 / (3 mu_bar) - 1), and for an oblique impact
 Q'*_RD = Q*_RD (mu / mu_alpha)^(2 - 3 mu_bar / 2), mu_alpha the reduced mass of the target and
-the interacting fraction alpha of the projectile.  The small-body values are c* = 1.9 and
-mu_bar = 0.36 (their rubble-pile simulations).  The law describes disruption; for grazing
-impacts that end in hit-and-run it does not apply, and at low energy it tends to a perfect merger.
+the interacting fraction alpha of the projectile.
+
+LS12 fit two sets of constants (docs/model.md): c* = 5 +- 2 with mu_bar = 0.37 for small,
+strengthless bodies (their pkdgrav rubble piles: the kind of body simulated here, and the
+reference of every comparison), and c* = 1.9 +- 0.3 with mu_bar = 0.36 for planets (their
+hydrocode bodies).  The law describes disruption; for grazing impacts that end in hit-and-run
+it does not apply, and at low energy it tends to a perfect merger.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 from ..params import G_CGS
 
-#: LS12 small-body fit: c* and mu_bar.
-C_STAR = 1.9
-MU_BAR = 0.36
+
+@dataclass(frozen=True)
+class Law:
+    """One fit of the universal law: its constants and what it describes."""
+
+    name: str
+    c_star: float
+    """Dimensionless dissipation constant of Q*_RD,1."""
+    mu_bar: float
+    """Velocity exponent of the coupling parameter."""
+    c_star_range: tuple[float, float]
+    """c* within the fit's quoted uncertainty (the band drawn around the law)."""
+
+
+#: LS12's fit for small, strengthless bodies (rubble piles): the reference here.
+SMALL_BODIES = Law("small bodies", 5.0, 0.37, (3.0, 7.0))
+#: LS12's fit for planet-sized (hydrocode) bodies, for comparison only.
+PLANETS = Law("planets", 1.9, 0.36, (1.6, 2.2))
 #: LS12's reference density [g/cm^3].
 RHO_1 = 1.0
 
@@ -40,17 +60,20 @@ def interacting_fraction(target_radius: float, projectile_radius: float, theta_d
 
 
 def disruption_energy(target_mass: float, projectile_mass: float, target_radius: float, projectile_radius: float,
-                      theta_deg: float, G: float = G_CGS) -> float:  # fmt: skip
-    """Q'*_RD [erg/g]: the specific impact energy that disperses half the total mass (LS12, small bodies)."""
+                      theta_deg: float, G: float = G_CGS, law: Law = SMALL_BODIES,
+                      c_star: float | None = None) -> float:  # fmt: skip
+    """Q'*_RD [erg/g]: the specific impact energy that disperses half the total mass (LS12), by
+    ``law`` (``c_star`` replaces its c*, e.g. an end of its band)."""
+    c_star = law.c_star if c_star is None else c_star
     total = target_mass + projectile_mass
     gamma = projectile_mass / target_mass
     reduced = target_mass * projectile_mass / total
     alpha = interacting_fraction(target_radius, projectile_radius, theta_deg)
     reduced_alpha = alpha * projectile_mass * target_mass / (alpha * projectile_mass + target_mass)
     radius_c1 = (3.0 * total / (4.0 * math.pi * RHO_1)) ** (1.0 / 3.0)
-    equal_mass = C_STAR * 0.8 * math.pi * RHO_1 * G * radius_c1**2
-    unequal = equal_mass * ((gamma + 1.0) ** 2 / (4.0 * gamma)) ** (2.0 / (3.0 * MU_BAR) - 1.0)
-    return unequal * (reduced / reduced_alpha) ** (2.0 - 1.5 * MU_BAR)
+    equal_mass = c_star * 0.8 * math.pi * RHO_1 * G * radius_c1**2
+    unequal = equal_mass * ((gamma + 1.0) ** 2 / (4.0 * gamma)) ** (2.0 / (3.0 * law.mu_bar) - 1.0)
+    return unequal * (reduced / reduced_alpha) ** (2.0 - 1.5 * law.mu_bar)
 
 
 def largest_remnant_fraction(specific_energy: float, disruption: float) -> float:
@@ -61,10 +84,31 @@ def largest_remnant_fraction(specific_energy: float, disruption: float) -> float
     return 0.1 / 1.8**-1.5 * ratio**-1.5
 
 
-def largest_mass_ratio(collision: dict, G: float = G_CGS) -> float:
-    """m_lf / m_t that the LS12 law gives for a run's collision set-up (its recorded metadata:
-    target and projectile mass and radius, theta_deg, kinetic_energy in the centre-of-mass frame)."""
+def largest_mass_ratio(collision: dict, G: float = G_CGS, law: Law = SMALL_BODIES, c_star: float | None = None) -> float:
+    """m_lf / m_t that the LS12 law (``law``, c* replaced by ``c_star`` if given) gives for a run's
+    collision set-up (its recorded metadata: target and projectile mass and radius, theta_deg,
+    kinetic_energy in the centre-of-mass frame)."""
     m_t, m_p = collision["target_mass"], collision["projectile_mass"]
     specific_energy = collision["kinetic_energy"] / (m_t + m_p)
-    disruption = disruption_energy(m_t, m_p, collision["target_radius"], collision["projectile_radius"], collision["theta_deg"], G)
+    disruption = disruption_energy(
+        m_t, m_p, collision["target_radius"], collision["projectile_radius"], collision["theta_deg"], G, law, c_star
+    )
     return largest_remnant_fraction(specific_energy, disruption) * (m_t + m_p) / m_t
+
+
+#: The summary columns of the law at a run's set-up: (column, law, c*).  The band's low end is the
+#: weaker body (smaller c*: it disrupts at lower energy), so it gives the smaller remnant.
+LAW_COLUMNS = (
+    ("ls12_largest_mass_ratio", SMALL_BODIES, None),
+    ("ls12_band_low", SMALL_BODIES, SMALL_BODIES.c_star_range[0]),
+    ("ls12_band_high", SMALL_BODIES, SMALL_BODIES.c_star_range[1]),
+    ("ls12_planets_largest_mass_ratio", PLANETS, None),
+)
+
+
+def law_columns(collision: dict, G: float = G_CGS) -> dict:
+    """The LAW_COLUMNS for a run's collision record (None each without its metadata)."""
+    needed = ("target_mass", "projectile_mass", "target_radius", "projectile_radius", "theta_deg", "kinetic_energy")
+    if not all(key in collision for key in needed):
+        return {column: None for column, _, _ in LAW_COLUMNS}
+    return {column: float(largest_mass_ratio(collision, G, law, c_star)) for column, law, c_star in LAW_COLUMNS}
