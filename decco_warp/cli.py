@@ -427,6 +427,9 @@ def simulate(
     projectile: Optional[str] = typer.Option(None, "--projectile", help="Projectile pile file (or builtin:projectile)."),
     eta: Optional[float] = typer.Option(None, "--eta", help="KE / |U| of the collision (paper eq. 18)."),
     speed: Optional[float] = typer.Option(None, "--speed", help="Relative speed [cm/s] instead of --eta."),
+    eta_potential: Optional[str] = typer.Option(
+        None, "--eta-potential", help="U of eta: self (each pile's own pairs, the default) or all (every pair of both piles, the cross term included)."
+    ),
     theta: Optional[float] = typer.Option(None, "--theta", help="Impact angle [degrees]."),
     gap: Optional[float] = typer.Option(None, "--gap", help="Initial surface gap along x [cm]."),
     spin_target: Optional[str] = typer.Option(None, "--spin-target", help="FRACTION[,AXIS] of breakup spin, e.g. 0.5,+z."),
@@ -473,7 +476,7 @@ def simulate(
             raw.get("run", {}).pop("steps", None)
             raw.get("run", {}).pop("duration", None)
             run_overrides.update(steps=steps, duration=duration)
-        collision = {"theta_deg": theta, "gap": gap, "orientation_seed": orientation_seed}
+        collision = {"theta_deg": theta, "gap": gap, "orientation_seed": orientation_seed, "eta_potential": eta_potential}
         collision.update(**_spin_option(spin_target, "target"), **_spin_option(spin_projectile, "projectile"))
         if eta is not None or speed is not None:
             raw.get("collision", {}).pop("eta", None)
@@ -572,7 +575,6 @@ def bench(
 ) -> None:
     """Pairs/s of the force kernel and of the full step, beside a one-thread-per-particle baseline."""
     import itertools
-    import json
 
     import warp as wp
 
@@ -663,12 +665,12 @@ def bench(
                 f"{fraction} {baseline_text}  {row.layout}"
             )
     if json_out is not None:
-        from .io import write_atomic
+        from .io import json_text, write_atomic
 
         table = {"device": chosen, "device_name": d.name, "warp": wp.config.version, "precision": precision,
                  "limit_pairs_per_s": limit, "limit": how, "rows": [benchmarks.as_dict(r) for r in rows]}  # fmt: skip
         try:
-            write_atomic(json_out, json.dumps(table, indent=2))
+            write_atomic(json_out, json_text(table))
         except OSError as error:
             write_failed(error, f"{json_out} is not written (any earlier one is as it was); the table above is the result")
         typer.echo(f"wrote {json_out}")
@@ -693,14 +695,13 @@ def analyze(
     A run still being written is analysed as far as its frames go (its writer is never touched)."""
     import csv
     import io
-    import json
     import time
 
     from .analysis.figures import draw_run, write_cross_run
     from .analysis.runs import analyse_run
     from .checks import InputError, check_destination
     from .device import DeviceError, resolve_device
-    from .io import FileFormatError, write_atomic
+    from .io import FileFormatError, json_text, write_atomic
     from .lock import AnalysisLock, RunFolderBusy, RunFolderLock, ensure_not_analysed
 
     if min_members < 1 or every < 1 or not poll > 0:
@@ -776,11 +777,7 @@ def analyze(
         done = f"the analyses of {len(summaries)} run(s) before it are whole, " if summaries else ""
         write_failed(failed, f"{done}each output file is whole or absent and the runs are untouched: free space, then decco-warp analyze {path} again")
     for run_dir, summary, state in zip(runs, summaries, states):
-        typer.echo(
-            f"{run_dir}: m_lf/m_t {summary['largest_mass_ratio']:.4g}, particle size change "
-            f"{summary['particle_size_change']:.3g} %, {summary['clusters']} cluster(s){state}; "
-            f"analysis.h5, summary.json and figures/ written"
-        )
+        typer.echo(f"{run_dir}: {_outcome(summary)}{state}; analysis.h5, summary.json and figures/ written")
     if len(runs) > 1:
         table = io.StringIO()
         writer = csv.DictWriter(table, fieldnames=list(summaries[0]))
@@ -789,10 +786,23 @@ def analyze(
         try:
             write_atomic(path / "summary.csv", table.getvalue())
             write_cross_run(path, summaries)
-            write_atomic(path / "summaries.json", json.dumps(summaries, indent=2) + "\n")
+            write_atomic(path / "summaries.json", json_text(summaries))
         except OSError as error:
             write_failed(error, f"every run's own analysis is whole; the cross-run files are whole or absent: free space, then decco-warp analyze {path} again")
         typer.echo(f"{path}: summary.csv and cross-run figures in {path / 'figures'}")
+
+
+def _outcome(summary: dict) -> str:
+    """A run's result in one line: m_lf/m_t, the size change over the late window, the clusters,
+    and whether the result is final (settled) or not, with the numbers that say so."""
+    text = f"m_lf/m_t {summary['largest_mass_ratio']:.4g}"
+    change, spread = summary.get("size_change_late"), summary.get("size_change_late_std")
+    if change is not None:
+        text += f", particle size change {change:+.3g} %" + (f" (+- {spread:.2g}, late mean)" if spread is not None else "")
+    text += f", {summary['clusters']} cluster(s)"
+    if "settled" in summary:
+        text += ", settled" if summary["settled"] else f", NOT SETTLED ({summary['settled_note']})"
+    return text
 
 
 def _running(run_dir: Path) -> bool:
@@ -980,8 +990,7 @@ def sweep(
             finished.append(row)
             write_summary(folder, finished)  # as runs finish, so that a stopped sweep keeps its table
             outcome = row["status"] if row["status"] != "failed" else f"FAILED: {row.get('reason', '')}"
-            ratio = row.get("largest_mass_ratio")
-            detail = f", m_lf/m_t {ratio:.4g}" if isinstance(ratio, float) else ""
+            detail = f", {_outcome(row)}" if isinstance(row.get("largest_mass_ratio"), float) else ""
             depth = row.get("deepest_overlap")
             detail += f", deepest overlap {depth:.2f}" if isinstance(depth, float) else ""
             together = f", {row['ensemble']} runs together" if (row.get("ensemble") or 1) > 1 else ""
@@ -1015,6 +1024,11 @@ def sweep(
         write_failed(error, f"the runs' folders are whole, and summary.csv and each figure whole or absent; {_AGAIN}")
     failed = [r for r in rows if r.get("status") == "failed"]
     typer.echo(f"summary: {summary}, sweep.json; figures in {folder / 'figures'}; {len(failed)} failed")
+    unsettled = [r for r in rows if r.get("status") != "failed" and r.get("settled") is False]
+    if unsettled:
+        typer.echo(f"{len(unsettled)} run(s) NOT SETTLED (their m_lf/m_t is not final; decco-warp resume RUN --steps N runs them on):")
+        for row in unsettled:
+            typer.echo(f"  {row['run']}: {row.get('settled_note', '')}")
     unwritten = [r for r in failed if OUTPUT_FAILURE in r.get("reason", "") or "No space left" in r.get("reason", "")]
     if unwritten:
         fail(f"{len(unwritten)} run(s) could not write their folder ({unwritten[0]['run']}: {unwritten[0]['reason']}); {_AGAIN}", EXIT_OUTPUT)

@@ -17,6 +17,11 @@ from .diagnostics import diagnostics
 from .params import G_CGS, Params
 from .state import State
 
+#: What eta = KE / |U| (paper eq. 18) takes as U: "self" sums each pile's own pairs (the default,
+#: and the reading of every committed run); "all" sums every pair of both piles at set-up, the
+#: cross term between the piles included (docs/model.md).
+ETA_POTENTIALS = ("self", "all")
+
 SPIN_AXES = {
     "+x": (1.0, 0.0, 0.0),
     "-x": (-1.0, 0.0, 0.0),
@@ -94,11 +99,14 @@ def setup_collision(
     G: float = G_CGS,
     device: str | None = None,
     orientation_seed: int | None = None,
+    eta_potential: str = "self",
 ) -> State:
     """Both piles in the centre-of-mass frame, set to collide.
 
     ``eta`` = KE / |U| (paper eq. 18): KE is the translational kinetic energy of
-    the two piles' centres, U the sum of their self-potential energies.  Give
+    the two piles' centres, U the sum of their self-potential energies (``eta_potential``
+    "self"), or the potential of all pairs of both piles at set-up, the cross term included
+    ("all"; :data:`ETA_POTENTIALS`).  Give
     either ``eta`` or ``speed`` (the relative speed [cm/s]).  ``theta_deg`` is
     the impact angle, ``gap`` [cm] the initial surface separation along x, and a
     spin is (fraction of breakup, axis) with axis one of +x, -x, +y, -y, +z, -z.
@@ -108,8 +116,9 @@ def setup_collision(
     piles as their files hold them.
 
     The result has ``pile_id`` 0 (target) and 1 (projectile), and ``metadata``
-    holding eta, speed, b, both radii and masses, KE, both self-potentials and
-    the cross term at t = 0.
+    holding eta (in the reading asked for), eta_potential, eta_self and eta_all (both readings),
+    speed, b, both radii and masses, KE, both self-potentials and the cross term at t = 0, and
+    the spins' motion at the first contact point (:func:`first_contact_motion`).
 
     >>> s = setup_collision(target, projectile, eta=2.0, theta_deg=22.0, gap=1e5,
     ...                     target_spin=None, projectile_spin=(0.5, "+z"))
@@ -124,6 +133,8 @@ def setup_collision(
         raise ValueError(f"theta_deg must be in [0, 90); got {theta_deg!r}")
     if not (_is_number(gap) and gap >= 0):
         raise ValueError(f"gap must be >= 0 cm; got {gap!r}")
+    if eta_potential not in ETA_POTENTIALS:
+        raise ValueError(f"eta_potential must be one of {', '.join(ETA_POTENTIALS)}; got {eta_potential!r}")
     if projectile.total_mass > target.total_mass:
         raise ValueError(
             f"the target must be the more massive pile: target {target.total_mass:.4g} g < "
@@ -152,22 +163,15 @@ def setup_collision(
     potential_p = diagnostics(projectile, params, device)["potential"]
 
     reduced_mass = mass_t * mass_p / (mass_t + mass_p)
-    if speed is None:
-        speed = math.sqrt(2.0 * eta * abs(potential_t + potential_p) / reduced_mass)
-    kinetic = 0.5 * reduced_mass * speed**2
     theta = math.radians(theta_deg)
     impact_parameter = (radius_t + radius_p) * math.sin(theta)
     separation_x = (radius_t + radius_p) * math.cos(theta) + gap
 
     # Projectile at (-separation_x, b) relative to the target; then both about the common centre.
+    # The places do not depend on the speed, so the cross term (eta_potential "all") is known first.
     offset = np.array([-separation_x, impact_parameter, 0.0])
-    shift_t = -mass_p / (mass_t + mass_p) * offset
-    shift_p = mass_t / (mass_t + mass_p) * offset
-    target.positions += shift_t
-    projectile.positions += shift_p
-    target.velocities[:, 0] -= speed * mass_p / (mass_t + mass_p)
-    projectile.velocities[:, 0] += speed * mass_t / (mass_t + mass_p)
-
+    target.positions += -mass_p / (mass_t + mass_p) * offset
+    projectile.positions += mass_t / (mass_t + mass_p) * offset
     combined = State.from_arrays(
         np.concatenate([target.positions, projectile.positions]),
         np.concatenate([target.velocities, projectile.velocities]),
@@ -177,9 +181,21 @@ def setup_collision(
         pile_id=np.repeat(np.array([0, 1], dtype=np.int32), [target.n, projectile.n]),
         size_class=np.concatenate([target.size_class, projectile.size_class]),
     )
-    potential_total = diagnostics(combined, params, device)["potential"]
+    potential_self = potential_t + potential_p
+    potential_all = diagnostics(combined, params, device)["potential"]
+    if speed is None:
+        potential = potential_self if eta_potential == "self" else potential_all
+        speed = math.sqrt(2.0 * eta * abs(potential) / reduced_mass)
+    kinetic = 0.5 * reduced_mass * speed**2
+    combined.velocities[: target.n, 0] -= speed * mass_p / (mass_t + mass_p)
+    combined.velocities[target.n :, 0] += speed * mass_t / (mass_t + mass_p)
+
+    eta_self, eta_all = kinetic / abs(potential_self), kinetic / abs(potential_all)
     combined.metadata = {
-        "eta": kinetic / abs(potential_t + potential_p),
+        "eta": eta_self if eta_potential == "self" else eta_all,
+        "eta_potential": eta_potential,
+        "eta_self": eta_self,
+        "eta_all": eta_all,
         "speed": speed,
         "theta_deg": float(theta_deg),
         "impact_parameter": impact_parameter,
@@ -193,11 +209,34 @@ def setup_collision(
         "kinetic_energy": kinetic,
         "target_potential": potential_t,
         "projectile_potential": potential_p,
-        "cross_potential": potential_total - potential_t - potential_p,
+        "cross_potential": potential_all - potential_self,
     }
+    combined.metadata.update(first_contact_motion(combined.metadata))
     if rotations is not None:
         combined.metadata.update(orientation_seed=int(orientation_seed), target_rotation=rotations[0], projectile_rotation=rotations[1])
     return combined
+
+
+def first_contact_motion(collision: dict) -> dict:
+    """How the spins move the two surfaces against each other where the piles first touch.
+
+    The first contact point is where the piles' bounding spheres meet as the projectile arrives
+    (direction u from the target's centre to the projectile's: (-cos theta, sin theta, 0)).  There
+    the spins alone give the projectile's surface the velocity w_p x (-R_p u) relative to its
+    centre, and the target's w_t x (R_t u).  Returns ``contact_surface_speed`` [cm/s], the
+    magnitude of their difference (a shear across the contact: parallel spins about z make it
+    w (R_t + R_p), anti-parallel ones w |R_t - R_p|), and ``contact_twist_rate`` [rad/s], the
+    relative spin about u (a twist of the contact: spins along the velocity, +x with -x).
+    ``collision``: the set-up's metadata (spins as vectors [rad/s], radii, theta_deg)."""
+    theta = math.radians(collision["theta_deg"])
+    u = np.array([-math.cos(theta), math.sin(theta), 0.0])
+    target_spin = np.asarray(collision["target_spin"], dtype=float)
+    projectile_spin = np.asarray(collision["projectile_spin"], dtype=float)
+    slip = np.cross(projectile_spin, -collision["projectile_radius"] * u) - np.cross(target_spin, collision["target_radius"] * u)
+    return {
+        "contact_surface_speed": float(np.linalg.norm(slip)),
+        "contact_twist_rate": float(abs((projectile_spin - target_spin) @ u)),
+    }
 
 
 def _is_number(value) -> bool:

@@ -150,7 +150,9 @@ class Plan:
         params, run = self.params, self.spec["run"]
         return [
             f"collision: {self.state.n} particles ({int((self.state.pile_id == 0).sum())} target + "
-            f"{int((self.state.pile_id == 1).sum())} projectile), eta {meta['eta']:.6g}, speed {meta['speed']:.6g} cm/s, "
+            f"{int((self.state.pile_id == 1).sum())} projectile), eta {meta['eta']:.6g}"
+            + (f" (U of all pairs; {meta['eta_self']:.4g} with each pile's own)" if meta.get("eta_potential") == "all" else "")
+            + f", speed {meta['speed']:.6g} cm/s, "
             f"theta {meta['theta_deg']:g} deg, b {meta['impact_parameter']:.6g} cm"
             + (f", piles turned by random rotations of orientation_seed {meta['orientation_seed']}" if "orientation_seed" in meta else ""),
             *self.notes,
@@ -245,6 +247,7 @@ def plan_start(spec: dict, device: str | None = None) -> Plan:
         G=spec["params"]["G"],
         device=device,
         orientation_seed=collision.get("orientation_seed"),
+        eta_potential=collision["eta_potential"],
     )
     check_particles(state, "the collision set-up")  # a speed or spin beyond the model's subsonic regime
     spec, notes = specs.settle_auto(spec, state, device)

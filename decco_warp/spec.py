@@ -5,8 +5,8 @@ A specification has four tables, every key optional (defaults below):
     [run]        name, steps | duration, output_every, checkpoint_every, device, precision, out,
                  allow_unstable, max_overlap
     [piles]      target, projectile          (pile files, or builtin:target / builtin:projectile)
-    [collision]  eta | speed, theta_deg, gap, target_spin, target_spin_axis, projectile_spin, projectile_spin_axis,
-                 orientation_seed
+    [collision]  eta | speed, eta_potential, theta_deg, gap, target_spin, target_spin_axis, projectile_spin,
+                 projectile_spin_axis, orientation_seed
     [params]     k_in, restitution, mu_k, mu_r, dt, G, rolling_friction, gravity, theta_open, max_compression
 
 Every problem is a :class:`SpecError` naming the table, the key and what is allowed.
@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-from .collision import SPIN_AXES
+from .collision import ETA_POTENTIALS, SPIN_AXES
 from .engine import LAYOUT_CHOICES, PRECISIONS
 from .params import GRAVITY_CHOICES, ROLLING_FRICTION_FORMS, Params, choose_gravity
 from .stability import DEFAULT_MAX_COMPRESSION, choose_stiffness, choose_time_step
@@ -92,6 +92,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "collision": {
         "eta": Key(float, None, _positive, "> 0 (KE / |U|, paper eq. 18)"),
         "speed": Key(float, None, _positive, "> 0 (relative speed, cm/s)"),
+        "eta_potential": Key(
+            str, "self", lambda v: v in ETA_POTENTIALS,
+            "self (U: each pile's own pairs) or all (U: every pair of both piles at set-up, the cross term included)",
+        ),
         "theta_deg": Key(float, 22.0, lambda v: 0 <= v < 90, "in [0, 90) degrees"),
         "gap": Key(float, 1e5, _non_negative, ">= 0 (cm)"),
         "target_spin": Key(float, 0.0, lambda v: 0 <= v <= 1, "in [0, 1] (fraction of breakup spin)"),

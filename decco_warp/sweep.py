@@ -60,7 +60,12 @@ SWEEP_KEYS = {"name", "out", "min_members", "analyse_every", "keep_trajectory", 
 SUMMARY_FIELDS = [
     "run", "status", "reason", "n_particles", "mass_ratio", "theta_deg", "eta", "speed", "spin_kind", "realization", "orientation_seed",
     "k_in", "dt", "steps",
-    "largest_mass_ratio", "ls12_largest_mass_ratio", "particle_size_change", "clusters", "deepest_overlap", "predicted_overlap",
+    "largest_mass_ratio", "settled", "settled_note", "largest_mass_ratio_late_low", "largest_mass_ratio_late_high",
+    "ls12_largest_mass_ratio", "ls12_band_low", "ls12_band_high", "ls12_planets_largest_mass_ratio",
+    "eta_potential", "eta_self", "eta_all", "cross_potential", "contact_surface_speed", "contact_twist_rate",
+    "particle_size_change", "particle_size_change_mass_weighted", "size_change_late", "size_change_late_std",
+    "size_change_mass_weighted_late", "size_change_mass_weighted_late_std", "late_frames",
+    "clusters", "deepest_overlap", "predicted_overlap",
     "momentum_drift", "angular_momentum_drift", "ledger_closure", "wall_seconds", "stepping_seconds", "analysis_seconds",
     "device", "device_name", "ensemble",
 ]  # fmt: skip
@@ -152,7 +157,10 @@ def realization(point: dict, name: str, k: int) -> dict:
 
 def orientation_seed_of(spec: dict, k: int) -> int:
     """A seed in [0, 2^31) from a resolved point's piles and collision and the realization number."""
-    identity = json.dumps({"piles": spec["piles"], "collision": spec["collision"], "realization": k}, sort_keys=True)
+    collision = dict(spec["collision"])
+    if collision.get("eta_potential") == "self":  # the default, older than the key: seeds stay as they were
+        del collision["eta_potential"]
+    identity = json.dumps({"piles": spec["piles"], "collision": collision, "realization": k}, sort_keys=True)
     return int(hashlib.sha256(identity.encode()).hexdigest()[:8], 16) & 0x7FFFFFFF
 
 
@@ -374,7 +382,8 @@ def _analyse(run_dir: Path, min_members: int, analyse_every: int, keep_trajector
     trajectory = run_dir / TRAJECTORY_FILE
     settings = {"min_members": min_members, "analyse_every": analyse_every}
     previous = json.loads(summary_path.read_text()) if summary_path.is_file() else None
-    current = previous is not None and all(previous.get(k) == v for k, v in settings.items())
+    # A summary older than the settled verdict is analysed again (its finder stopped too early).
+    current = previous is not None and "settled" in previous and all(previous.get(k) == v for k, v in settings.items())
     if trajectory.is_file() and not (current and summary_path.stat().st_mtime >= trajectory.stat().st_mtime):
         analysis = analyse_run(run_dir, min_members=min_members, every=analyse_every, device=resolve_device(device))
         draw_run(analysis, run_dir)
@@ -563,7 +572,7 @@ def write_record(folder: Path, settings: dict, rows: list[dict], wall_seconds: f
     """sweep.json: what ran where, with which versions, and how long it took."""
     import warp as wp
 
-    from .io import write_atomic
+    from .io import json_text, write_atomic
 
     devices = sorted({(r.get("device"), r.get("device_name")) for r in rows if r.get("device")})
     record = {
@@ -581,4 +590,4 @@ def write_record(folder: Path, settings: dict, rows: list[dict], wall_seconds: f
         "settings": settings,
     }
     path = folder / "sweep.json"
-    return write_atomic(path, json.dumps(record, indent=2) + "\n")
+    return write_atomic(path, json_text(record))

@@ -91,8 +91,59 @@ def test_bad_setups_are_refused(piles):
         (dict(eta=1.0, gap=-5.0), "gap must be >= 0"),
         (dict(eta=1.0, projectile_spin=(2.0, "+z")), r"fraction of breakup must be in \[0, 1\]"),
         (dict(eta=1.0, projectile_spin=(0.5, "up")), "axis must be one of"),
+        (dict(eta=1.0, eta_potential="both"), "eta_potential must be one of self, all"),
     ]:
         with pytest.raises(ValueError, match=match):
             dw.setup_collision(target, projectile, **kwargs)
     with pytest.raises(ValueError, match="target must be the more massive"):
         dw.setup_collision(projectile, target, eta=1.0)
+
+
+def test_both_readings_of_eta(piles):
+    """eta_potential "self" (each pile's own pairs) and "all" (every pair at set-up), each computed
+    here from float64 NumPy potentials: the run's eta is its reading's, and both are recorded."""
+    target, projectile = piles
+    own = dw.setup_collision(target, projectile, eta=2.0, theta_deg=22.0)
+    every = dw.setup_collision(target, projectile, eta=2.0, theta_deg=22.0, eta_potential="all")
+    for s, reading in ((own, "self"), (every, "all")):
+        t, p = _pile(s, 0), _pile(s, 1)
+        kinetic = 0.5 * t.total_mass * t.bulk_velocity @ t.bulk_velocity + 0.5 * p.total_mass * p.bulk_velocity @ p.bulk_velocity
+        u_self = _self_potential(t) + _self_potential(p)
+        u_all = _self_potential(s)
+        meta = s.metadata
+        assert meta["eta_potential"] == reading
+        assert meta["eta_self"] == pytest.approx(kinetic / abs(u_self), rel=1e-9)
+        assert meta["eta_all"] == pytest.approx(kinetic / abs(u_all), rel=1e-9)
+        assert meta["eta"] == pytest.approx(2.0, rel=1e-12)
+        assert meta["eta_" + reading] == pytest.approx(2.0, rel=1e-9)
+    # The cross term deepens U, so at the same eta the "all" reading is the faster impact, by
+    # sqrt(|U_all| / |U_self|); the piles sit where they sat.
+    ratio = 1 + own.metadata["cross_potential"] / (own.metadata["target_potential"] + own.metadata["projectile_potential"])
+    assert every.metadata["speed"] / own.metadata["speed"] == pytest.approx(math.sqrt(ratio), rel=1e-9)
+    np.testing.assert_array_equal(every.positions, own.positions)
+
+
+def test_surface_motion_at_the_first_contact_by_kind_of_spin():
+    """Head-on, contact along -x from the target: spins about z shear the contact (parallel: the
+    surfaces pass at w (R_t + R_p); anti-parallel: they roll together, w |R_t - R_p|); spins about x
+    do not shear it, and twist it only when opposed (2 w)."""
+    from decco_warp.collision import first_contact_motion
+
+    w, r_t, r_p = 1e-4, 2e7, 1e7
+    base = {"theta_deg": 0.0, "target_radius": r_t, "projectile_radius": r_p}
+
+    def motion(target_axis, projectile_axis):
+        return first_contact_motion({**base, "target_spin": w * np.array(target_axis), "projectile_spin": w * np.array(projectile_axis)})
+
+    z, x = (0, 0, 1), (1, 0, 0)
+    minus = lambda axis: tuple(-c for c in axis)  # noqa: E731
+    assert motion(z, z)["contact_surface_speed"] == pytest.approx(w * (r_t + r_p), rel=1e-12)
+    assert motion(z, minus(z))["contact_surface_speed"] == pytest.approx(w * (r_t - r_p), rel=1e-12)
+    assert motion(x, x) == {"contact_surface_speed": 0.0, "contact_twist_rate": 0.0}
+    assert motion(x, minus(x)) == pytest.approx({"contact_surface_speed": 0.0, "contact_twist_rate": 2 * w}, rel=1e-12)
+    assert motion(z, x)["contact_surface_speed"] == pytest.approx(w * r_t, rel=1e-12)  # only the target's spin shears
+    assert motion(z, x)["contact_twist_rate"] == pytest.approx(w, rel=1e-12)
+    # Oblique: the contact normal turns with theta; a spin about z still shears it by w (R_t + R_p).
+    assert first_contact_motion({**base, "theta_deg": 30.0, "target_spin": w * np.array(z), "projectile_spin": w * np.array(z)})[
+        "contact_surface_speed"
+    ] == pytest.approx(w * (r_t + r_p), rel=1e-12)

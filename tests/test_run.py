@@ -239,6 +239,7 @@ def test_bad_input_is_one_line_and_exit_code_2(args, message, bad_piles, tmp_pat
         ("[runs]\nsteps = 2\n", "unknown table [runs]"),
         ("[run]\nsteps = 'many'\n", "[run] steps = 'many': must be int"),
         ("[params]\nrestitution = 1.5\n", "[params] restitution = 1.5: must be in (0, 1]"),
+        ("[collision]\neta_potential = 'both'\n", "[collision] eta_potential = 'both': must be self (U: each pile's own pairs) or all"),
         ("[run\nsteps = 1\n", "is not valid TOML"),
     ],
 )
