@@ -23,6 +23,8 @@ import contextlib
 import errno
 import gc
 import io as _io
+import json
+import math
 import os
 import tempfile
 import threading
@@ -92,6 +94,25 @@ def atomic_h5(path: Path):
     with h5py.File(buffer, "w") as f:
         yield f
     write_atomic(path, buffer.getvalue())
+
+
+def json_ready(value):
+    """``value`` with NumPy scalars and arrays as Python numbers and lists, and every NaN or
+    infinity as None: what strict JSON can hold (``null`` for a number that does not exist)."""
+    if isinstance(value, dict):
+        return {str(key): json_ready(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [json_ready(item) for item in (value.tolist() if isinstance(value, np.ndarray) else value)]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def json_text(value) -> str:
+    """Strict JSON (RFC 8259: no NaN, no Infinity) of ``value``, indented, with a final newline."""
+    return json.dumps(json_ready(value), indent=2, allow_nan=False) + "\n"
 
 
 def write_atomic(path, data: bytes | str, what: str | None = None) -> Path:

@@ -8,7 +8,15 @@ from helpers import cli
 
 import decco_warp as dw
 from decco_warp.analysis.figures import RUN_FIGURES, line_data
-from decco_warp.analysis.runs import analyse_snapshot, particle_size_change, read_analysis
+from decco_warp.analysis.runs import (
+    SETTLED_TOLERANCE,
+    analyse_snapshot,
+    late_statistics,
+    mass_weighted_size_change,
+    particle_size_change,
+    read_analysis,
+    refresh_summary,
+)
 from decco_warp.collision import pile_radius
 from decco_warp.diagnostics import stress_shares
 from decco_warp.run import builtin_pile
@@ -33,6 +41,50 @@ def test_particle_size_change_by_hand():
     # Parents: 10 particles of 2 g and 30 of 1 g -> mean 1.25 g; a fragment of 4 x 2 g + 2 x 1 g -> 10/6 g.
     assert particle_size_change(10.0, 6, 50.0, 40) == pytest.approx(100 * ((10 / 6) / 1.25 - 1))
     assert particle_size_change(5.0, 4, 50.0, 40) == pytest.approx(0.0)
+
+
+def test_mass_weighted_size_change_by_hand():
+    # Parents 10 x 2 g + 30 x 1 g: sum m^2 / sum m = (40 + 30) / 50 = 1.4 g; fragment 4 x 2 g + 2 x 1 g: 18 / 10.
+    parents = np.array([2.0] * 10 + [1.0] * 30)
+    fragment = np.array([2.0] * 4 + [1.0] * 2)
+    assert mass_weighted_size_change(fragment, parents) == pytest.approx(100 * (1.8 / 1.4 - 1))
+    assert mass_weighted_size_change(parents[::2], parents) == pytest.approx(0.0)
+
+
+def _frames(time, ratio, clusters, change):
+    return {"time": np.asarray(time, float), "largest_mass_ratio": np.asarray(ratio, float),
+            "clusters": np.asarray(clusters), "particle_size_change": np.asarray(change, float)}  # fmt: skip
+
+
+def test_late_window_means_and_the_settled_verdict():
+    """The last 10 % of the run: t >= 900 s of 0..1000 s here, frames at 900, 950, 1000."""
+    time = np.arange(0, 1001, 50)
+    quiet = _frames(time, [1.2] * 18 + [0.80, 0.805, 0.802], [1] * 21, [9.0] * 18 + [2.0, 4.0, 3.0])
+    stats = late_statistics(quiet)
+    assert stats["late_frames"] == 3 and stats["late_from_time"] == 900.0
+    assert stats["size_change_late"] == pytest.approx(3.0) and stats["size_change_late_std"] == pytest.approx(np.std([2.0, 4.0, 3.0]))
+    assert stats["size_change_mass_weighted_late"] is None  # no such series: not measured
+    assert (stats["largest_mass_ratio_late_low"], stats["largest_mass_ratio_late_high"]) == (0.80, 0.805)
+    assert stats["settled"] is True and "0.8 to 0.805" in stats["settled_note"]
+    # m_lf/m_t moving by more than the tolerance, a flickering cluster count, a frame without any
+    # cluster (the debris still in flight), or too few frames: not settled, and the note says why.
+    moving = _frames(time, [1.2] * 18 + [0.80, 0.80 + 2 * SETTLED_TOLERANCE, 0.80], [1] * 21, [1.0] * 21)
+    flicker = _frames(time, [1.0] * 21, [1] * 18 + [1, 2, 1], [1.0] * 21)
+    lost = _frames(time, [0.99] * 18 + [0.99, 0.0, 0.93], [1] * 18 + [1, 0, 1], [1.0] * 18 + [1.0, np.nan, 1.0])
+    short = _frames([0, 500, 1000], [1.0] * 3, [1] * 3, [1.0] * 3)
+    for frames, reason in ((moving, "0.8 to 0.82"), (flicker, "1 to 2 cluster(s)"), (lost, "no cluster in 1 of the 3"), (short, "1 analysed frame")):
+        stats = late_statistics(frames)
+        assert stats["settled"] is False and reason in stats["settled_note"], stats["settled_note"]
+    assert late_statistics(lost)["size_change_late"] == pytest.approx(1.0)  # the frame without a fragment left out
+    # Counted by mass, a clump of 0.5 % of the target that comes and goes changes nothing; one of 5 % does.
+    masses = np.zeros((21, 2))
+    masses[:, 0] = 1.0e22
+    flicker["cluster_mass"] = masses.copy()
+    flicker["cluster_mass"][19, 1] = 0.005e22
+    assert late_statistics(flicker, target_mass=1e22)["settled"] is True
+    flicker["cluster_mass"][19, 1] = 0.05e22
+    stats = late_statistics(flicker, target_mass=1e22)
+    assert stats["settled"] is False and "1 to 2 fragment(s) of >= 0.01 m_t" in stats["settled_note"]
 
 
 def test_snapshot_analysis_of_a_spinning_pile_and_a_receding_one():
@@ -89,6 +141,75 @@ def test_analyze_writes_analysis_and_figures_that_show_its_data(sweep):
     np.testing.assert_array_equal(lines[0][1], energy["kinetic_translational"] + energy["kinetic_rotational"])
     np.testing.assert_allclose(lines[-1][1], energy["total_energy"][0], rtol=1e-10)  # the books balance
     assert analysis["conservation"]["momentum_drift"].max() < 1e-6
+
+
+def _strict(text: str):
+    """JSON parsed as RFC 8259 has it: NaN and Infinity are not numbers there."""
+
+    def refuse(constant):
+        raise ValueError(f"not JSON: {constant}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_summary_is_strict_json_with_both_etas_the_laws_and_the_verdict(sweep):
+    out, result = sweep
+    for run_dir in (out / "eta0.5", out / "eta1"):
+        summary = _strict((run_dir / "summary.json").read_text())
+        assert summary["eta_potential"] == "self" and summary["eta_self"] == pytest.approx(summary["eta"], rel=1e-12)
+        assert summary["cross_potential"] < 0 and summary["eta_all"] < summary["eta_self"]
+        assert summary["ls12_band_low"] <= summary["ls12_largest_mass_ratio"] <= summary["ls12_band_high"]
+        assert summary["ls12_planets_largest_mass_ratio"] <= summary["ls12_largest_mass_ratio"]
+        assert summary["contact_surface_speed"] == 0.0  # no spins
+        assert isinstance(summary["settled"], bool) and summary["settled_note"]
+        assert ("settled" if summary["settled"] else "NOT SETTLED") in result.stdout
+    _strict((out / "summaries.json").read_text())
+
+
+def test_a_run_without_any_cluster_writes_null_not_nan(tmp_path):
+    """No cluster of min_members at the end: m_lf/m_t is 0 and the size change does not exist, which
+    strict JSON says as null; the CLI line says the result is not settled."""
+    result = cli("simulate", "--name", "a", "--eta", "0.5", "--steps", "400", "--output-every", "20", "--out", str(tmp_path), "--device", "cpu")
+    assert result.returncode == 0, result.stderr
+    result = cli("analyze", str(tmp_path / "a"), "--min-members", "100000")
+    assert result.returncode == 0, result.stderr
+    summary = _strict((tmp_path / "a" / "summary.json").read_text())
+    assert summary["largest_mass_ratio"] == 0.0 and summary["particle_size_change"] is None and summary["size_change_late"] is None
+    assert summary["settled"] is False and "NOT SETTLED (no cluster" in result.stdout
+
+
+def test_analysis_keeps_velocities_labels_per_frame_and_units(sweep):
+    out, _ = sweep
+    import h5py
+
+    with h5py.File(out / "eta1" / "analysis.h5", "r") as f:
+        frames, final = f["frames"], f["final"]
+        assert frames["label"].shape == (5, final["positions"].shape[0]) and frames["label"].compression == "gzip"
+        np.testing.assert_array_equal(frames["label"][-1], final["label"][()])
+        assert final["velocities"].shape == final["positions"].shape and final["omegas"].shape == final["positions"].shape
+        assert final["velocities"].attrs["unit"] == "cm/s" and frames["time"].attrs["unit"] == "s"
+        members = final["label"][()] == 0
+        composition = np.bincount(final["size_class"][()][members], minlength=frames["largest_composition"].shape[1])
+        np.testing.assert_array_equal(frames["largest_composition"][-1], composition)
+        masses = final["particle_mass"][()]
+        assert frames["particle_size_change_mass_weighted"][-1] == pytest.approx(mass_weighted_size_change(masses[members], masses), rel=1e-12)
+
+
+def test_a_summary_is_refreshed_from_analysis_h5_alone(sweep, tmp_path):
+    """A run kept without its trajectory: its summary recomputed from analysis.h5 and its set-up gives
+    the analysis's own numbers."""
+    import shutil
+
+    out, _ = sweep
+    kept = tmp_path / "eta1"
+    shutil.copytree(out / "eta1", kept, ignore=shutil.ignore_patterns("trajectory.h5", "checkpoint.h5"))
+    before = json.loads((kept / "summary.json").read_text())
+    collision = dw.read_trajectory(out / "eta1" / "trajectory.h5")["parameters"]["collision"]
+    params = dw.read_trajectory(out / "eta1" / "trajectory.h5")["parameters"]["spec"]["params"]
+    after = refresh_summary(kept, collision, params)
+    assert _strict((kept / "summary.json").read_text()) == after
+    for key, value in before.items():
+        assert after[key] == (pytest.approx(value, rel=1e-12) if isinstance(value, float) else value), key
 
 
 def test_analyze_of_a_set_of_runs_makes_the_cross_run_table_and_figures(sweep):

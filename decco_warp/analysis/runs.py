@@ -6,7 +6,6 @@ Reads ``trajectory.h5`` (never the simulation) and writes ``analysis.h5`` and
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -14,11 +13,11 @@ import h5py
 import numpy as np
 
 from ..diagnostics import energy_scale, ledger_closure
-from ..io import read_trajectory, write_atomic
+from ..io import json_ready, json_text, read_trajectory, write_atomic
 from ..params import G_CGS
 from ..state import State
+from . import scaling
 from .clusters import find_clusters
-from .scaling import largest_mass_ratio as ls12_largest_mass_ratio
 
 ENERGY_SERIES = (
     "kinetic_translational",
@@ -36,6 +35,102 @@ ENERGY_SERIES = (
 def particle_size_change(cluster_mass: float, cluster_members: int, parents_mass: float, parents_count: int) -> float:
     """Paper Fig. 6: mean particle mass of a fragment over that of both piles before the collision, minus 1, in %."""
     return 100.0 * ((cluster_mass / cluster_members) / (parents_mass / parents_count) - 1.0)
+
+
+def mass_weighted_size_change(cluster_masses: np.ndarray, parents_masses: np.ndarray) -> float:
+    """Fig. 6 weighted by mass: the mass-weighted mean particle mass (sum m^2 / sum m) of a fragment
+    over that of both piles before the collision, minus 1, in %.  It follows where the mass sits
+    (a grain's weight is its mass), where the paper's per-particle mean follows the grain count."""
+    return 100.0 * ((cluster_masses @ cluster_masses / cluster_masses.sum()) / (parents_masses @ parents_masses / parents_masses.sum()) - 1.0)
+
+
+#: The late window of a run: its last LATE_FRACTION of simulated time.  Size changes are averaged
+#: over it, and a run is settled when its outcome holds still there.
+LATE_FRACTION = 0.1
+#: A run is settled when, over the analysed frames of its late window, m_lf/m_t moves by at most this
+#: (a fraction of the target's mass) and the number of clusters stays the same.
+SETTLED_TOLERANCE = 0.01
+#: Fewer analysed frames than this in the late window cannot show that a run is settled.
+SETTLED_MIN_FRAMES = 3
+
+
+def late_window(time: np.ndarray) -> np.ndarray:
+    """Indices of the frames in the last LATE_FRACTION of the run's simulated time."""
+    time = np.asarray(time, dtype=float)
+    if time.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    return np.flatnonzero(time >= time[-1] - LATE_FRACTION * (time[-1] - time[0]))
+
+
+def late_statistics(frames: dict, target_mass: float | None = None) -> dict:
+    """Over the late window of a run's analysed frames: the mean and spread (standard deviation) of
+    each size change, the range of m_lf/m_t, and the verdict ``settled`` with its ``settled_note``.
+
+    The fragment set counted is the clusters of at least SETTLED_TOLERANCE of the target's mass
+    (``target_mass``, with the frames' ``cluster_mass``); without those, every cluster, so that one
+    of ~``min_members`` grains gaining and losing a member counts as a change."""
+    late = late_window(frames["time"])
+    ratio = np.asarray(frames["largest_mass_ratio"], dtype=float)[late]
+    if "cluster_mass" in frames and target_mass:
+        fragments = (np.asarray(frames["cluster_mass"])[late] >= SETTLED_TOLERANCE * target_mass).sum(axis=1)
+        kind = f"fragment(s) of >= {SETTLED_TOLERANCE:g} m_t"
+    else:
+        fragments, kind = np.asarray(frames["clusters"])[late], "cluster(s)"
+    stats = {"late_frames": int(late.size), "late_from_time": float(frames["time"][late[0]]) if late.size else None}
+    for column, series in (("size_change_late", "particle_size_change"), ("size_change_mass_weighted_late", "particle_size_change_mass_weighted")):
+        values = np.asarray(frames[series], dtype=float)[late] if series in frames else np.full(late.size, np.nan)
+        values = values[np.isfinite(values)]
+        stats[column] = float(values.mean()) if values.size else None
+        stats[f"{column}_std"] = float(values.std()) if values.size else None
+    stats["largest_mass_ratio_late_low"] = float(ratio.min()) if ratio.size else None
+    stats["largest_mass_ratio_late_high"] = float(ratio.max()) if ratio.size else None
+    stats.update(settled_verdict(ratio, fragments, kind, stats["late_from_time"]))
+    return stats
+
+
+def settled_verdict(ratio: np.ndarray, fragments: np.ndarray, kind: str, since: float | None) -> dict:
+    """``settled`` and the numbers behind it (``settled_note``) for the late window's frames:
+    m_lf/m_t (``ratio``) and the count of ``fragments`` (what they are: ``kind``) per frame."""
+    frames = ratio.size
+    if frames < SETTLED_MIN_FRAMES:
+        return {"settled": False, "settled_note": f"{frames} analysed frame(s) in the last {LATE_FRACTION:.0%} of the run; "
+                f"at least {SETTLED_MIN_FRAMES} are needed to judge (analyse more frames, or run longer)"}  # fmt: skip
+    window = f"over the last {frames} analysed frames (t >= {since:.6g} s)"
+    counts = sorted({int(c) for c in fragments})
+    if (ratio <= 0).any():
+        return {"settled": False, "settled_note": f"no cluster in {int((ratio <= 0).sum())} of the {frames} frames {window}"}
+    shown = f"{counts[0]} to {counts[-1]} {kind}" if len(counts) > 1 else f"{counts[0]} {kind}"
+    spread = float(ratio.max() - ratio.min())
+    if spread > SETTLED_TOLERANCE or len(counts) > 1:
+        return {"settled": False, "settled_note": f"m_lf/m_t {ratio.min():.4g} to {ratio.max():.4g} and {shown} {window}"}
+    return {"settled": True, "settled_note": f"m_lf/m_t {ratio.min():.4g} to {ratio.max():.4g} (within {SETTLED_TOLERANCE:g}) and {shown} {window}"}
+
+
+def eta_readings(collision: dict) -> dict:
+    """Both readings of eq. 18 for a collision record (docs/model.md): ``eta_self`` (U of each pile's
+    own pairs) and ``eta_all`` (U of every pair at set-up), with the reading the run was set up by
+    and the cross term [erg].  Records older than the two readings hold the potentials: eta_all is
+    computed from them, the reading is "self"."""
+    if not all(key in collision for key in ("kinetic_energy", "target_potential", "projectile_potential", "cross_potential")):
+        return {"eta_potential": collision.get("eta_potential"), "eta_self": collision.get("eta"), "eta_all": None, "cross_potential": None}
+    own = collision["target_potential"] + collision["projectile_potential"]
+    return {
+        "eta_potential": collision.get("eta_potential", "self"),
+        "eta_self": float(collision["kinetic_energy"] / abs(own)),
+        "eta_all": float(collision["kinetic_energy"] / abs(own + collision["cross_potential"])),
+        "cross_potential": float(collision["cross_potential"]),
+    }
+
+
+def contact_motion(collision: dict) -> dict:
+    """:func:`decco_warp.collision.first_contact_motion` of a collision record (None each without it)."""
+    from ..collision import first_contact_motion
+
+    keys = ("contact_surface_speed", "contact_twist_rate")
+    if all(key in collision for key in keys):
+        return {key: float(collision[key]) for key in keys}
+    needed = ("theta_deg", "target_spin", "projectile_spin", "target_radius", "projectile_radius")
+    return first_contact_motion(collision) if all(key in collision for key in needed) else dict.fromkeys(keys)
 
 
 #: |cos| of the angle between the two spin axes past which they count as (anti-)parallel, and below
@@ -74,7 +169,8 @@ def snapshot_state(data: dict, frame: int) -> State:
 
 def analyse_snapshot(state: State, target_mass: float, min_members: int = 50, G: float | None = None, device: str | None = None) -> dict:
     """Clusters of one snapshot with their properties, and the headline numbers (``device``: where
-    the cluster finder's smoothed density is summed, see :func:`.clusters.smoothed_density`)."""
+    the cluster finder's smoothed density is summed, see :func:`.clusters.smoothed_density`).
+    Without a cluster, m_lf/m_t is 0 and the size changes are NaN (no fragment to measure)."""
     kwargs = {} if G is None else {"G": G}
     clusters = find_clusters(state, min_members=min_members, device=device, **kwargs)
     classes = int(state.size_class.max()) + 1
@@ -98,10 +194,26 @@ def analyse_snapshot(state: State, target_mass: float, min_members: int = 50, G:
         "clusters": rows,
         "label": label,
         "largest_mass_ratio": largest["mass"] / target_mass if largest else 0.0,
+        "largest_composition": largest["composition"] if largest else np.zeros(classes, dtype=np.int64),
         "particle_size_change": (
             particle_size_change(largest["mass"], largest["members"], state.total_mass, state.n) if largest else np.nan
         ),
+        "particle_size_change_mass_weighted": (
+            mass_weighted_size_change(state.masses[clusters[0].members], state.masses) if largest else np.nan
+        ),
     }
+
+
+#: The per-frame series of :func:`analyse_snapshot` that analysis.h5 keeps under /frames.
+FRAME_SERIES = ("largest_mass_ratio", "particle_size_change", "particle_size_change_mass_weighted", "largest_composition", "label")
+
+
+def _padded(rows: list[np.ndarray]) -> np.ndarray:
+    """Rows of different lengths as one array, padded with zeros (frames x most clusters)."""
+    out = np.zeros((len(rows), max([len(r) for r in rows] + [1])))
+    for k, row in enumerate(rows):
+        out[k, : len(row)] = row
+    return out
 
 
 def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, device: str | None = None) -> dict:
@@ -119,12 +231,14 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
     if frames[-1] != len(data["step"]) - 1:
         frames.append(len(data["step"]) - 1)
 
-    ratio, size_change, n_clusters = [], [], []
+    series: dict[str, list] = {name: [] for name in FRAME_SERIES}
+    n_clusters, cluster_masses = [], []
     for done, frame in enumerate(frames):
         result = analyse_snapshot(snapshot_state(data, frame), target_mass, min_members, G, device)
-        ratio.append(result["largest_mass_ratio"])
-        size_change.append(result["particle_size_change"])
+        for name in FRAME_SERIES:
+            series[name].append(result[name])
         n_clusters.append(len(result["clusters"]))
+        cluster_masses.append(np.array([c["mass"] for c in result["clusters"]]))
         if progress is not None:
             progress(done + 1, len(frames))
     final = result
@@ -132,18 +246,18 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
     obs = data["observables"]
     # Trajectories written before decco-warp 0.2 have no deepest_overlap series.
     depth = obs.get("deepest_overlap", np.full(len(data["time"]), np.nan))
-    deepest_frame = int(np.nanargmax(depth)) if np.isfinite(depth).any() else 0
     first = snapshot_state(data, 0)
     p_scale = float(np.linalg.norm(first.masses[:, None] * first.velocities, axis=1).sum())
     orbital = first.masses[:, None] * np.cross(first.positions, first.velocities)
     l_scale = float(np.linalg.norm(orbital, axis=1).sum() + np.linalg.norm(first.inertia[:, None] * first.omegas, axis=1).sum())
+    classes = int(static["species"].max()) + 1
     analysis = {
         "frames": {
             "step": data["step"][frames],
             "time": data["time"][frames],
-            "largest_mass_ratio": np.array(ratio),
-            "particle_size_change": np.array(size_change),
+            **{name: np.array(values) for name, values in series.items()},
             "clusters": np.array(n_clusters),
+            "cluster_mass": _padded(cluster_masses),
         },
         "conservation": {
             "time": data["time"],
@@ -162,68 +276,121 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
             "time": float(data["time"][-1]),
             "label": final["label"],
             "positions": data["particles"]["position"][-1],
+            "velocities": data["particles"]["velocity"][-1],
+            "omegas": data["particles"]["omega"][-1],
             "radius": static["radius"],
+            "particle_mass": static["mass"],
+            "size_class": static["species"],
             "mass": np.array([c["mass"] for c in final["clusters"]]),
             "members": np.array([c["members"] for c in final["clusters"]], dtype=np.int64),
             "com": np.array([c["com"] for c in final["clusters"]]).reshape(-1, 3),
             "velocity": np.array([c["velocity"] for c in final["clusters"]]).reshape(-1, 3),
             "spin": np.array([c["spin"] for c in final["clusters"]]).reshape(-1, 3),
-            "composition": np.array([c["composition"] for c in final["clusters"]], dtype=np.int64).reshape(
-                len(final["clusters"]), int(static["species"].max()) + 1
-            ),
+            "composition": np.array([c["composition"] for c in final["clusters"]], dtype=np.int64).reshape(len(final["clusters"]), classes),
         },
     }
-    collision = data["parameters"].get("collision", {})
-    params = spec.get("params", {})
-    summary = {
-        "run": run_dir.name,
-        "n_particles": int(static["radius"].shape[0]),
-        "eta": collision.get("eta"),
-        "speed": collision.get("speed"),
-        "theta_deg": collision.get("theta_deg"),
-        "spin_kind": spin_kind(collision.get("target_spin"), collision.get("projectile_spin")) if collision else None,
-        "orientation_seed": int(collision["orientation_seed"]) if "orientation_seed" in collision else None,
-        "mass_ratio": (collision.get("projectile_mass", np.nan) / collision.get("target_mass", np.nan)) if collision else None,
-        "target_mass": target_mass,
-        "k_in": params.get("k_in"),
-        "dt": params.get("dt"),
-        "steps": int(data["step"][-1]),
-        "final_time": float(data["time"][-1]),
-        "largest_mass_ratio": float(ratio[-1]),
-        "ls12_largest_mass_ratio": _ls12(collision, G),
-        "particle_size_change": float(size_change[-1]),
-        "clusters": int(n_clusters[-1]),
-        "deepest_overlap": float(depth[deepest_frame]),
-        "deepest_overlap_time": float(data["time"][deepest_frame]),
-        "predicted_overlap": data["parameters"].get("stability", {}).get("predicted_overlap"),
-        "momentum_drift": float(analysis["conservation"]["momentum_drift"].max()),
-        "angular_momentum_drift": float(analysis["conservation"]["angular_momentum_drift"].max()),
-        "ledger_closure": float(np.abs(analysis["energy"]["ledger_closure"]).max()),
-        "min_members": int(min_members),
-        "analyse_every": int(every),
-    }
-    summary = {k: (float(v) if isinstance(v, np.floating) else v) for k, v in summary.items()}
+    summary = summarise(
+        run_dir.name,
+        analysis,
+        collision=data["parameters"].get("collision", {}),
+        params=spec.get("params", {}),
+        n_particles=int(static["radius"].shape[0]),
+        target_mass=target_mass,
+        predicted_overlap=data["parameters"].get("stability", {}).get("predicted_overlap"),
+        min_members=min_members,
+        every=every,
+    )
     # Kept with the summary, so that a sweep that finds the run analysed reports what it took then.
     summary["analysis_seconds"] = round(time.perf_counter() - started, 3)
     analysis["summary"] = summary
     write_analysis(run_dir / "analysis.h5", analysis)
-    write_atomic(run_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
+    write_atomic(run_dir / "summary.json", json_text(summary))
     return analysis
 
 
-def _ls12(collision: dict, G) -> float | None:
-    """The Leinhardt & Stewart (2012) m_lf/m_t for the run's set-up (None without its metadata)."""
-    needed = ("target_mass", "projectile_mass", "target_radius", "projectile_radius", "theta_deg", "kinetic_energy")
-    if not all(key in collision for key in needed):
-        return None
-    return float(ls12_largest_mass_ratio(collision, G_CGS if G is None else G))
+def summarise(name: str, analysis: dict, collision: dict, params: dict, n_particles: int, target_mass: float,
+              predicted_overlap, min_members: int, every: int) -> dict:  # fmt: skip
+    """A run's summary row from its analysis (the /frames, /conservation, /energy and /overlap
+    series) and its set-up (``collision``: the set-up's metadata; ``params``: the resolved [params]).
+    Numbers that do not exist (no fragment to measure, a record without the set-up) are None."""
+    frames = analysis["frames"]
+    depth = np.asarray(analysis["overlap"]["deepest"], dtype=float)
+    deepest_frame = int(np.nanargmax(depth)) if np.isfinite(depth).any() else 0
+    G = params.get("G")
+    summary = {
+        "run": name,
+        "n_particles": n_particles,
+        "eta": collision.get("eta"),
+        **eta_readings(collision),
+        "speed": collision.get("speed"),
+        "theta_deg": collision.get("theta_deg"),
+        "spin_kind": spin_kind(collision.get("target_spin"), collision.get("projectile_spin")) if collision else None,
+        **contact_motion(collision),
+        "orientation_seed": int(collision["orientation_seed"]) if "orientation_seed" in collision else None,
+        "mass_ratio": (collision["projectile_mass"] / collision["target_mass"]) if "projectile_mass" in collision else None,
+        "target_mass": target_mass,
+        "k_in": params.get("k_in"),
+        "dt": params.get("dt"),
+        "steps": int(frames["step"][-1]),
+        "final_time": float(frames["time"][-1]),
+        "largest_mass_ratio": float(frames["largest_mass_ratio"][-1]),
+        **scaling.law_columns(collision, G_CGS if G is None else G),
+        "particle_size_change": float(frames["particle_size_change"][-1]),
+        "particle_size_change_mass_weighted": (
+            float(frames["particle_size_change_mass_weighted"][-1]) if "particle_size_change_mass_weighted" in frames else None
+        ),
+        **late_statistics(frames, target_mass),
+        "clusters": int(frames["clusters"][-1]),
+        "deepest_overlap": float(depth[deepest_frame]),
+        "deepest_overlap_time": float(analysis["overlap"]["time"][deepest_frame]),
+        "predicted_overlap": predicted_overlap,
+        "momentum_drift": float(np.max(analysis["conservation"]["momentum_drift"])),
+        "angular_momentum_drift": float(np.max(analysis["conservation"]["angular_momentum_drift"])),
+        "ledger_closure": float(np.abs(analysis["energy"]["ledger_closure"]).max()),
+        "min_members": int(min_members),
+        "analyse_every": int(every),
+    }
+    return json_ready(summary)
 
 
 def _start_energies(observables: dict) -> dict:
     return {name: float(observables[name][0]) for name in ("potential", "total_energy")}
 
 
+#: Units of analysis.h5's datasets (HDF5 attribute "unit"; docs/data.md says what each holds).
+ANALYSIS_UNITS = {
+    "time": "s",
+    "step": "1",
+    "largest_mass_ratio": "1 (of the target's mass)",
+    "particle_size_change": "%",
+    "particle_size_change_mass_weighted": "%",
+    "largest_composition": "particles per size class",
+    "label": "cluster index, largest first (-1: in no cluster)",
+    "clusters": "1",
+    "momentum_drift": "1 (of sum m|v| at t = 0)",
+    "angular_momentum_drift": "1 (of sum |m x cross v| + |I w| at t = 0)",
+    "value": "1 (100 N_top / N per size class)",
+    "ledger_closure": "1 (of |U| + KE at t = 0)",
+    "deepest": "1 (of the smaller radius of the pair)",
+    "positions": "cm",
+    "velocities": "cm/s",
+    "omegas": "rad/s",
+    "radius": "cm",
+    "particle_mass": "g",
+    "size_class": "index (0: smallest radius)",
+    "mass": "g",
+    "members": "particles",
+    "com": "cm",
+    "velocity": "cm/s",
+    "spin": "rad/s",
+    "composition": "particles per size class",
+    **{name: "erg" for name in ENERGY_SERIES},
+}
+
+
 def write_analysis(path: Path, analysis: dict) -> None:
+    """analysis.h5: a group per part of ``analysis``, each dataset with its unit (compressed: a run's
+    analysis stays small enough to commit); the summary as the file's attributes (None left out)."""
     from ..io import atomic_h5
 
     with atomic_h5(path) as f:
@@ -235,7 +402,12 @@ def write_analysis(path: Path, analysis: dict) -> None:
                 continue
             g = f.create_group(group)
             for key, value in values.items():
-                g.create_dataset(key, data=np.asarray(value))
+                value = np.asarray(value)
+                compress = {"compression": "gzip", "compression_opts": 6, "shuffle": True} if value.size > 64 else {}
+                dataset = g.create_dataset(key, data=value, **compress)
+                unit = ANALYSIS_UNITS.get(key)
+                if unit is not None:
+                    dataset.attrs["unit"] = unit
 
 
 def read_analysis(path) -> dict:
@@ -243,3 +415,36 @@ def read_analysis(path) -> dict:
         result = {name: {key: f[name][key][()] for key in f[name]} for name in f}
         result["summary"] = {key: (v.item() if isinstance(v, np.generic) else v) for key, v in f.attrs.items()}
     return result
+
+
+def refresh_summary(run_dir, collision: dict, params: dict, predicted_overlap=None) -> dict:
+    """A run's summary recomputed from its analysis.h5 alone (no trajectory: a run kept without one)
+    and its set-up's ``collision`` metadata (set up again from its spec.toml: ``plan_start``), with
+    every column of today's :func:`summarise`; analysis.h5 is rewritten (compressed, with units) and
+    summary.json replaced.  Series the analysis did not keep (the mass-weighted size change per frame)
+    give None: those need the trajectory."""
+    run_dir = Path(run_dir)
+    analysis = read_analysis(run_dir / "analysis.h5")
+    old = analysis["summary"]
+    final = analysis["final"]
+    summary = summarise(
+        old.get("run", run_dir.name),
+        analysis,
+        collision=collision,
+        params=params,
+        n_particles=int(old["n_particles"]),
+        target_mass=float(old["target_mass"]),
+        predicted_overlap=old.get("predicted_overlap", predicted_overlap),
+        min_members=int(old["min_members"]),
+        every=int(old["analyse_every"]),
+    )
+    if summary["particle_size_change_mass_weighted"] is None and "label" in final:
+        # The last frame's fragment is known (final/label); grains of one density weigh as R^3.
+        masses, members = final["radius"] ** 3, final["label"] == 0
+        if members.any():
+            summary["particle_size_change_mass_weighted"] = mass_weighted_size_change(masses[members], masses)
+    summary["analysis_seconds"] = old.get("analysis_seconds")
+    analysis["summary"] = summary
+    write_analysis(run_dir / "analysis.h5", analysis)
+    write_atomic(run_dir / "summary.json", json_text(summary))
+    return summary
