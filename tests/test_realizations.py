@@ -204,11 +204,16 @@ def test_cross_run_figures_draw_each_points_mean_and_its_spread():
     assert [(p["eta"], p["mean"], p["low"], p["high"]) for p in points] == [(1.0, pytest.approx(0.7), 0.4, 0.9), (2.0, pytest.approx(0.6), 0.5, 0.7)]
     lines = line_data(plot_runs(summaries, "largest_mass_ratio", "m_lf / m_t"))
     pairs = [[round(float(v), 12) for v in y] for x, y in lines if list(x) == [1.0, 2.0]]
-    # The mean (line and bar centres) and the bar's ends at the smallest and the largest realization.
-    assert sorted(pairs) == [[0.4, 0.5], [0.7, 0.6], [0.7, 0.6], [0.9, 0.7]]
+    # The mean (line, markers and bar centres) and the bar's ends at the smallest and the largest realization.
+    assert sorted(pairs) == [[0.4, 0.5], [0.7, 0.6], [0.7, 0.6], [0.7, 0.6], [0.9, 0.7]]
     faint = [sorted(zip(x, y)) for x, y in lines if len(x) == 5]
     assert faint == [sorted((s["eta"], s["largest_mass_ratio"]) for s in summaries[:5])]
     assert ([1.0], [0.1]) in [(list(x), list(y)) for x, y in lines]
+    # A point with an unsettled run is drawn hollow (its value is not final), never left out.
+    summaries[3]["settled"] = False
+    fig = plot_runs(summaries, "largest_mass_ratio", "m_lf / m_t")
+    hollow = [(list(line.get_xdata()), list(line.get_ydata())) for line in fig.axes[0].lines if line.get_markerfacecolor() == "white"]
+    assert hollow == [([2.0], [pytest.approx(0.6)])]
 
 
 @pytest.mark.parametrize(

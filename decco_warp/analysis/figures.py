@@ -148,51 +148,90 @@ def draw_run(analysis: dict, run_dir: Path) -> list[Path]:
     return paths
 
 
-def realization_points(summaries: list[dict], metric: str) -> list[dict]:
-    """Runs of one set-up family grouped by eta (realizations of one point: same piles, angle and
-    spins, the piles turned otherwise), in increasing eta: per point its ``eta``, every run's
-    ``values``, their ``mean``, ``low`` and ``high``, and the LS12 law's value (``law``, or None)."""
+def realization_points(summaries: list[dict], metric: str, x: str = "eta") -> list[dict]:
+    """Runs of one set-up family grouped by ``x`` (eta in one reading: realizations of one point,
+    the same piles, angle and spins, the piles turned otherwise), in increasing ``x``: per point its
+    ``eta`` (the value of ``x``), every run's ``values``, their ``mean``, ``low`` and ``high``,
+    whether every run is ``settled`` (a run analysed before the verdict counts as settled), and
+    the LS12 law's value (``law``, small bodies), its band (``band_low``, ``band_high``) and the
+    planets' fit (``planets``), each None where unknown.  Runs without a value are left out."""
     points: dict[float, list[dict]] = {}
     for s in summaries:
-        points.setdefault(round(float(s["eta"]), 6), []).append(s)
+        if s.get(metric) is not None and s.get(x) is not None:
+            points.setdefault(round(float(s[x]), 6), []).append(s)
     out = []
     for eta in sorted(points):
         runs = points[eta]
         values = np.array([float(r[metric]) for r in runs])
-        law = runs[0].get(f"ls12_{metric}")
-        out.append({"eta": float(runs[0]["eta"]), "values": values, "mean": float(values.mean()), "low": float(values.min()),
-                    "high": float(values.max()), "law": law})  # fmt: skip
+        first = runs[0]
+        out.append({"eta": float(first[x]), "values": values, "mean": float(values.mean()), "low": float(values.min()),
+                    "high": float(values.max()), "settled": all(r.get("settled", True) is not False for r in runs),
+                    "law": first.get(f"ls12_{metric}"), "band_low": first.get("ls12_band_low"),
+                    "band_high": first.get("ls12_band_high"), "planets": first.get("ls12_planets_largest_mass_ratio")})  # fmt: skip
     return out
 
 
-def plot_runs(summaries: list[dict], metric: str, ylabel: str):
-    """Cross-run figure (Fig. 3 / Fig. 6 / Fig. 9 style): ``metric`` vs eta, one panel per mass ratio,
-    a line per angle and kind of spin through each point's mean; where a point has several
-    realizations, each drawn faintly and a bar from the smallest to the largest; for m_lf/m_t,
-    dashed, the Leinhardt & Stewart (2012) universal law at the same set-ups."""
+ETA_LABELS = {"eta": "eta = KE / |U|", "eta_self": "eta = KE / |U| (U: each pile's own pairs)",
+              "eta_all": "eta = KE / |U| (U: all pairs at set-up)"}  # fmt: skip
+
+
+def draw_points(ax, points: list[dict], colour, label: str | None) -> None:
+    """Each point's mean (a line through them), every realization faintly, a bar from the smallest
+    to the largest; a point whose runs are not all settled is drawn hollow (its value is not final)."""
+    etas, means = [p["eta"] for p in points], [p["mean"] for p in points]
+    ax.plot(etas, means, color=colour, label=label)
+    for settled in (True, False):
+        chosen = [p for p in points if p["settled"] == settled]
+        if chosen:
+            ax.plot([p["eta"] for p in chosen], [p["mean"] for p in chosen], linestyle="", marker="o", color=colour,
+                    mfc=colour if settled else "white")  # fmt: skip
+    several = [p for p in points if len(p["values"]) > 1]
+    if several:
+        ax.plot([p["eta"] for p in several for _ in p["values"]], [v for p in several for v in p["values"]],
+                linestyle="", marker=".", alpha=0.35, color=colour)  # fmt: skip
+        spread = [[p["mean"] - p["low"] for p in several], [p["high"] - p["mean"] for p in several]]
+        ax.errorbar([p["eta"] for p in several], [p["mean"] for p in several], yerr=spread, linestyle="", color=colour, capsize=3)
+
+
+def draw_law(ax, points: list[dict], colour, label: str) -> None:
+    """LS12 at the runs' own set-ups: the small-body law (dashed) in its band c* = 3 to 7 (shaded),
+    and the planets' fit (dotted)."""
+    known = [p for p in points if p["law"] is not None]
+    if not known:
+        return
+    etas = [p["eta"] for p in known]
+    ax.plot(etas, [p["law"] for p in known], linestyle="--", color=colour, label=f"{label}: LS12 small bodies (c* = 5, band 3 to 7)")
+    if all(p["band_low"] is not None for p in known):
+        ax.fill_between(etas, [p["band_low"] for p in known], [p["band_high"] for p in known], color=colour, alpha=0.12, linewidth=0)
+    if all(p["planets"] is not None for p in known):
+        ax.plot(etas, [p["planets"] for p in known], linestyle=":", color=colour, label=f"{label}: LS12 planets (c* = 1.9)")
+
+
+def plot_runs(summaries: list[dict], metric: str, ylabel: str, x: str = "eta"):
+    """Cross-run figure (Fig. 3 / Fig. 9 style): ``metric`` vs eta (``x``: "eta", "eta_self" or
+    "eta_all"), one panel per mass ratio, a line per angle and kind of spin through each point's
+    mean; where a point has several realizations, each drawn faintly and a bar from the smallest to
+    the largest; unsettled points hollow; for m_lf/m_t, the Leinhardt & Stewart (2012) law at the
+    same set-ups (:func:`draw_law`).  Panels share their axes."""
     ratios = sorted({round(s["mass_ratio"], 3) for s in summaries})
-    fig, axes = plt.subplots(1, len(ratios), figsize=(4.0 * len(ratios), 3.6), squeeze=False, sharey=True)
+    fig, axes = plt.subplots(1, len(ratios), figsize=(4.4 * len(ratios), 3.8), squeeze=False, sharey=True, sharex=True)
     for ax, ratio in zip(axes[0], ratios):
         mine = [s for s in summaries if round(s["mass_ratio"], 3) == ratio]
         families = sorted({(s["theta_deg"], s.get("spin_kind") or "none") for s in mine})
         for k, (angle, spins) in enumerate(families):
-            points = realization_points([s for s in mine if (s["theta_deg"], s.get("spin_kind") or "none") == (angle, spins)], metric)
+            points = realization_points([s for s in mine if (s["theta_deg"], s.get("spin_kind") or "none") == (angle, spins)], metric, x)
+            if not points:
+                continue
             colour = plt.get_cmap("tab10")(k)
             label = f"{angle:g} deg" + (f", {spins} spins" if spins != "none" else "")
-            etas, means = [p["eta"] for p in points], [p["mean"] for p in points]
-            ax.plot(etas, means, marker="o", color=colour, label=label)
-            if any(len(p["values"]) > 1 for p in points):
-                ax.plot([p["eta"] for p in points for _ in p["values"]], [v for p in points for v in p["values"]],
-                        linestyle="", marker=".", alpha=0.35, color=colour)  # fmt: skip
-                spread = [[m - p["low"] for m, p in zip(means, points)], [p["high"] - m for m, p in zip(means, points)]]
-                ax.errorbar(etas, means, yerr=spread, linestyle="", color=colour, capsize=3)
-            law = [(p["eta"], p["law"]) for p in points]
-            if metric == "largest_mass_ratio" and all(v is not None for _, v in law):
-                ax.plot(*zip(*law), linestyle="--", color=colour, label=f"{label}, LS12 law")
+            draw_points(ax, points, colour, label)
+            if metric == "largest_mass_ratio":
+                draw_law(ax, points, colour, label)
         ax.set_title(f"m_p / m_t = {ratio:g}")
-        ax.set_xlabel("eta = KE / |U|")
-        ax.legend(fontsize=8)
-    axes[0][0].set_ylabel(ylabel)
+        ax.set_xlabel(ETA_LABELS.get(x, x))
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
+    axes[0][0].set_ylabel(ylabel + "  (hollow: not settled)")
     return fig
 
 
@@ -200,27 +239,45 @@ def plot_runs(summaries: list[dict], metric: str, ylabel: str):
 RATIO_MARKERS = {0.1: "s", 0.25: "^", 1.0: "o"}
 
 
+def size_change_value(summary: dict) -> tuple[float | None, float]:
+    """A run's particle-size change for Fig. 6: the mean over its late window and the spread there
+    (0 where only the last frame is known), else the last frame's value."""
+    if summary.get("size_change_late") is not None:
+        return summary["size_change_late"], summary.get("size_change_late_std") or 0.0
+    return summary.get("particle_size_change"), 0.0
+
+
 def plot_size_change(summaries: list[dict]):
-    """Fig. 6 style: the largest fragment's particle-size change vs eta from every run, one panel per
-    angle, markers by mass ratio, constructive (m_lf > m_t) blue and destructive orange."""
+    """Fig. 6 style: the largest fragment's particle-size change (mean over the last 10 % of the run,
+    a bar of one standard deviation of its frames there) vs eta from every run, one panel per angle,
+    markers by mass ratio, constructive (m_lf > m_t) blue and destructive orange, unsettled hollow."""
     angles = sorted({s["theta_deg"] for s in summaries})
-    fig, axes = plt.subplots(1, len(angles), figsize=(4.0 * len(angles), 3.6), squeeze=False, sharey=True)
+    fig, axes = plt.subplots(1, len(angles), figsize=(4.4 * len(angles), 3.8), squeeze=False, sharey=True, sharex=True)
     for ax, angle in zip(axes[0], angles):
-        mine = [s for s in summaries if s["theta_deg"] == angle]
+        mine = [s for s in summaries if s["theta_deg"] == angle and size_change_value(s)[0] is not None]
         for ratio in sorted({round(s["mass_ratio"], 2) for s in mine}):
             runs = [s for s in mine if round(s["mass_ratio"], 2) == ratio]
             for constructive, colour in ((True, "C0"), (False, "C1")):
                 chosen = [s for s in runs if (s["largest_mass_ratio"] > 1) == constructive]
-                if chosen:
-                    ax.plot([s["eta"] for s in chosen], [s["particle_size_change"] for s in chosen], linestyle="",
-                            marker=RATIO_MARKERS.get(ratio, "D"), color=colour, alpha=0.8,
-                            label=f"m_p/m_t = {ratio:g}, {'constructive' if constructive else 'destructive'}")  # fmt: skip
+                if not chosen:
+                    continue
+                values = [size_change_value(s) for s in chosen]
+                marker = RATIO_MARKERS.get(ratio, "D")
+                ax.errorbar([s["eta"] for s in chosen], [v for v, _ in values], yerr=[e for _, e in values], linestyle="",
+                            color=colour, alpha=0.8, capsize=2)  # fmt: skip
+                for settled in (True, False):
+                    mark = [(s, v) for s, (v, _) in zip(chosen, values) if (s.get("settled") is not False) == settled]
+                    if mark:
+                        kind = "constructive" if constructive else "destructive"
+                        ax.plot([s["eta"] for s, _ in mark], [v for _, v in mark], linestyle="", marker=marker, color=colour,
+                                mfc=colour if settled else "white", label=f"m_p/m_t = {ratio:g}, {kind}" + ("" if settled else ", not settled"))  # fmt: skip
         ax.axhline(0.0, color="0.6", linewidth=0.6)
         ax.set_xscale("log")
         ax.set_xlabel("eta = KE / |U|")
         ax.set_title(f"theta = {angle:g} deg")
-        ax.legend(fontsize=7)
-    axes[0][0].set_ylabel("mean particle mass change of the largest fragment [%]")
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
+    axes[0][0].set_ylabel("largest fragment's mean grain mass change [%]")
     return fig
 
 
