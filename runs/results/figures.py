@@ -1,6 +1,8 @@
 """Draw docs/validation.md's figures from the committed paper runs (runs/results/fig*/).
 
     python runs/results/figures.py          # from the repository root; writes docs/figures/validation-*.png
+    python runs/results/figures.py --runs   # also each run's own figures and each experiment's
+                                            # cross-run figures, in place (not committed)
 
 Reads only what the sweeps kept (summary.json and analysis.h5 of each run) and the paper's piles.
 """
@@ -8,6 +10,7 @@ Reads only what the sweeps kept (summary.json and analysis.h5 of each run) and t
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -18,7 +21,16 @@ import numpy as np  # noqa: E402
 
 import decco_warp as dw  # noqa: E402
 from decco_warp.analysis import scaling  # noqa: E402
-from decco_warp.analysis.figures import SIZE_LABELS, plot_size_change, realization_points, save  # noqa: E402
+from decco_warp.analysis.figures import (  # noqa: E402
+    ETA_LABELS,
+    SIZE_LABELS,
+    draw_points,
+    draw_run,
+    plot_size_change,
+    realization_points,
+    save,
+    write_cross_run,
+)
 from decco_warp.analysis.runs import read_analysis  # noqa: E402
 from decco_warp.collision import pile_radius  # noqa: E402
 
@@ -44,32 +56,31 @@ RATIOS = ((0.1, "1/10"), (0.25, "1/4"), (1.0, "1"))
 ANGLES = (0.0, 22.0, 44.0)
 
 
-def ls12_curve(summary: dict, etas: np.ndarray) -> np.ndarray:
-    """The LS12 law's m_lf/m_t along eta for the piles and angle of one run (KE scales with eta)."""
+def ls12_curves(summary: dict, etas: np.ndarray, x: str = "eta_self") -> dict[str, np.ndarray]:
+    """LS12 along eta (in the reading ``x``) for the piles and angle of one run, KE scaling with eta:
+    the small-body law (c* = 5), its band (c* = 3 and 7) and the planets' fit (c* = 1.9)."""
     target = dw.load_pile(PILES / "target5000.h5")
     ratio = round(summary["mass_ratio"], 2)
     projectile = dw.load_pile(PILES / f"{PROJECTILES[ratio]}.h5")
     m_t, m_p = target.total_mass, projectile.total_mass
     reduced = m_t * m_p / (m_t + m_p)
-    kinetic_per_eta = 0.5 * reduced * summary["speed"] ** 2 / summary["eta"]
+    kinetic_per_eta = 0.5 * reduced * summary["speed"] ** 2 / summary[x]
     collision = {"target_mass": m_t, "projectile_mass": m_p, "target_radius": pile_radius(target),
                  "projectile_radius": pile_radius(projectile), "theta_deg": summary["theta_deg"]}  # fmt: skip
-    return np.array([scaling.largest_mass_ratio({**collision, "kinetic_energy": kinetic_per_eta * e}) for e in etas])
+    curves = {}
+    for column, law, c_star in scaling.LAW_COLUMNS:
+        curves[column] = np.array([scaling.largest_mass_ratio({**collision, "kinetic_energy": kinetic_per_eta * e}, law=law, c_star=c_star) for e in etas])
+    return curves
 
 
-def draw_points(ax, summaries: list[dict], metric: str, colour: str, label: str, shift: float = 1.0) -> None:
-    """Each point's mean (marker and line), every realization faintly, a bar from the smallest to the
-    largest; ``shift`` multiplies eta, to set families at the same eta side by side."""
-    points = [{**p, "eta": p["eta"] * shift} for p in realization_points(summaries, metric)]
-    etas, means = [p["eta"] for p in points], [p["mean"] for p in points]
-    spread = [[m - p["low"] for m, p in zip(means, points)], [p["high"] - m for m, p in zip(means, points)]]
-    ax.errorbar(etas, means, yerr=spread, marker="o", color=colour, capsize=3, label=label)
-    several = [p for p in points if len(p["values"]) > 1]
-    ax.plot([p["eta"] for p in several for _ in p["values"]], [v for p in several for v in p["values"]], ".", color=colour, alpha=0.35)
+def points_of(summaries: list[dict], metric: str, x: str = "eta_self", shift: float = 1.0) -> list[dict]:
+    """:func:`realization_points` with eta multiplied by ``shift`` (families at one eta set side by side)."""
+    return [{**p, "eta": p["eta"] * shift} for p in realization_points(summaries, metric, x)]
 
 
-def largest_fragment():
-    """Fig. 3: nine panels, angles by row and mass ratios by column, beside the LS12 law."""
+def largest_fragment(x: str = "eta_self"):
+    """Fig. 3 against eta in the reading ``x``: nine panels, angles by row and mass ratios by column,
+    beside the LS12 small-body law with its band and the planets' fit."""
     fig, axes = plt.subplots(3, 3, figsize=(13, 10.5), sharex=True, sharey="col")
     etas = np.geomspace(0.3, 15, 200)
     summaries = [r["summary"] for r in runs("fig3")]
@@ -78,22 +89,24 @@ def largest_fragment():
             ax = axes[row][col]
             mine = [s for s in summaries if round(s["mass_ratio"], 2) == ratio and s["theta_deg"] == angle]
             if mine:
-                draw_points(ax, mine, "largest_mass_ratio", "C0", "decco-warp (mean, range of realizations)")
-                ax.plot(etas, ls12_curve(mine[0], etas), "--", color="C1", label="LS12 universal law (small bodies)")
+                curves = ls12_curves(mine[0], etas, x)
+                ax.fill_between(etas, curves["ls12_band_low"], curves["ls12_band_high"], color="C1", alpha=0.15, linewidth=0,
+                                label="LS12 small bodies, c* = 3 to 7")  # fmt: skip
+                ax.plot(etas, curves["ls12_largest_mass_ratio"], "--", color="C1", label="LS12 small bodies, c* = 5")
+                ax.plot(etas, curves["ls12_planets_largest_mass_ratio"], ":", color="0.4", label="LS12 planets, c* = 1.9")
+                draw_points(ax, points_of(mine, "largest_mass_ratio", x), "C0", "decco-warp (mean, range of realizations; hollow: not settled)")
             else:
                 ax.text(0.5, 0.5, "not run", transform=ax.transAxes, ha="center", color="0.5")
-            if (ratio, angle) == (0.25, 22.0):  # the Fig. 8 runs: the same set-ups, stepped in another layout
-                fig8 = [r["summary"] for r in runs("fig8")]
-                ax.plot([x["eta"] for x in fig8], [x["largest_mass_ratio"] for x in fig8], "x", color="C2", label="Fig. 8 runs (fused layout)")
-                ax.legend(fontsize=7, loc="lower left")
             ax.axhline(1.0, color="0.6", linewidth=0.6)
             ax.set_xscale("log")
             ax.set_title(f"m_p/m_t = {label}, theta = {angle:g} deg", fontsize=10)
             if row == 2:
-                ax.set_xlabel("eta = KE / |U|")
+                ax.set_xlabel(ETA_LABELS[x])
             if col == 0:
                 ax.set_ylabel("m_lf / m_t")
-    axes[0][0].legend(fontsize=7, loc="lower left")  # merged runs sit top left, the law's tail bottom right
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, bbox_to_anchor=(0.5, -0.005))
+    fig.subplots_adjust(bottom=0.1)
     return fig
 
 
@@ -102,25 +115,44 @@ def size_change():
     return plot_size_change([r["summary"] for r in runs("fig3")])
 
 
+KINDS = ("none", "parallel", "anti-parallel", "perpendicular")
+
+
 def spins():
-    """Fig. 9: equal masses head-on, m_lf/m_t vs eta per kind of spin; the bars span the runs that the
-    kind consolidates (axis pairs and realizations)."""
+    """Fig. 9: equal masses head-on. Left, m_lf/m_t vs eta per kind of spin (the bars span the runs
+    that the kind consolidates: axis pairs and realizations); right, each run against the spins'
+    shear of the first contact (the relative surface speed there), a marker per kind."""
     spinning = [r["summary"] for r in runs("fig9")]
     still = [r["summary"] for r in runs("fig3", 1.0) if r["summary"]["theta_deg"] == 0 and r["summary"]["eta"] >= 2.9]
-    fig, ax = plt.subplots(figsize=(6.4, 4.4))
-    for k, kind in enumerate(("none", "parallel", "anti-parallel", "perpendicular")):
+    loose = [r["summary"] for r in runs("spin_friction")]
+    fig, (ax, shear) = plt.subplots(1, 2, figsize=(12.0, 4.6))
+    for k, kind in enumerate(KINDS):
         mine = still if kind == "none" else [s for s in spinning if s.get("spin_kind") == kind]
         if mine:
-            draw_points(ax, mine, "largest_mass_ratio", f"C{k}", "no spin" if kind == "none" else f"{kind} spins", 1 + 0.025 * k)
+            draw_points(ax, points_of(mine, "largest_mass_ratio", "eta", 1 + 0.025 * k), f"C{k}", "no spin" if kind == "none" else f"{kind} spins")
         # spin_friction.toml: the same set-up at eta 3 without friction, to see whether friction hides the spin
-        loose = [r["summary"] for r in runs("spin_friction") if r["summary"].get("spin_kind") == kind]
+        without = [s for s in loose if s.get("spin_kind") == kind]
         label = "open squares: without friction (mu_k = mu_r = 0)" if k == 0 else None
-        ax.plot([s["eta"] * (1 + 0.025 * k) for s in loose], [s["largest_mass_ratio"] for s in loose], "s", mfc="none", color=f"C{k}", label=label)
+        ax.plot([s["eta"] * (1 + 0.025 * k) for s in without], [s["largest_mass_ratio"] for s in without], "s", mfc="none", color=f"C{k}", label=label)
     ax.set_xscale("log")
     ax.set_xlabel("eta = KE / |U| (spinning kinds set 2.5 % apart to be seen)")
     ax.set_ylabel("m_lf / m_t")
     ax.set_title("equal masses, head-on, spins at half breakup")
     ax.legend(fontsize=8)
+    markers = dict(zip(KINDS, "osD^"))
+    etas = sorted({round(s["eta"]) for s in spinning})
+    for e, colour in zip(etas, ("C0", "C1", "C2", "C3")):
+        reference = np.mean([s["largest_mass_ratio"] for s in still if round(s["eta"]) == e])
+        for kind in KINDS:
+            mine = [s for s in (still if kind == "none" else spinning) if round(s["eta"]) == e and (s.get("spin_kind") or "none") == kind]
+            if mine:
+                shear.plot([s["contact_surface_speed"] / 100.0 for s in mine], [s["largest_mass_ratio"] - reference for s in mine],
+                           linestyle="", marker=markers[kind], color=colour, alpha=0.8, label=f"eta {e}, {kind}")  # fmt: skip
+    shear.axhline(0.0, color="0.6", linewidth=0.6)
+    shear.set_xlabel("relative surface speed from the spins at the first contact [m/s]")
+    shear.set_ylabel("m_lf / m_t minus the no-spin mean at its eta")
+    shear.set_title("by the shear of the first contact")
+    shear.legend(fontsize=7, ncol=1, loc="center left", bbox_to_anchor=(1.01, 0.5))
     return fig
 
 
@@ -175,9 +207,22 @@ def overlaps():
     return fig
 
 
+def run_figures() -> None:
+    """Each committed run's own figures into its figures/, each experiment's cross-run ones into its figures/."""
+    for folder in sorted(p for p in RESULTS.iterdir() if p.is_dir()):
+        found = runs(folder.name)
+        for run in found:
+            draw_run(read_analysis(run["dir"] / "analysis.h5"), run["dir"])
+        write_cross_run(folder, [r["summary"] for r in found])
+        print(f"drew {folder.relative_to(ROOT)}: {len(found)} runs")
+
+
 def main() -> None:
+    if "--runs" in sys.argv[1:]:
+        run_figures()
     for name, fig in [
-        ("validation-largest-fragment", largest_fragment()),
+        ("validation-largest-fragment", largest_fragment("eta_self")),
+        ("validation-largest-fragment-eta-all", largest_fragment("eta_all")),
         ("validation-size-change", size_change()),
         ("validation-spins", spins()),
         ("validation-stress-shares", stress_shares()),
