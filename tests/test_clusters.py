@@ -211,3 +211,27 @@ def test_the_smoothed_density_on_a_warp_device_equals_numpys_and_finds_the_same_
         on_gpu, in_numpy = dw.find_clusters(state, min_members=50, device=device), dw.find_clusters(state, min_members=50)
         assert len(on_gpu) == len(in_numpy) == 2
         assert all(np.array_equal(a.members, b.members) for a, b in zip(on_gpu, in_numpy))
+
+
+def test_screening_lone_seeds_changes_no_cluster(piles, monkeypatch):
+    """Seeds screened out as standing alone (touching and binding nobody) would fall short anyway:
+    the finder with the screen finds the same clusters, member for member, as without it, on a pile
+    with a receding one, slow and fast escapers, and a sparse cluster behind a dense group."""
+    from decco_warp.analysis import clusters as finder
+
+    target, projectile = piles
+    distance = 3 * (pile_radius(target) + pile_radius(projectile))
+    state = _combine(
+        target,
+        _moved(projectile, (distance, 0, 0), (3 * _escape_speed(target, distance), 0, 0)),
+        _escapers(target, 40, 2.0, seed=3),
+        _escapers(target, 40, 0.7, seed=5),
+        _moved(_sparse_and_dense(offset=(4e7, 0, 0), velocity=(45.0, 0, 0)), (50 * distance, 0, 0), (0, 0, 0)),
+    )
+    screened = dw.find_clusters(state, min_members=20)
+    assert finder._alone(state.positions, state.velocities, state.masses, state.radii,
+                         finder.contact_graph(state.positions, state.radii), dw.G_CGS).sum() >= 40  # fmt: skip
+    monkeypatch.setattr(finder, "_alone", lambda x, *rest: np.zeros(len(x), dtype=bool))
+    plain = dw.find_clusters(state, min_members=20)
+    assert [c.members.tolist() for c in screened] == [c.members.tolist() for c in plain]
+    assert len(plain) >= 2
