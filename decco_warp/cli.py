@@ -28,6 +28,7 @@ EXIT_INPUT = 2  # bad input: nothing was run or written
 EXIT_STOPPED = 3  # SIGINT/SIGTERM: checkpoint written, resumable
 EXIT_BLOW_UP = 4  # non-finite values or runaway overlaps: the last good checkpoint is kept
 EXIT_OUTPUT = 5  # writing the run folder failed (disk full): the last checkpoint is intact
+EXIT_NOT_SETTLED = 6  # resume --until-settled reached its step limit with the outcome still changing: the run is whole
 
 
 def fail(message: str, code: int = EXIT_INPUT) -> None:
@@ -540,15 +541,67 @@ def _check(spec: dict) -> None:
 def resume(
     run_dir: Path = typer.Argument(..., help="Run folder to continue."),
     steps: Optional[int] = typer.Option(None, "--steps", help="New total number of steps (to extend a run)."),
+    until_settled: bool = typer.Option(
+        False, "--until-settled", help="Extend the run until its outcome is settled (docs/model.md), at most to --max-steps."
+    ),
+    max_steps: Optional[int] = typer.Option(
+        None, "--max-steps", help="With --until-settled: the most steps the run may reach (default: 4 times its steps now)."
+    ),
+    min_members: int = typer.Option(50, "--min-members", help="With --until-settled: smallest cluster, as for analyze."),
     rerun: Optional[str] = RerunOption,
     rerun_every: Optional[int] = RerunEveryOption,
     device: Optional[str] = DeviceOption,
 ) -> None:
-    """Continue a stopped or killed run from its last checkpoint."""
+    """Continue a stopped or killed run from its last checkpoint (or extend it, with --steps or --until-settled)."""
     from .run import prepare_resume
 
-    result = _run_with_progress(prepare_resume, run_dir, steps=steps, device=device, rerun=rerun, rerun_every=rerun_every)
+    if not until_settled:
+        if max_steps is not None:
+            fail("--max-steps goes with --until-settled")
+        result = _run_with_progress(prepare_resume, run_dir, steps=steps, device=device, rerun=rerun, rerun_every=rerun_every)
+        _report(result)
+        return
+    if steps is not None:
+        fail("give --steps or --until-settled, not both")
+    if min_members < 1 or (max_steps is not None and max_steps < 1):
+        fail("--min-members and --max-steps must be >= 1")
+    _resume_until_settled(run_dir, max_steps, min_members, device, rerun, rerun_every)
+
+
+#: ``resume --until-settled`` extends a run by this fraction of its steps at a time.
+SETTLE_EXTENSION = 0.25
+
+
+def _resume_until_settled(run_dir: Path, max_steps: int | None, min_members: int, device, rerun, rerun_every) -> None:
+    """Finish the run, then judge its late window; while not settled, extend it by SETTLE_EXTENSION
+    of its steps (at most to ``max_steps``) and judge again."""
+    from .analysis.runs import late_verdict
+    from .io import FileFormatError
+    from .run import prepare_resume
+
+    def verdict() -> dict:
+        try:
+            return late_verdict(run_dir, min_members=min_members, device=device)
+        except (FileFormatError, OSError) as error:
+            fail(f"{run_dir}: cannot judge whether the run is settled: {error}")
+
+    if not (run_dir / "trajectory.h5").is_file():
+        fail(f"{run_dir} does not exist or holds no trajectory.h5" if run_dir.is_dir() or not run_dir.exists() else f"{run_dir} is not a run folder")
+    result = _run_with_progress(prepare_resume, run_dir, device=device, rerun=rerun, rerun_every=rerun_every)  # its own steps first
     _report(result)
+    judged = verdict()
+    limit = max_steps if max_steps is not None else 4 * judged["steps"]
+    while not judged["settled"]:
+        typer.echo(f"{run_dir}: not settled at step {judged['steps']} (t {judged['time']:.6g} s): {judged['settled_note']}")
+        if judged["steps"] >= limit:
+            fail(f"{run_dir} is not settled at step {judged['steps']}, the limit; raise --max-steps to run it on", code=EXIT_NOT_SETTLED)
+        target = min(limit, judged["steps"] + max(1, int(SETTLE_EXTENSION * judged["steps"])))
+        typer.echo(f"{run_dir}: extending to step {target}")
+        result = _run_with_progress(prepare_resume, run_dir, steps=target, device=device, rerun=rerun, rerun_every=rerun_every)
+        _report(result)
+        judged = verdict()
+    typer.echo(f"{run_dir}: settled at step {judged['steps']} (t {judged['time']:.6g} s): {judged['settled_note']}; "
+               f"decco-warp analyze {run_dir} analyses it whole")  # fmt: skip
 
 
 # --- bench -------------------------------------------------------------------------------

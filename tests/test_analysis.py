@@ -227,3 +227,25 @@ def test_analyze_of_a_set_of_runs_makes_the_cross_run_table_and_figures(sweep):
 def test_analyze_refuses_a_folder_without_runs(tmp_path):
     result = cli("analyze", str(tmp_path))
     assert result.returncode == 2 and "no trajectory.h5" in result.stderr
+
+
+def test_resume_until_settled_extends_a_run_only_while_its_outcome_changes(tmp_path):
+    """A run whose outcome holds still over its last 10 % is left as it is; one that cannot settle
+    (no cluster of a million grains) is extended by a quarter of its steps at a time, to --max-steps,
+    then ends with exit 6 and the numbers; its trajectory holds every step it was given."""
+    result = cli("simulate", "--name", "a", "--eta", "0.5", "--steps", "400", "--output-every", "20", "--out", str(tmp_path), "--device", "cpu")
+    assert result.returncode == 0, result.stderr
+    import shutil
+
+    shutil.copytree(tmp_path / "a", tmp_path / "b")
+    result = cli("resume", str(tmp_path / "a"), "--until-settled", "--min-members", "20")
+    assert result.returncode == 0, result.stderr
+    assert "settled at step 400" in result.stdout and "extending" not in result.stdout
+    result = cli("resume", str(tmp_path / "b"), "--until-settled", "--min-members", "1000000", "--max-steps", "600")
+    assert result.returncode == 6, result.stderr
+    assert "extending to step 500" in result.stdout and "extending to step 600" in result.stdout
+    assert "not settled at step 600" in result.stderr and "raise --max-steps" in result.stderr
+    assert dw.read_trajectory(tmp_path / "b" / "trajectory.h5")["step"][-1] == 600
+    for args, message in ((["--until-settled", "--steps", "500"], "not both"), (["--max-steps", "500"], "goes with --until-settled")):
+        result = cli("resume", str(tmp_path / "a"), *args)
+        assert result.returncode == 2 and message in result.stderr

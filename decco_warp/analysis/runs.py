@@ -54,22 +54,25 @@ SETTLED_TOLERANCE = 0.01
 SETTLED_MIN_FRAMES = 3
 
 
-def late_window(time: np.ndarray) -> np.ndarray:
-    """Indices of the frames in the last LATE_FRACTION of the run's simulated time."""
+def late_window(time: np.ndarray, start: float | None = None) -> np.ndarray:
+    """Indices of the frames (at ``time``) in the last LATE_FRACTION of the run's simulated time,
+    which began at ``start`` (default: the first frame's time)."""
     time = np.asarray(time, dtype=float)
     if time.size == 0:
         return np.zeros(0, dtype=np.int64)
-    return np.flatnonzero(time >= time[-1] - LATE_FRACTION * (time[-1] - time[0]))
+    start = time[0] if start is None else start
+    return np.flatnonzero(time >= time[-1] - LATE_FRACTION * (time[-1] - start))
 
 
-def late_statistics(frames: dict, target_mass: float | None = None) -> dict:
+def late_statistics(frames: dict, target_mass: float | None = None, start: float | None = None) -> dict:
     """Over the late window of a run's analysed frames: the mean and spread (standard deviation) of
     each size change, the range of m_lf/m_t, and the verdict ``settled`` with its ``settled_note``.
 
     The fragment set counted is the clusters of at least SETTLED_TOLERANCE of the target's mass
     (``target_mass``, with the frames' ``cluster_mass``); without those, every cluster, so that one
-    of ~``min_members`` grains gaining and losing a member counts as a change."""
-    late = late_window(frames["time"])
+    of ~``min_members`` grains gaining and losing a member counts as a change.  ``start``: when the
+    run began (default: the first frame's time)."""
+    late = late_window(frames["time"], start)
     ratio = np.asarray(frames["largest_mass_ratio"], dtype=float)[late]
     if "cluster_mass" in frames and target_mass:
         fragments = (np.asarray(frames["cluster_mass"])[late] >= SETTLED_TOLERANCE * target_mass).sum(axis=1)
@@ -216,6 +219,35 @@ def _padded(rows: list[np.ndarray]) -> np.ndarray:
     return out
 
 
+def _analyse_frames(data: dict, frames: list[int], target_mass: float, min_members: int, G, device, progress=None) -> tuple[dict, dict]:
+    """The /frames series of the trajectory ``data``'s frames ``frames`` (and the last one's full result)."""
+    series: dict[str, list] = {name: [] for name in FRAME_SERIES}
+    n_clusters, cluster_masses = [], []
+    result = None
+    for done, frame in enumerate(frames):
+        result = analyse_snapshot(snapshot_state(data, frame), target_mass, min_members, G, device)
+        for name in FRAME_SERIES:
+            series[name].append(result[name])
+        n_clusters.append(len(result["clusters"]))
+        cluster_masses.append(np.array([c["mass"] for c in result["clusters"]]))
+        if progress is not None:
+            progress(done + 1, len(frames))
+    arrays = {"step": data["step"][frames], "time": data["time"][frames], **{name: np.array(values) for name, values in series.items()}}
+    arrays.update(clusters=np.array(n_clusters), cluster_mass=_padded(cluster_masses))
+    return arrays, result
+
+
+def late_verdict(run_dir, min_members: int = 50, device: str | None = None) -> dict:
+    """:func:`late_statistics` of a run as its trajectory stands, from the frames of its late window
+    only (what ``resume --until-settled`` asks after each extension); writes nothing."""
+    data = read_trajectory(Path(run_dir) / "trajectory.h5")
+    target_mass = float(data["static"]["mass"][data["static"]["pile_id"] == 0].sum())
+    G = data["parameters"].get("spec", {}).get("params", {}).get("G")
+    frames, _ = _analyse_frames(data, late_window(data["time"]).tolist(), target_mass, min_members, G, device)
+    late = late_statistics(frames, target_mass, start=float(data["time"][0]))
+    return {"steps": int(data["step"][-1]), "time": float(data["time"][-1]), **late}
+
+
 def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, device: str | None = None) -> dict:
     """Analyse every ``every``-th frame of a run (and always the last); write analysis.h5 and summary.json.
     ``device``: as for :func:`analyse_snapshot`."""
@@ -231,17 +263,7 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
     if frames[-1] != len(data["step"]) - 1:
         frames.append(len(data["step"]) - 1)
 
-    series: dict[str, list] = {name: [] for name in FRAME_SERIES}
-    n_clusters, cluster_masses = [], []
-    for done, frame in enumerate(frames):
-        result = analyse_snapshot(snapshot_state(data, frame), target_mass, min_members, G, device)
-        for name in FRAME_SERIES:
-            series[name].append(result[name])
-        n_clusters.append(len(result["clusters"]))
-        cluster_masses.append(np.array([c["mass"] for c in result["clusters"]]))
-        if progress is not None:
-            progress(done + 1, len(frames))
-    final = result
+    series, final = _analyse_frames(data, frames, target_mass, min_members, G, device, progress)
 
     obs = data["observables"]
     # Trajectories written before decco-warp 0.2 have no deepest_overlap series.
@@ -252,13 +274,7 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
     l_scale = float(np.linalg.norm(orbital, axis=1).sum() + np.linalg.norm(first.inertia[:, None] * first.omegas, axis=1).sum())
     classes = int(static["species"].max()) + 1
     analysis = {
-        "frames": {
-            "step": data["step"][frames],
-            "time": data["time"][frames],
-            **{name: np.array(values) for name, values in series.items()},
-            "clusters": np.array(n_clusters),
-            "cluster_mass": _padded(cluster_masses),
-        },
+        "frames": series,
         "conservation": {
             "time": data["time"],
             "momentum_drift": np.linalg.norm(obs["momentum"] - obs["momentum"][0], axis=1) / p_scale,
