@@ -29,6 +29,7 @@ import os
 import tempfile
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
 import h5py
@@ -332,6 +333,27 @@ def load_pile(path) -> State:
 # --- trajectories (H5MD) -----------------------------------------------------------
 
 
+#: Units of the trajectory's /observables (the attribute "unit" of each value; docs/data.md).
+OBSERVABLE_UNITS = {
+    "kinetic_translational": "erg",
+    "kinetic_rotational": "erg",
+    "potential": "erg",
+    "elastic": "erg",
+    "total_energy": "erg",
+    "dissipated_sliding": "erg",
+    "dissipated_rolling": "erg",
+    "dissipated_hysteresis": "erg",
+    "integration_error": "erg",
+    "momentum": "g cm s-1",
+    "angular_momentum": "g cm2 s-1",
+    "number_of_contacts": "1",
+    "max_overlap": "cm",
+    "deepest_overlap": "1 (of the smaller radius of the pair)",
+    "deepest_overlap_pair": "particle index",
+    "stress_share": "1 (100 N_top / N per size class)",
+}
+
+
 def _time_series(group: h5py.Group, name: str, shape: tuple, dtype) -> None:
     element = group.create_group(name)
     element.create_dataset("step", shape=(0,), maxshape=(None,), dtype=np.int64, chunks=(1024,))
@@ -339,6 +361,8 @@ def _time_series(group: h5py.Group, name: str, shape: tuple, dtype) -> None:
     element["time"].attrs["unit"] = "s"
     chunk = (1, *shape) if shape and int(np.prod(shape)) > 64 else (256, *shape)
     element.create_dataset("value", shape=(0, *shape), maxshape=(None, *shape), dtype=dtype, chunks=chunk)
+    if name in OBSERVABLE_UNITS and group.name == "/observables":
+        element["value"].attrs["unit"] = OBSERVABLE_UNITS[name]
 
 
 class Trajectory:
@@ -631,8 +655,51 @@ def check_complete(path, what: str) -> None:
         raise FileFormatError(f"{what} {path} is truncated ({size} of {end} bytes)")
 
 
-def read_trajectory(path) -> dict:
-    """A finished or running trajectory as NumPy arrays: steps, times, particle frames, observables, parameters.
+@dataclass(frozen=True)
+class TrajectoryData:
+    """A trajectory read into memory (:func:`read_trajectory`): F frames of N particles.
+
+    Fields are read as attributes (``data.time``) or, as a dict's, by name (``data["time"]``).
+    docs/data.md lists every dataset of the file these come from.
+
+    >>> data = read_trajectory("runs/out/default/trajectory.h5")
+    >>> data.time[-1], data.particles["position"].shape     # [s], (F, N, 3) [cm]
+    """
+
+    step: np.ndarray
+    """(F,) int64: the step of each frame."""
+    time: np.ndarray
+    """(F,) float64 [s]: simulated time of each frame."""
+    particles: dict
+    """Per frame and particle: ``position`` (F, N, 3) [cm], ``velocity`` (F, N, 3) [cm s-1],
+    ``omega`` (F, N, 3) [rad s-1] (each sphere's angular velocity), ``stress`` (F, N) [cm] (a
+    particle's largest overlap over its contacts)."""
+    static: dict
+    """Per particle, constant: ``radius`` (N,) [cm], ``mass`` (N,) [g], ``species`` (N,) (size
+    class, 0 the smallest radius), ``pile_id`` (N,) (0 target, 1 projectile)."""
+    observables: dict
+    """Per frame, the system's series (units: OBSERVABLE_UNITS): energies [erg] and the ledger's
+    dissipated channels, momentum [g cm s-1], angular momentum [g cm2 s-1], contacts, overlaps,
+    stress shares by size class."""
+    observable_step: dict
+    """The step of each observable's frames (the same as ``step`` for a run of this version)."""
+    parameters: dict
+    """The run's set-up: ``spec`` (the resolved specification), ``collision`` (eta in both
+    readings, speed [cm s-1], radii [cm], masses [g], energies [erg], spins [rad s-1], ...),
+    ``stability`` (the margins and predicted overlap), the pile files and their SHA-256."""
+
+    def __getitem__(self, name: str):
+        if name not in self.__dataclass_fields__:
+            raise KeyError(name)
+        return getattr(self, name)
+
+    def keys(self):
+        return self.__dataclass_fields__.keys()
+
+
+def read_trajectory(path) -> TrajectoryData:
+    """A finished or running trajectory as NumPy arrays (:class:`TrajectoryData`): steps, times,
+    particle frames, observables, parameters.
 
     Of a run still being written, the frames whole in every element so far (a frame being
     written is left out)."""
@@ -640,16 +707,15 @@ def read_trajectory(path) -> dict:
         particles = f["particles/all"]
         elements = [particles[name] for name in Trajectory.PARTICLE_ELEMENTS] + list(f["observables"].values())
         n = min(_complete_frames(element, np.iinfo(np.int64).max) for element in elements)
-        result = {
-            "step": particles["position/step"][:n],
-            "time": particles["position/time"][:n],
-            "particles": {name: particles[name]["value"][:n] for name in Trajectory.PARTICLE_ELEMENTS},
-            "static": {name: particles[name][()] for name in ("radius", "mass", "species", "pile_id")},
-            "observables": {name: group["value"][:n] for name, group in f["observables"].items()},
-            "observable_step": {name: group["step"][:n] for name, group in f["observables"].items()},
-            "parameters": read_dict(f["parameters"]),
-        }
-    return result
+        return TrajectoryData(
+            step=particles["position/step"][:n],
+            time=particles["position/time"][:n],
+            particles={name: particles[name]["value"][:n] for name in Trajectory.PARTICLE_ELEMENTS},
+            static={name: particles[name][()] for name in ("radius", "mass", "species", "pile_id")},
+            observables={name: group["value"][:n] for name, group in f["observables"].items()},
+            observable_step={name: group["step"][:n] for name, group in f["observables"].items()},
+            parameters=read_dict(f["parameters"]),
+        )
 
 
 def last_frame_step(path) -> int:

@@ -1,6 +1,7 @@
 """Run analysis: paper metrics on constructed examples, analysis.h5, figures and cross-run output."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -187,7 +188,7 @@ def test_analysis_keeps_velocities_labels_per_frame_and_units(sweep):
         assert frames["label"].shape == (5, final["positions"].shape[0]) and frames["label"].compression == "gzip"
         np.testing.assert_array_equal(frames["label"][-1], final["label"][()])
         assert final["velocities"].shape == final["positions"].shape and final["omegas"].shape == final["positions"].shape
-        assert final["velocities"].attrs["unit"] == "cm/s" and frames["time"].attrs["unit"] == "s"
+        assert final["velocities"].attrs["unit"] == "cm s-1" and frames["time"].attrs["unit"] == "s"
         members = final["label"][()] == 0
         composition = np.bincount(final["size_class"][()][members], minlength=frames["largest_composition"].shape[1])
         np.testing.assert_array_equal(frames["largest_composition"][-1], composition)
@@ -249,3 +250,63 @@ def test_resume_until_settled_extends_a_run_only_while_its_outcome_changes(tmp_p
     for args, message in ((["--until-settled", "--steps", "500"], "not both"), (["--max-steps", "500"], "goes with --until-settled")):
         result = cli("resume", str(tmp_path / "a"), *args)
         assert result.returncode == 2 and message in result.stderr
+
+
+def test_ellipsoid_axes_of_a_uniform_ellipsoid_of_grains():
+    """Grains filling an ellipsoid of semi-axes 3, 2, 1 (x 1e7 cm) uniformly: the inertia-equivalent
+    ellipsoid has those axes (to the sampling noise of 20 000 grains and their own radius)."""
+    from decco_warp.analysis.runs import ellipsoid_axes
+
+    rng = np.random.default_rng(2)
+    points = rng.uniform(-1, 1, size=(60_000, 3))
+    points = points[(points**2).sum(axis=1) <= 1][:20_000] * np.array([3e7, 2e7, 1e7])
+    radii = np.full(len(points), 1e4)
+    grains = dw.State.from_arrays(points, np.zeros_like(points), np.zeros_like(points), radii, np.full(len(points), 1e15))
+    np.testing.assert_allclose(ellipsoid_axes(grains), [3e7, 2e7, 1e7], rtol=0.02)
+
+
+def test_the_fragment_catalogue_lists_every_cluster_of_every_analysed_frame(sweep):
+    from decco_warp.analysis.runs import read_catalogue
+
+    out, _ = sweep
+    analysis = read_analysis(out / "eta1" / "analysis.h5")
+    table = read_catalogue(out / "eta1" / "analysis.h5")
+    frames = analysis["frames"]
+    counts = np.bincount(np.searchsorted(frames["step"], table["step"]), minlength=len(frames["step"]))
+    np.testing.assert_array_equal(counts, frames["clusters"])
+    last = table["step"] == frames["step"][-1]
+    np.testing.assert_allclose(table["mass"][last], analysis["final"]["mass"], rtol=1e-12)
+    np.testing.assert_array_equal(np.stack([table[f"class_{k}"][last] for k in range(3)], axis=1), analysis["final"]["composition"])
+    assert np.all((0 < table["axis_ratio_c_a"]) & (table["axis_ratio_c_a"] <= table["axis_ratio_b_a"]) & (table["axis_ratio_b_a"] <= 1))
+    # A pile's bulk density lies below its grains' 2.7 g/cm^3 (voids) and well above nothing.
+    assert np.all((0.5 < table["bulk_density"]) & (table["bulk_density"] < 2.7))
+    np.testing.assert_allclose(table["spin_rate"], np.linalg.norm(np.stack([table[f"omega_{a}"] for a in "xyz"], axis=1), axis=1))
+    # Every grain is in a cluster or free, per size class.
+    members = np.stack([table[f"class_{k}"] for k in range(3)], axis=1)
+    per_frame = np.zeros((len(frames["step"]), 3), dtype=np.int64)
+    np.add.at(per_frame, np.searchsorted(frames["step"], table["step"]), members)
+    np.testing.assert_array_equal((per_frame + frames["free_composition"]).sum(axis=1), analysis["final"]["label"].size)
+
+
+def test_every_dataset_of_a_run_carries_its_unit_and_data_md_lists_it(sweep):
+    """trajectory.h5's particle and observable values and every analysis.h5 dataset have a "unit"
+    attribute, and docs/data.md names each of them; read_trajectory's fields read as attributes."""
+    import h5py
+
+    out, _ = sweep
+    data_md = (Path(__file__).parent.parent / "docs" / "data.md").read_text()
+    with h5py.File(out / "eta1" / "trajectory.h5", "r") as f:
+        for name, group in f["observables"].items():
+            assert "unit" in group["value"].attrs, name
+            assert f"`{name}`" in data_md, name
+        for name in ("position", "velocity", "omega", "stress"):
+            assert "unit" in f["particles/all"][name]["value"].attrs and f"`{name}`" in data_md
+    with h5py.File(out / "eta1" / "analysis.h5", "r") as f:
+        for group in f.values():
+            for name, dataset in group.items():
+                assert "unit" in dataset.attrs, f"{group.name}/{name}"
+                assert f"`{group.name[1:]}/{name}`" in data_md or f"`{name}`" in data_md, f"{group.name}/{name}"
+        for key in f.attrs:
+            assert f"`{key}`" in data_md, f"summary column {key}"
+    data = dw.read_trajectory(out / "eta1" / "trajectory.h5")
+    assert data.time is data["time"] and data.particles["position"].shape[1:] == (data.static["radius"].size, 3)

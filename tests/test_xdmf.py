@@ -127,7 +127,7 @@ def test_export_of_a_killed_or_running_run_covers_its_whole_frames(tmp_path):
     assert [float(grid.find("Time").get("Value")) for grid in grids] == [0.0, 0.4, 0.8]
     result = export(str(tmp_path / "trajectory.h5"), "--xdmf")  # killed: its writer's flags are cleared
     assert result.exit_code == 0 and "still going" not in result.stdout, result.stderr
-    data = dw.read_trajectory(trajectory)
+    data = {**dw.read_trajectory(trajectory)}  # a plain dict of its fields, to cut
     for name in ("time", "step"):
         data[name] = data[name][:3]
     assert_reads_back(tmp_path / "trajectory.xdmf", {**data, "particles": {k: v[:3] for k, v in data["particles"].items()}})

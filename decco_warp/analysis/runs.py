@@ -170,6 +170,19 @@ def snapshot_state(data: dict, frame: int) -> State:
     )
 
 
+def ellipsoid_axes(part: State) -> np.ndarray:
+    """Semi-axes a >= b >= c [cm] of the uniform ellipsoid with a cluster's mass and inertia tensor
+    about its centre of mass (the grains' own spins' inertia included): from the principal moments
+    I1 <= I2 <= I3, a^2 = 5 (I2 + I3 - I1) / (2 M) and so on."""
+    x = part.positions - part.centre_of_mass
+    m = part.masses
+    r2 = (x * x).sum(axis=1)
+    tensor = ((m * r2).sum() + part.inertia.sum()) * np.eye(3) - np.einsum("i,ij,ik->jk", m, x, x)
+    i1, i2, i3 = np.linalg.eigvalsh(tensor)
+    scale = 5.0 / (2.0 * part.total_mass)
+    return np.sqrt(np.maximum(scale * np.array([i2 + i3 - i1, i1 + i3 - i2, i1 + i2 - i3]), 0.0))
+
+
 def analyse_snapshot(state: State, target_mass: float, min_members: int = 50, G: float | None = None, device: str | None = None) -> dict:
     """Clusters of one snapshot with their properties, and the headline numbers (``device``: where
     the cluster finder's smoothed density is summed, see :func:`.clusters.smoothed_density`).
@@ -190,6 +203,7 @@ def analyse_snapshot(state: State, target_mass: float, min_members: int = 50, G:
                 "velocity": cluster.velocity,
                 "spin": part.spin(),
                 "composition": np.bincount(part.size_class, minlength=classes)[:classes],
+                "axes": ellipsoid_axes(part),
             }
         )
     largest = rows[0] if rows else None
@@ -198,6 +212,7 @@ def analyse_snapshot(state: State, target_mass: float, min_members: int = 50, G:
         "label": label,
         "largest_mass_ratio": largest["mass"] / target_mass if largest else 0.0,
         "largest_composition": largest["composition"] if largest else np.zeros(classes, dtype=np.int64),
+        "free_composition": np.bincount(state.size_class[label < 0], minlength=classes)[:classes],
         "particle_size_change": (
             particle_size_change(largest["mass"], largest["members"], state.total_mass, state.n) if largest else np.nan
         ),
@@ -208,7 +223,49 @@ def analyse_snapshot(state: State, target_mass: float, min_members: int = 50, G:
 
 
 #: The per-frame series of :func:`analyse_snapshot` that analysis.h5 keeps under /frames.
-FRAME_SERIES = ("largest_mass_ratio", "particle_size_change", "particle_size_change_mass_weighted", "largest_composition", "label")
+FRAME_SERIES = (
+    "largest_mass_ratio", "particle_size_change", "particle_size_change_mass_weighted", "largest_composition", "free_composition", "label",
+)  # fmt: skip
+
+
+def catalogue_rows(frame: int, step: int, time_s: float, clusters: list[dict]) -> dict[str, list]:
+    """The fragment catalogue's rows of one analysed frame: a row per cluster (largest first)."""
+    rows: dict[str, list] = {name: [] for name in CATALOGUE_UNITS}
+    for k, c in enumerate(clusters):
+        a, b, axis_c = c["axes"]
+        omega = np.asarray(c["spin"], dtype=float)
+        values = {
+            "frame": frame, "step": step, "time": time_s, "cluster": k, "mass": c["mass"], "members": c["members"],
+            "com": c["com"], "velocity": c["velocity"], "omega": omega, "spin_rate": float(np.linalg.norm(omega)),
+            "semi_axes": np.array([a, b, axis_c]), "axis_ratio_b_a": b / a if a > 0 else np.nan,
+            "axis_ratio_c_a": axis_c / a if a > 0 else np.nan,
+            "bulk_density": c["mass"] / (4.0 / 3.0 * np.pi * a * b * axis_c) if a * b * axis_c > 0 else np.nan,
+            "composition": c["composition"],
+        }  # fmt: skip
+        for name, value in values.items():
+            rows[name].append(value)
+    return rows
+
+
+#: The fragment catalogue (analysis.h5 /catalogue): a row per cluster per analysed frame, columns
+#: with their units.  ``read_catalogue`` gives it as columns for ``pandas.DataFrame``.
+CATALOGUE_UNITS = {
+    "frame": "index of the trajectory's frame",
+    "step": "1",
+    "time": "s",
+    "cluster": "rank in its frame, largest first",
+    "mass": "g",
+    "members": "particles",
+    "com": "cm",
+    "velocity": "cm s-1",
+    "omega": "rad s-1 (rigid-body spin about the centre of mass)",
+    "spin_rate": "rad s-1",
+    "semi_axes": "cm (a >= b >= c of the ellipsoid with the cluster's inertia)",
+    "axis_ratio_b_a": "1",
+    "axis_ratio_c_a": "1",
+    "bulk_density": "g cm-3 (mass over that ellipsoid's volume)",
+    "composition": "particles per size class",
+}
 
 
 def _padded(rows: list[np.ndarray]) -> np.ndarray:
@@ -223,17 +280,23 @@ def _analyse_frames(data: dict, frames: list[int], target_mass: float, min_membe
     """The /frames series of the trajectory ``data``'s frames ``frames`` (and the last one's full result)."""
     series: dict[str, list] = {name: [] for name in FRAME_SERIES}
     n_clusters, cluster_masses = [], []
+    catalogue: dict[str, list] = {name: [] for name in CATALOGUE_UNITS}
     result = None
     for done, frame in enumerate(frames):
         result = analyse_snapshot(snapshot_state(data, frame), target_mass, min_members, G, device)
         for name in FRAME_SERIES:
             series[name].append(result[name])
+        for name, values in catalogue_rows(frame, int(data["step"][frame]), float(data["time"][frame]), result["clusters"]).items():
+            catalogue[name] += values
         n_clusters.append(len(result["clusters"]))
         cluster_masses.append(np.array([c["mass"] for c in result["clusters"]]))
         if progress is not None:
             progress(done + 1, len(frames))
     arrays = {"step": data["step"][frames], "time": data["time"][frames], **{name: np.array(values) for name, values in series.items()}}
     arrays.update(clusters=np.array(n_clusters), cluster_mass=_padded(cluster_masses))
+    classes = int(data["static"]["species"].max()) + 1
+    empty = {"com": (0, 3), "velocity": (0, 3), "omega": (0, 3), "semi_axes": (0, 3), "composition": (0, classes)}
+    result = dict(result or {}, catalogue={name: np.array(values) if values else np.zeros(empty.get(name, (0,))) for name, values in catalogue.items()})
     return arrays, result
 
 
@@ -275,6 +338,7 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
     classes = int(static["species"].max()) + 1
     analysis = {
         "frames": series,
+        "catalogue": final.pop("catalogue"),
         "conservation": {
             "time": data["time"],
             "momentum_drift": np.linalg.norm(obs["momentum"] - obs["momentum"][0], axis=1) / p_scale,
@@ -389,17 +453,19 @@ ANALYSIS_UNITS = {
     "ledger_closure": "1 (of |U| + KE at t = 0)",
     "deepest": "1 (of the smaller radius of the pair)",
     "positions": "cm",
-    "velocities": "cm/s",
-    "omegas": "rad/s",
+    "velocities": "cm s-1",
+    "omegas": "rad s-1",
     "radius": "cm",
     "particle_mass": "g",
     "size_class": "index (0: smallest radius)",
     "mass": "g",
     "members": "particles",
     "com": "cm",
-    "velocity": "cm/s",
-    "spin": "rad/s",
+    "velocity": "cm s-1",
+    "spin": "rad s-1",
     "composition": "particles per size class",
+    "free_composition": "particles per size class, in no cluster",
+    "cluster_mass": "g (each frame's clusters, largest first; 0: none)",
     **{name: "erg" for name in ENERGY_SERIES},
 }
 
@@ -421,7 +487,7 @@ def write_analysis(path: Path, analysis: dict) -> None:
                 value = np.asarray(value)
                 compress = {"compression": "gzip", "compression_opts": 6, "shuffle": True} if value.size > 64 else {}
                 dataset = g.create_dataset(key, data=value, **compress)
-                unit = ANALYSIS_UNITS.get(key)
+                unit = CATALOGUE_UNITS.get(key) if group == "catalogue" else ANALYSIS_UNITS.get(key)
                 if unit is not None:
                     dataset.attrs["unit"] = unit
 
@@ -431,6 +497,26 @@ def read_analysis(path) -> dict:
         result = {name: {key: f[name][key][()] for key in f[name]} for name in f}
         result["summary"] = {key: (v.item() if isinstance(v, np.generic) else v) for key, v in f.attrs.items()}
     return result
+
+
+def read_catalogue(path) -> dict[str, np.ndarray]:
+    """The fragment catalogue of an analysis.h5 as columns, vectors split into _x, _y, _z and the
+    composition into class_0, class_1, ...: ``pandas.DataFrame(read_catalogue(path))`` is a table
+    with a row per cluster per analysed frame (units: CATALOGUE_UNITS, docs/data.md)."""
+    with h5py.File(path, "r") as f:
+        if "catalogue" not in f:
+            raise KeyError(f"{path} has no fragment catalogue (analysed by a decco-warp older than the catalogue: analyze it again)")
+        columns = {}
+        for name in CATALOGUE_UNITS:
+            values = f["catalogue"][name][()]
+            if name == "composition":
+                columns.update({f"class_{k}": values[:, k] for k in range(values.shape[1])})
+            elif values.ndim == 2:
+                suffixes = ("a", "b", "c") if name == "semi_axes" else ("x", "y", "z")
+                columns.update({f"{name}_{axis}": values[:, k] for k, axis in enumerate(suffixes)})
+            else:
+                columns[name] = values
+    return columns
 
 
 def refresh_summary(run_dir, collision: dict, params: dict, predicted_overlap=None) -> dict:
