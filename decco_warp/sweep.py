@@ -13,6 +13,9 @@ A sweep specification is a run specification plus a ``[sweep]`` table:
                                    # 20 000 particles stepped together, larger ones alone; 1 on a CPU)
     realizations = 1               # runs of each grid point: the piles as their files hold them, then
                                    # turned by random rotations (orientation_seed derived from the point)
+    [sweep.pile_alternatives]      # piles that may stand in for a pile in realizations 1, 2, ...: the same
+                                   # recipe formed from other seeds; each realization draws its pair from its seed
+    "runs/paper/piles/target5000.h5" = ["runs/paper/piles/target5000_s11.h5", "runs/paper/piles/target5000_s12.h5"]
     [sweep.grid]                   # the cartesian product of these lists
     "collision.eta" = [0.5, 1.0, 2.0]
     "collision.theta_deg" = [0.0, 22.0]
@@ -43,6 +46,8 @@ from concurrent.futures import Future, ProcessPoolExecutor
 from datetime import datetime, timezone
 from pathlib import Path
 
+import numpy as np
+
 from . import spec as specs
 from ._version import __version__
 
@@ -56,9 +61,10 @@ AUTO_ENSEMBLE = 8
 #: 1.25x at 10 000 (a sweep: 4 runs of 10 000 in 505 s against ~668 s one at a time), 1.14x at
 #: 16 384 and 1.09x at 20 000, as one system fills more of the GPU.  Larger runs go alone.
 ENSEMBLE_MAX_PARTICLES = 20_000
-SWEEP_KEYS = {"name", "out", "min_members", "analyse_every", "keep_trajectory", "ensemble", "realizations", "grid"}
+SWEEP_KEYS = {"name", "out", "min_members", "analyse_every", "keep_trajectory", "ensemble", "realizations", "grid", "pile_alternatives"}
 SUMMARY_FIELDS = [
     "run", "status", "reason", "n_particles", "mass_ratio", "theta_deg", "eta", "speed", "spin_kind", "realization", "orientation_seed",
+    "target_pile", "projectile_pile",
     "k_in", "dt", "steps",
     "largest_mass_ratio", "settled", "settled_note", "largest_mass_ratio_late_low", "largest_mass_ratio_late_high",
     "ls12_largest_mass_ratio", "ls12_band_low", "ls12_band_high", "ls12_planets_largest_mass_ratio",
@@ -121,6 +127,7 @@ def load_sweep(path) -> tuple[dict, list[dict]]:
     seeded = "orientation_seed" in raw.get("collision", {}) or any(("collision", "orientation_seed") in keys for keys, _ in axes)
     if settings["realizations"] > 1 and seeded:
         raise specs.SpecError("[sweep] realizations choose each run's orientation_seed: leave [collision] orientation_seed out")
+    alternatives = _pile_alternatives(sweep.get("pile_alternatives", {}), settings["realizations"])
     runs = []
     for combination in itertools.product(*(values for _, values in axes)):
         run = {table: dict(values) for table, values in raw.items() if isinstance(values, dict)}
@@ -134,25 +141,53 @@ def load_sweep(path) -> tuple[dict, list[dict]]:
         run.setdefault("run", {})
         run["run"]["out"] = str(Path(settings["out"]) / name)
         for k in range(settings["realizations"]):
-            runs.append(specs.resolve_spec(realization(run, "_".join(labels), k)))
+            runs.append(specs.resolve_spec(realization(run, "_".join(labels), k, alternatives)))
     names = [r["run"]["name"] for r in runs]
     if len(set(names)) != len(names):
         raise specs.SpecError("[sweep.grid] gives two runs the same name; use values that differ in their text")
     return settings, runs
 
 
-def realization(point: dict, name: str, k: int) -> dict:
+def realization(point: dict, name: str, k: int, alternatives: dict[str, list[str]] | None = None) -> dict:
     """The ``k``-th realization of a grid point (raw tables): k = 0 is the point as written (its piles
     as their files hold them: the runs a sweep without realizations makes, under the same name); k >= 1
     is named NAME_rK and turns the piles by random rotations whose seed is drawn from the point's
     piles and collision and from k alone, so that adding points, realizations or other [params]
-    never changes a run already made, and runs that differ only in their [params] share orientations."""
+    never changes a run already made, and runs that differ only in their [params] share orientations.
+    With ``alternatives`` (a pile file -> the files that may stand in for it), realization k >= 1
+    also draws each pile from the file and its alternatives with that seed."""
     run = {table: dict(values) for table, values in point.items()}
     run["run"]["name"] = name
     if k > 0:
         run["run"]["name"] = f"{name}_r{k}"
-        run.setdefault("collision", {})["orientation_seed"] = orientation_seed_of(specs.resolve_spec(point), k)
+        resolved = specs.resolve_spec(point)
+        seed = orientation_seed_of(resolved, k)
+        run.setdefault("collision", {})["orientation_seed"] = seed
+        if alternatives:
+            draw = np.random.default_rng(seed)
+            for which in ("target", "projectile"):
+                original = resolved["piles"][which]
+                choices = [original, *alternatives.get(original, [])]
+                run.setdefault("piles", {})[which] = choices[int(draw.integers(len(choices)))]
     return run
+
+
+def _pile_alternatives(table, realizations: int) -> dict[str, list[str]]:
+    """``[sweep.pile_alternatives]`` checked: each key a pile file, each value a non-empty list of other
+    pile files, all of them existing; only with realizations > 1."""
+    if not isinstance(table, dict):
+        raise specs.SpecError("[sweep.pile_alternatives] must be a table: a pile file = [files that may stand in for it]")
+    if table and realizations < 2:
+        raise specs.SpecError("[sweep.pile_alternatives] serve realizations 1, 2, ...: set [sweep] realizations >= 2")
+    checked = {}
+    for pile, others in table.items():
+        if not isinstance(others, list) or not others or not all(isinstance(o, str) and o.strip() for o in others):
+            raise specs.SpecError(f"[sweep.pile_alternatives] {pile!r} must be a non-empty list of pile files")
+        for path in (pile, *others):
+            if not path.startswith("builtin:") and not Path(path).expanduser().is_file():
+                raise specs.SpecError(f"[sweep.pile_alternatives] pile file {path} does not exist; build it first (decco-warp piles)")
+        checked[pile] = list(others)
+    return checked
 
 
 def orientation_seed_of(spec: dict, k: int) -> int:

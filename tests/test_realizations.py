@@ -155,6 +155,36 @@ def test_realizations_expand_each_point_with_seeds_that_adding_never_changes(tmp
         load_sweep(path)
 
 
+def test_realizations_draw_their_piles_from_the_alternatives_with_their_seed(tmp_path):
+    """[sweep.pile_alternatives]: realization 0 keeps the files as written; each later one draws
+    its target and projectile from the file and its stand-ins with its own seed (every stand-in
+    drawn over enough realizations, the draw repeatable and independent of other points)."""
+    import shutil
+
+    from decco_warp.run import builtin_pile
+
+    piles = {}
+    for which in ("target", "projectile"):
+        piles[which] = [str(tmp_path / f"{which}{k}.h5") for k in range(3)]
+        for path in piles[which]:
+            shutil.copy(builtin_pile(which), path)
+    table = "".join(f'"{files[0]}" = {files[1:]!r}\n'.replace("'", '"') for files in piles.values())
+    text = SWEEP.format(out=tmp_path, k=12, etas="[0.5, 1.0]") + "[sweep.pile_alternatives]\n" + table
+    text += f'[piles]\ntarget = "{piles["target"][0]}"\nprojectile = "{piles["projectile"][0]}"\n'
+    path = tmp_path / "s.toml"
+    path.write_text(text)
+    _, runs = load_sweep(path)
+    first = {r["run"]["name"]: (r["piles"]["target"], r["piles"]["projectile"]) for r in runs}
+    assert first["eta0.5"] == (piles["target"][0], piles["projectile"][0])
+    drawn = [first[f"eta0.5_r{k}"] for k in range(1, 12)]
+    assert {t for t, _ in drawn} == set(piles["target"]) and {p for _, p in drawn} == set(piles["projectile"])
+    assert load_sweep(path)[1] == runs  # the same draw every time
+    for written, instead in (("realizations = 12", "realizations = 1"), (f'"{piles["target"][2]}"]', f'"{tmp_path}/nowhere.h5"]')):
+        path.write_text(text.replace(written, instead))
+        with pytest.raises(specs.SpecError, match="pile_alternatives"):
+            load_sweep(path)
+
+
 def test_a_sweep_of_realizations_adds_runs_to_those_made_and_records_them(tmp_path):
     """A sweep without realizations, its run kept without a checkpoint (as runs/results keeps them);
     the same sweep with two realizations skips that run and adds the second, both in its table."""

@@ -379,6 +379,7 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
         predicted_overlap=data["parameters"].get("stability", {}).get("predicted_overlap"),
         min_members=min_members,
         every=every,
+        piles=spec.get("piles"),
     )
     # Kept with the summary, so that a sweep that finds the run analysed reports what it took then.
     summary["analysis_seconds"] = round(time.perf_counter() - started, 3)
@@ -389,9 +390,10 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
 
 
 def summarise(name: str, analysis: dict, collision: dict, params: dict, n_particles: int, target_mass: float,
-              predicted_overlap, min_members: int, every: int) -> dict:  # fmt: skip
+              predicted_overlap, min_members: int, every: int, piles: dict | None = None) -> dict:  # fmt: skip
     """A run's summary row from its analysis (the /frames, /conservation, /energy and /overlap
-    series) and its set-up (``collision``: the set-up's metadata; ``params``: the resolved [params]).
+    series) and its set-up (``collision``: the set-up's metadata; ``params``: the resolved [params];
+    ``piles``: the resolved [piles], whose files name the realization's piles).
     Numbers that do not exist (no fragment to measure, a record without the set-up) are None."""
     frames = analysis["frames"]
     depth = np.asarray(analysis["overlap"]["deepest"], dtype=float)
@@ -408,6 +410,8 @@ def summarise(name: str, analysis: dict, collision: dict, params: dict, n_partic
         **contact_motion(collision),
         "orientation_seed": int(collision["orientation_seed"]) if "orientation_seed" in collision else None,
         "mass_ratio": (collision["projectile_mass"] / collision["target_mass"]) if "projectile_mass" in collision else None,
+        "target_pile": Path(piles["target"]).stem if piles else None,
+        "projectile_pile": Path(piles["projectile"]).stem if piles else None,
         "target_mass": target_mass,
         "k_in": params.get("k_in"),
         "dt": params.get("dt"),
@@ -519,7 +523,7 @@ def read_catalogue(path) -> dict[str, np.ndarray]:
     return columns
 
 
-def refresh_summary(run_dir, collision: dict, params: dict, predicted_overlap=None) -> dict:
+def refresh_summary(run_dir, collision: dict, params: dict, predicted_overlap=None, piles: dict | None = None) -> dict:
     """A run's summary recomputed from its analysis.h5 alone (no trajectory: a run kept without one)
     and its set-up's ``collision`` metadata (set up again from its spec.toml: ``plan_start``), with
     every column of today's :func:`summarise`; analysis.h5 is rewritten (compressed, with units) and
@@ -539,6 +543,7 @@ def refresh_summary(run_dir, collision: dict, params: dict, predicted_overlap=No
         predicted_overlap=old.get("predicted_overlap", predicted_overlap),
         min_members=int(old["min_members"]),
         every=int(old["analyse_every"]),
+        piles=piles,
     )
     if summary["particle_size_change_mass_weighted"] is None and "label" in final:
         # The last frame's fragment is known (final/label); grains of one density weigh as R^3.

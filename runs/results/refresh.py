@@ -39,7 +39,7 @@ def refresh_run(run_dir: Path) -> dict:
     collision = plan.state.metadata
     if abs(collision["speed"] / recorded["speed"] - 1) > SPEED_TOLERANCE:
         raise SystemExit(f"{run_dir}: the set-up made again gives speed {collision['speed']!r}, the run recorded {recorded['speed']!r}")
-    return refresh_summary(run_dir, collision, plan.spec["params"])
+    return refresh_summary(run_dir, collision, plan.spec["params"], piles=plan.spec["piles"])
 
 
 def refresh_experiment(folder: Path) -> None:
