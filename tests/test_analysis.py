@@ -205,9 +205,8 @@ def test_a_summary_is_refreshed_from_analysis_h5_alone(sweep, tmp_path):
     kept = tmp_path / "eta1"
     shutil.copytree(out / "eta1", kept, ignore=shutil.ignore_patterns("trajectory.h5", "checkpoint.h5"))
     before = json.loads((kept / "summary.json").read_text())
-    collision = dw.read_trajectory(out / "eta1" / "trajectory.h5")["parameters"]["collision"]
-    params = dw.read_trajectory(out / "eta1" / "trajectory.h5")["parameters"]["spec"]["params"]
-    after = refresh_summary(kept, collision, params)
+    parameters = dw.read_trajectory(out / "eta1" / "trajectory.h5").parameters
+    after = refresh_summary(kept, parameters["collision"], parameters["spec"]["params"], piles=parameters["spec"]["piles"])
     assert _strict((kept / "summary.json").read_text()) == after
     for key, value in before.items():
         assert after[key] == (pytest.approx(value, rel=1e-12) if isinstance(value, float) else value), key
