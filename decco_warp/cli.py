@@ -32,9 +32,15 @@ EXIT_NOT_SETTLED = 6  # resume --until-settled reached its step limit with the o
 
 
 def fail(message: str, code: int = EXIT_INPUT) -> None:
-    """Print a one-line error and exit: bad input is exit code 2, never a traceback."""
-    typer.echo(f"decco-warp: error: {message}", err=True)
+    """Print a one-line error and exit: bad input is exit code 2, never a traceback.  A requested
+    stop (exit 3: SIGINT or SIGTERM, a checkpoint written) is no error, and its line says so."""
+    typer.echo(f"decco-warp: {'' if code == EXIT_STOPPED else 'error: '}{message}", err=True)
     raise typer.Exit(code)
+
+
+def missing(path: Path, what: str = "run folder") -> str:
+    """The line for a path that is not a ``what``: "does not exist" when nothing is there."""
+    return f"{path} does not exist" if not path.exists() else f"{path} is not a {what}"
 
 
 def write_failed(error: OSError, kept: str) -> None:
@@ -210,6 +216,7 @@ def pile(
     precision: str = typer.Option(PILE_DEFAULTS["precision"], "--precision", help="mixed or float64."),
     gravity: str = typer.Option(PILE_DEFAULTS["gravity"], "--gravity", help="all-pairs, tree, or auto: the tree from the size where it is the faster on this device (params.TREE_FROM)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing pile file."),
+    check: bool = typer.Option(False, "--check", help="Check the inputs and estimate the steps and wall time of the formation, form nothing."),
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Build a rubble pile: seed spheres without overlaps, collapse under gravity until settled."""
@@ -220,10 +227,11 @@ def pile(
     from .forming import TYPICAL_FORMATION_STEPS, FormationStopped, form_pile_file, partial_path
     from .pile import FormationError, check_formation_inputs
 
-    if out.exists() and not overwrite:
+    if out.exists() and not overwrite and not check:
         fail(f"{out} already exists; use --overwrite to replace it")
     try:
-        check_destination(out, "pile file")
+        if not check:
+            check_destination(out, "pile file")
         chosen = resolve_device(device)
         if gravity not in GRAVITY_CHOICES:
             raise ValueError(f"--gravity must be one of {', '.join(GRAVITY_CHOICES)}; got {gravity!r}")
@@ -235,6 +243,14 @@ def pile(
         note = check_fits(particles, gravity, chosen, min(max_steps, TYPICAL_FORMATION_STEPS), "forming a pile")
     except (DeviceError, InputError, ValueError) as error:
         fail(str(error))
+    if check:
+        from .costs import formation_cost
+
+        typer.echo(f"pile: {particles} particles of radii {', '.join(f'{r / 1e5:g}' for r in size_radii)} km (equal mass per size class), "
+                   f"density {density:g} g/cm^3, seed {seed}, {gravity} gravity on {chosen}")  # fmt: skip
+        typer.echo(f"cost: {formation_cost(particles, size_radii, density, fill, dt, gravity, chosen)}; gives up at {max_steps} steps")
+        typer.echo(f"verdict: would form {out}" + (" (replacing it)" if out.exists() else ""))
+        return
     if note:
         typer.echo(f"{note} (a pile takes ~{TYPICAL_FORMATION_STEPS:.0e} steps to settle)", err=True)
     typer.echo(f"forming a {particles}-particle pile on {chosen} (seed {seed}, {gravity} gravity)", err=True)
@@ -293,9 +309,13 @@ def pile(
         fail(*failed)
     from .collision import pile_radius
 
+    import numpy as np
+
     meta = formed.metadata
+    radii = np.unique(formed.radii)  # one per size class, smallest first
+    classes = ", ".join(f"{int(c)} of radius {r / 1e5:g} km" for c, r in zip(meta["size_counts"], radii))
     typer.echo(
-        f"wrote {out}: {formed.n} particles {tuple(int(c) for c in meta['size_counts'])}, "
+        f"wrote {out}: {formed.n} particles ({classes}), "
         f"mass {formed.total_mass:.4g} g, radius {pile_radius(formed) / 1e5:.4g} km, U {meta['potential']:.4g} erg; "
         f"{meta['formation_steps']} steps ({meta['formation_time']:.4g} s simulated) in "
         f"{meta['formation_wall_seconds']:.1f} s (this session: {timing[0]})"
@@ -513,6 +533,7 @@ def _number_or_auto(text: Optional[str], option: str):
 
 def _check(spec: dict) -> None:
     """``simulate --check``: the run's plan (its set-up, margins, predicted deepest overlap and resolved choices); exit 2 if it would be refused."""
+    from .costs import run_cost
     from .device import DeviceError
     from .io import FileFormatError
     from .plan import RunError, plan_start
@@ -524,6 +545,7 @@ def _check(spec: dict) -> None:
         fail(str(error))
     for line in [*plan.lines(), *plan.choices()]:
         typer.echo(line)
+    typer.echo(f"cost: {run_cost(plan.state.n, plan.params.gravity, plan.device, plan.steps)}")
     if plan.run_dir.exists():
         typer.echo(f"note: run folder {plan.run_dir} exists (resume continues it, --overwrite replaces it)")
     if not plan.stability.stable and not plan.allow_unstable:
@@ -586,7 +608,7 @@ def _resume_until_settled(run_dir: Path, max_steps: int | None, min_members: int
             fail(f"{run_dir}: cannot judge whether the run is settled: {error}")
 
     if not (run_dir / "trajectory.h5").is_file():
-        fail(f"{run_dir} does not exist or holds no trajectory.h5" if run_dir.is_dir() or not run_dir.exists() else f"{run_dir} is not a run folder")
+        fail(f"{run_dir} holds no trajectory.h5" if run_dir.is_dir() else missing(run_dir))
     result = _run_with_progress(prepare_resume, run_dir, device=device, rerun=rerun, rerun_every=rerun_every)  # its own steps first
     _report(result)
     judged = verdict()
@@ -770,7 +792,7 @@ def analyze(
         if not runs:
             fail(f"{path} holds no trajectory.h5 and no run folders with one")
     else:
-        fail(f"{path} is not a run folder")
+        fail(missing(path))
     if follow and len(runs) > 1:
         fail("--follow follows one run folder")
     try:  # every destination, and no other analysis of these runs, before the first analysis
@@ -845,6 +867,26 @@ def analyze(
         typer.echo(f"{path}: summary.csv and cross-run figures in {path / 'figures'}")
 
 
+def _run_check(spec: dict) -> str:
+    """One line of ``sweep --check`` for a run still to make: its set-up's margins, its predicted
+    deepest overlap and its cost on this machine's device, or why it would be refused."""
+    from .costs import run_cost
+    from .device import DeviceError
+    from .io import FileFormatError
+    from .plan import RunError, plan_start
+    from .spec import SpecError
+
+    try:
+        plan = plan_start(spec)
+    except (SpecError, RunError, FileFormatError, DeviceError, ValueError) as error:
+        return f"REFUSED: {error}"
+    stability = plan.stability
+    refused = "" if stability.stable or plan.allow_unstable else f"; REFUSED: {'; '.join(stability.problems())}"
+    return (f"eta {plan.state.metadata['eta']:.3g}, margins: stiffness {stability.stiffness_margin:.3g} (>= 1), time step "
+            f"{stability.time_step_margin:.3g} (>= 10); predicted deepest overlap {plan.forecast.fraction:.2g}; "
+            f"{run_cost(plan.state.n, plan.params.gravity, plan.device, plan.steps)}{refused}")  # fmt: skip
+
+
 def _outcome(summary: dict) -> str:
     """A run's result in one line: m_lf/m_t, the size change over the late window, the clusters,
     and whether the result is final (settled) or not, with the numbers that say so."""
@@ -895,7 +937,7 @@ def view(
 
     trajectory = path / "trajectory.h5" if path.is_dir() else path
     if not trajectory.is_file():
-        fail(f"{path} is neither a run folder nor a trajectory file")
+        fail(f"{path} does not exist" if not path.exists() else f"{path} is neither a run folder nor a trajectory file")
     try:
         chosen, address = ("save", None) if save_to is not None else parse_mode(mode)
         if chosen == "save" and save_to is None:
@@ -939,7 +981,7 @@ def export(
         fail("say what to export: --xdmf")
     trajectory = path / "trajectory.h5" if path.is_dir() else path
     if not trajectory.is_file():
-        fail(f"{path} is neither a run folder with a trajectory.h5 nor a trajectory file")
+        fail(f"{path} does not exist" if not path.exists() else f"{path} is neither a run folder with a trajectory.h5 nor a trajectory file")
     destination = trajectory.with_name(XDMF_FILE)
     running = False
     try:
@@ -1007,6 +1049,8 @@ def sweep(
         width = max(len(run["run"]["name"]) for run in runs)
         for run, state in zip(runs, states):
             typer.echo(f"  {run['run']['name']:<{width}}  {state}")
+            if not state.startswith("complete"):
+                typer.echo(f"  {'':<{width}}  {_run_check(run)}")
         return
     if workers is not None and workers < 1 or analysis_workers is not None and analysis_workers < 1:
         fail("--workers and --analysis-workers must be >= 1")

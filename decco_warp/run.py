@@ -208,7 +208,7 @@ def prepare_resume(run_dir, steps: int | None = None, device: str | None = None)
     spec_path, checkpoint_path, trajectory_path = (run_dir / n for n in (SPEC_FILE, CHECKPOINT_FILE, TRAJECTORY_FILE))
     for path in (spec_path, checkpoint_path):
         if not path.is_file():
-            raise RunError(f"{run_dir} is not a run folder: {path.name} is missing")
+            raise RunError(f"{run_dir} does not exist" if not Path(run_dir).exists() else f"{run_dir} is not a run folder: {path.name} is missing")
     if not trajectory_path.is_file():
         # A resumed run appends to its own trajectory; starting a new one would leave a run whose
         # frames begin mid-collision, which analysis would take for the whole run.
@@ -638,7 +638,7 @@ class RunStopped(RuntimeError):
 
     def __init__(self, signal_name: str, step: int, run_dir: Path):
         self.signal_name, self.step, self.run_dir = signal_name, step, run_dir
-        super().__init__(f"stopped by {signal_name} at step {step}; continue with: decco-warp resume {run_dir}")
+        super().__init__(f"stopped by {signal_name} at step {step}, a checkpoint written; continue with: decco-warp resume {run_dir}")
 
 
 def check_sanity(step: int, particles: dict) -> None:

@@ -292,6 +292,7 @@ def test_signal_stops_cleanly_and_resume_equals_an_uninterrupted_run(signal_numb
     _, stderr = process.communicate(timeout=120)
     assert process.returncode == 3, stderr
     assert f"stopped by {signal.Signals(signal_number).name}" in stderr and "decco-warp resume" in stderr
+    assert "error" not in stderr.lower()  # a stop asked for is reported as a stop, not as an error
     stopped_at = read_checkpoint(tmp_path / "stopped" / "checkpoint.h5")[0]["step"]
     assert 300 <= stopped_at < 2400
     result = cli("resume", str(tmp_path / "stopped"), "--device", "cpu")
@@ -361,3 +362,24 @@ def test_help_prints_units_and_toml_tables_as_written():
                 assert token in shown, (name, param.name, token)
                 checked += 1
     assert checked >= 5  # units of pile and simulate, the sweep's and piles' TOML tables
+
+
+def test_check_estimates_the_cost_and_a_missing_folder_does_not_exist(tmp_path):
+    """simulate --check and pile --check say what the job will cost on this device before any work,
+    from the measured rate a step (the estimate's own line, checked against the cost model); a path
+    that is not there is said not to exist."""
+    from decco_warp.costs import duration, formation_steps, step_seconds
+
+    result = cli("simulate", "--check", "--device", "cpu", "--steps", "3000", "--out", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    step = step_seconds(450, "all-pairs", "cpu")
+    assert f"cost: about {duration(3000 * step)} on cpu ({1e3 * step:.3g} ms a step x 3000 steps" in result.stdout
+    result = cli("pile", "--out", str(tmp_path / "p.h5"), "-n", "400", "--check", "--device", "cpu")
+    assert result.returncode == 0, result.stderr
+    low, high = formation_steps(400, [0.75e6, 1.5e6, 2.25e6], 2.7, 0.3, 0.04)
+    assert f"settling takes {low} to {high} steps" in result.stdout and not (tmp_path / "p.h5").exists()
+    # 400 particles settled in ~230 000 steps (docs/benchmarks.md): inside the range.
+    assert low < 230_000 < high
+    for command in (["analyze"], ["resume"], ["view"], ["export", "--xdmf"]):
+        result = cli(*command, str(tmp_path / "nowhere"))
+        assert result.returncode == 2 and f"{tmp_path / 'nowhere'} does not exist" in result.stderr, (command, result.stderr)

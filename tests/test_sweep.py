@@ -314,8 +314,14 @@ def test_sweep_check_lists_where_runs_stand_and_only_runs_a_part(tmp_path):
     assert result.returncode == 0, result.stderr
     assert list(_rows(tmp_path / "grid" / "summary.csv")) == ["eta0.5_dt0.04"]
     result = cli("sweep", str(path), "--check")
-    lines = {line.split()[0]: line.split(None, 1)[1] for line in result.stdout.splitlines()[1:]}
+    listed = [line for line in result.stdout.splitlines()[1:] if not line.startswith("   ")]
+    lines = {line.split()[0]: line.split(None, 1)[1] for line in listed}
     assert lines == {"eta0.5_dt0.04": "complete", "eta0.5_dt5": "to run", "eta1_dt0.04": "to run", "eta1_dt5": "to run"}
+    # Each run still to make: its margins, predicted overlap and cost (dt = 5 s: eq. 17's margin far below 10,
+    # run all the same under allow_unstable).
+    details = [line.strip() for line in result.stdout.splitlines()[1:] if line.startswith("   ")]
+    assert len(details) == 3 and sum("time step 0.437 (>= 10)" in d for d in details) == 2
+    assert all(d.startswith("eta ") and "predicted deepest overlap" in d and "on cpu" in d and "REFUSED" not in d for d in details)
     result = cli("sweep", str(path), "--only", "eta1_dt0*", "--workers", "1", env={**os.environ, "DECCO_LOG_EVERY": "0"})
     assert result.returncode == 0, result.stderr
     made = [int(line.split("runs, ")[1].split(" %")[0]) for line in result.stderr.splitlines() if "% of the steps made" in line]
