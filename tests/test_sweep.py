@@ -334,7 +334,7 @@ def test_sweep_check_lists_where_runs_stand_and_only_runs_a_part(tmp_path):
     spec_file.write_text(spec_file.read_text().replace("steps = 200", "steps = 400"))
     result = cli("sweep", str(path), "--check", "--only", "eta1_dt0.04")
     assert result.returncode == 0, result.stderr
-    lines = {line.split()[0]: line.split(None, 1)[1] for line in result.stdout.splitlines()[1:]}
+    lines = {line.split()[0]: line.split(None, 1)[1] for line in result.stdout.splitlines()[1:] if not line.startswith("   ")}
     assert lines == {"eta0.5_dt0.04": "complete", "eta1_dt0.04": "resumes at step 200"}
     assert "1 complete, 1 to resume, 0 to run" in result.stdout
     # The progress a sweep reports while its runs step: each run by its last checkpoint.
