@@ -1,6 +1,8 @@
-"""decco_warp.analysis.compare: intervals that cover the truth at the stated rate, the runs-needed
-formula by hand, grouping and filtering."""
+"""decco_warp.analysis.compare and ``decco-warp compare``: intervals that cover the truth at the
+stated rate, the runs-needed formula by hand, grouping, and each bad input as one line (exit 2)."""
 
+import csv
+import json
 import math
 
 import numpy as np
@@ -8,6 +10,9 @@ import pytest
 from scipy import stats
 
 from decco_warp.analysis import compare as cmp
+from decco_warp.io import json_text
+
+from helpers import cli, cli_here
 
 #: Coverage over TRIALS seeded trials must lie within this many binomial standard deviations of
 #: 95 %: sqrt(0.95 0.05 / 400) = 1.09 %, so 3 of them admit 91.7 % to 98.3 %.
@@ -120,3 +125,97 @@ def test_error_bars_are_the_mean_and_its_t_interval():
     assert bars["none"]["at"].tolist() == [6.0] and bars["none"]["mean"].tolist() == [2.0]
     assert bars["none"]["minus"] == pytest.approx([half]) and bars["none"]["plus"] == pytest.approx([half])
     assert bars["none"]["method"] == ["t"] and np.isnan(bars["parallel"]["minus"]).all()
+
+
+# --- the command -------------------------------------------------------------------------------
+
+
+def write_runs(folder, rows):
+    """A sweep's folder as analyze leaves it: a run folder with summary.json per row, and summary.csv."""
+    folder.mkdir()
+    for row in rows:
+        (folder / row["run"]).mkdir()
+        (folder / row["run"] / "summary.json").write_text(json_text({k: v for k, v in row.items() if k != "status"}))
+    with (folder / "summary.csv").open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows({k: ("" if v is None else v) for k, v in row.items()} for row in rows)
+    return folder
+
+
+@pytest.fixture
+def sweep(tmp_path):
+    """Groups 0.05 apart at eta 6 (resolved) and equal at eta 9 (not), eta as a run set up writes it."""
+    rng = np.random.default_rng(3)
+    rows = fake_rows({"none": rng.normal(1.39, 0.005, 4), "parallel": rng.normal(1.34, 0.005, 3)}, eta=6.000000000000001)
+    rows += fake_rows({"none": rng.normal(0.75, 0.05, 3), "parallel": rng.normal(0.75, 0.05, 3)}, eta=9.0)
+    return write_runs(tmp_path / "fig9", rows)
+
+
+def test_compare_end_to_end_on_run_folders_and_on_summary_csv(sweep, tmp_path):
+    out = tmp_path / "compare.json"
+    args = ["--by", "spin_kind", "--metric", "largest_mass_ratio", "--at", "eta", "--resolve", "0.01"]
+    folders = cli("compare", str(sweep), *args, "--json", str(out))
+    assert folders.returncode == 0, folders.stderr
+    lines = folders.stdout.splitlines()
+    assert lines[0] == "largest_mass_ratio by spin_kind at eta; reference: none"
+    assert lines[1] == "runs: 13 read, 13 kept"
+    at6, at9 = lines.index("eta 6:"), lines.index("eta 9:")
+    assert lines[at6 + 2].split()[:2] == ["none", "4"] and lines[at6 + 2].endswith("reference")
+    parallel = lines[at6 + 3]
+    assert parallel.split()[:2] == ["parallel", "3"] and "Welch t" in parallel and parallel.endswith("  resolved")
+    assert lines[at9 + 3].endswith("not resolved at n = 3 and 3")
+    table = json.loads(out.read_text())
+    rows = cmp.read_rows([sweep])
+    expected = cmp.compare(rows, "spin_kind", "largest_mass_ratio", at="eta", resolve=0.01).as_dict()
+    assert table == json.loads(json_text(expected))
+    assert table["points"][0]["differences"][0]["runs_needed"] == cmp.runs_needed(
+        math.sqrt(sum(g["std"] ** 2 for g in table["points"][0]["groups"]) / 2), 0.01
+    )
+    # The sweep's table gives the same numbers, from its text.
+    sheet = cli_here("compare", str(sweep / "summary.csv"), *args)
+    assert sheet.returncode == 0, sheet.stderr
+    assert sheet.stdout.splitlines()[1:] == lines[1:-1] and lines[-1] == f"wrote {out}"
+
+
+@pytest.fixture
+def bad_inputs(sweep, tmp_path):
+    """{case: (decco-warp arguments, words its error line must hold)}: each bad input of compare."""
+    base = ["--by", "spin_kind", "--metric", "largest_mass_ratio"]
+    lone = write_runs(tmp_path / "lone", fake_rows({"none": [1.0, 1.1], "parallel": [1.2]}))
+    mixed = write_runs(tmp_path / "mixed", fake_rows({"none": [1.0, 1.1]}) + fake_rows({"parallel": [1.2, 1.3]}, mass_ratio=0.25))
+    (tmp_path / "empty").mkdir()
+    return {
+        "unknown column": ([str(sweep), "--by", "spin_kind", "--metric", "largest_mass"], ["--metric largest_mass: no such column", "spin_kind"]),
+        "unknown --at": ([str(sweep), *base, "--at", "etta"], ["--at etta: no such column", "eta"]),
+        "not numeric": ([str(sweep), "--by", "spin_kind", "--metric", "eta_potential"], ["--metric eta_potential is not numeric", "'self'"]),
+        "group of one": ([str(lone), *base], ["1 group(s) of one run", "parallel", "--allow-single"]),
+        "mixed set-ups": ([str(mixed), *base], ["differ in mass_ratio (0.25, 1)", "--allow-mixed"]),
+        "no runs": ([str(tmp_path / "empty"), *base], ["holds no summary.json"]),
+        "no such path": ([str(tmp_path / "nowhere"), *base], ["does not exist"]),
+        "nothing matches": ([str(sweep), *base, "--where", "eta=12"], ["no run matches --where eta=12"]),
+        "bad --where": ([str(sweep), *base, "--where", "eta"], ["--where takes COLUMN=VALUE"]),
+        "unknown reference": ([str(sweep), *base, "--reference", "oblique"], ["--reference oblique", "none, parallel"]),
+        "read twice": ([str(sweep), str(sweep / "summary.csv"), *base], ["is read twice"]),
+    }
+
+
+def test_each_bad_comparison_is_one_line_naming_it_and_exit_2(bad_inputs):
+    for case, (args, words) in bad_inputs.items():
+        result = cli_here("compare", *args)
+        assert result.returncode == 2, (case, result.stdout, result.stderr)
+        assert len(result.stderr.splitlines()) == 1 and result.stderr.startswith("decco-warp: error: "), (case, result.stderr)
+        for word in words:
+            assert word in result.stderr, (case, word, result.stderr)
+        if case != "group of one":
+            assert result.stdout == "", case  # refused before any table
+
+
+def test_a_group_of_one_still_shows_the_rest_and_the_allow_options_accept(bad_inputs):
+    lone, _ = bad_inputs["group of one"]
+    refused = cli_here("compare", *lone)
+    assert "spread unknown: 1 run of parallel" in refused.stdout and refused.returncode == 2
+    accepted = cli_here("compare", *lone, "--allow-single")
+    assert accepted.returncode == 0 and accepted.stdout == refused.stdout
+    mixed, _ = bad_inputs["mixed set-ups"]
+    assert cli_here("compare", *mixed, "--allow-mixed").returncode == 0
