@@ -887,6 +887,64 @@ def _run_check(spec: dict) -> str:
             f"{run_cost(plan.state.n, plan.params.gravity, plan.device, plan.steps)}{refused}")  # fmt: skip
 
 
+# --- compare -------------------------------------------------------------------------------
+
+
+@app.command()
+def compare(
+    paths: List[Path] = typer.Argument(..., help="Run folders, folders of run folders (their summary.json), or sweeps' summary.csv files."),
+    by: str = typer.Option(..., "--by", help="The column whose groups are compared, e.g. spin_kind."),
+    metric: str = typer.Option(..., "--metric", help="The numeric column compared, e.g. largest_mass_ratio [its own units]."),
+    at: Optional[str] = typer.Option(None, "--at", help="Compare at each value of this column too, e.g. eta (numbers equal to 6 significant digits are one point)."),
+    reference: Optional[str] = typer.Option(
+        None, "--reference", help="The group the others are compared with (default: none for spin_kind where present, else the first group in sorted order)."
+    ),
+    resolve: Optional[float] = typer.Option(
+        None, "--resolve", metavar="DELTA", help="Difference to resolve [the metric's units] (default: each difference seen): the runs per group it needs are "
+        "n = 2 (z_0.975 + z_0.8)^2 s^2 / DELTA^2 rounded up (two-sided 5 %, power 0.8; s^2 the mean of the two groups' variances)."
+    ),
+    where: Optional[List[str]] = typer.Option(
+        None, "--where", metavar="COLUMN=VALUE[,VALUE...]",
+        help="Keep only the runs with one of these values in COLUMN (repeatable, every column must match; numbers within 1 %), e.g. --where mass_ratio=1 --where eta=3,6."
+    ),
+    allow_mixed: bool = typer.Option(
+        False, "--allow-mixed", help="Compare runs at one point that differ in a set-up column (mass_ratio, theta_deg, k_in, dt, eta_potential, n_particles) other than --by and --at."
+    ),
+    allow_single: bool = typer.Option(
+        False, "--allow-single", help="Accept groups of one run: shown without spread or interval (without it, the table is printed and the command exits 2 naming them)."
+    ),
+    json_out: Optional[Path] = typer.Option(None, "--json", help="Write the table as JSON here."),
+) -> None:
+    """Compare groups of runs: per group (and point), the mean and spread of a metric, and the
+    difference to a reference group with its 95 % interval (Welch's t for groups under 30 runs, else a
+    seeded bootstrap), a verdict, and the runs per group a difference needs.  Rows of failed runs are
+    left out."""
+    from .analysis.compare import CompareError, SingleRunGroup, compare as compare_runs, parse_where, read_rows
+    from .checks import InputError, check_destination
+
+    try:
+        if json_out is not None:
+            check_destination(json_out, "comparison table")
+        result = compare_runs(read_rows(paths), by, metric, at, reference=reference, resolve=resolve,
+                              where=parse_where(where or []), allow_mixed=allow_mixed, allow_single=allow_single)  # fmt: skip
+    except SingleRunGroup as error:  # the rest is shown, so that one sees what the runs there give
+        for line in error.comparison.lines():
+            typer.echo(line)
+        fail(str(error))
+    except (CompareError, InputError) as error:
+        fail(str(error))
+    for line in result.lines():
+        typer.echo(line)
+    if json_out is not None:
+        from .io import json_text, write_atomic
+
+        try:
+            write_atomic(json_out, json_text(result.as_dict()))
+        except OSError as error:
+            write_failed(error, f"{json_out} is not written (any earlier one is as it was); the table above is the result")
+        typer.echo(f"wrote {json_out}")
+
+
 def _outcome(summary: dict) -> str:
     """A run's result in one line: m_lf/m_t, the size change over the late window, the clusters,
     and whether the result is final (settled) or not, with the numbers that say so."""

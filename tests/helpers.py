@@ -17,6 +17,27 @@ def cli(*args, env=None, cwd=None):
     )
 
 
+def cli_here(*args) -> subprocess.CompletedProcess:
+    """Run the ``decco-warp`` console entry in this interpreter (no second of start-up for Warp's
+    import per call): the CompletedProcess that :func:`cli` would give, its exit code, stdout and stderr."""
+    import contextlib
+    import io
+
+    from decco_warp.cli import main_entry
+
+    out, err, argv = io.StringIO(), io.StringIO(), sys.argv
+    sys.argv = ["decco-warp", *args]
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            main_entry()
+        code = 0
+    except SystemExit as done:
+        code = int(done.code or 0)
+    finally:
+        sys.argv = argv
+    return subprocess.CompletedProcess(args, code, out.getvalue(), err.getvalue())
+
+
 def assert_same_run(a: dict, b: dict) -> None:
     """Two trajectories (read_trajectory) hold the same frames, bit for bit, with no frame lost or repeated."""
     assert a["step"].tolist() == b["step"].tolist()

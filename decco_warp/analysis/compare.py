@@ -1,0 +1,513 @@
+"""Does X change the outcome, and how sure are we?  Groups of runs compared with 95 % intervals.
+
+The rows are run summaries (``summary.json`` of a run folder, or the rows of a sweep's
+``summary.csv``) as plain dicts.  :func:`compare` groups them by one column (``by``: spin_kind, say)
+and optionally by a second (``at``: eta), and gives, per point and group, the metric's mean and
+spread, and for each group its difference to a reference group with a 95 % confidence interval, a
+verdict (resolved, or not at the runs there are) and the runs per group that a given difference
+needs.  :func:`error_bars` gives the same numbers as a figure's error bars.
+
+    rows = read_rows(["runs/results/fig9", "runs/results/fig3"])
+    result = compare(rows, by="spin_kind", metric="largest_mass_ratio", at="eta",
+                     where={"mass_ratio": [1], "theta_deg": [0]}, allow_single=True)
+    for line in result.lines():
+        print(line)
+
+Pure NumPy and SciPy over dicts: no Warp, no HDF5.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+from ..checks import InputError
+
+#: Intervals and verdicts are at this confidence (two-sided).
+CONFIDENCE = 0.95
+#: The runs-per-group estimate is for this power (and the two-sided 5 % of CONFIDENCE).
+POWER = 0.8
+#: Groups of at least this many runs each get a bootstrap interval, smaller ones Welch's t.  Below
+#: ~30 the bootstrap undercovers: over 1 000 trials of normal groups with a known difference (and
+#: unequal spreads), BCa covered it 90 % of the time at 10 runs a group and 93.7 % at 20, against
+#: Welch's 95 %; 94.5 % at 40.
+BOOTSTRAP_FROM = 30
+#: Bootstrap resamples, and the seed they are drawn from (each interval draws afresh from it, so
+#: that an interval does not depend on which other groups are in the table).
+RESAMPLES = 9999
+SEED = 0
+#: Numbers are the same point (``at``), group (``by``) or set-up when equal to this many significant
+#: digits: eta 3.0000000000000004 and 3.0 are one point.
+KEY_DIGITS = 6
+#: A ``where`` number picks the values within this relative tolerance: mass_ratio=0.1 picks the
+#: 1/10 runs, whose ratio is 0.10031.
+WHERE_TOLERANCE = 0.01
+#: The columns that define a set-up: rows compared at one point must agree in each of these (where
+#: present) unless it is the ``by`` or ``at`` column.  (Summaries do not record restitution or the
+#: friction coefficients yet; they are checked once they do.)
+SETUP_COLUMNS = ("mass_ratio", "theta_deg", "k_in", "dt", "eta_potential", "n_particles", "restitution", "mu_k", "mu_r")
+#: The group that ``spin_kind`` is compared against by default, where present.
+NO_SPIN = "none"
+
+
+class CompareError(InputError):
+    """A comparison that cannot be made as asked: the message (one line) says what, and what to do."""
+
+
+class UnknownColumn(CompareError):
+    """A column that no row has."""
+
+
+class MixedSetups(CompareError):
+    """Rows of one point that differ in a set-up column (``column``) other than ``by`` and ``at``."""
+
+    def __init__(self, message: str, column: str):
+        super().__init__(message)
+        self.column = column
+
+
+class SingleRunGroup(CompareError):
+    """Groups of one run (their spread is unknown); ``comparison`` holds the rest, computed."""
+
+    def __init__(self, message: str, comparison: "Comparison"):
+        super().__init__(message)
+        self.comparison = comparison
+
+
+# --- reading summaries ----------------------------------------------------------------------------
+
+SUMMARY_JSON = "summary.json"
+
+
+def read_rows(paths) -> list[dict]:
+    """The summary rows under ``paths``: each a run folder (its summary.json), a folder of run
+    folders (theirs), or a sweep's summary.csv (its rows; blank cells are None, numbers floats).
+    A run read twice (a sweep's folder and its summary.csv, say) is refused: it would count twice."""
+    rows, origin = [], {}
+    for path in map(Path, paths):
+        for identity, where, row in _rows_of(path):
+            if identity in origin:
+                raise CompareError(f"run {row.get('run', identity)} is read twice ({origin[identity]} and {where}): give each run once")
+            origin[identity] = where
+            rows.append(row)
+    if not rows:
+        raise CompareError(f"no summaries in {', '.join(map(str, paths))}")
+    return rows
+
+
+def _rows_of(path: Path) -> list[tuple[Path, str, dict]]:
+    """(identity of the run, where it was read, row) for each run at ``path``."""
+    if path.is_file() and path.suffix == ".csv":
+        try:
+            with path.open(newline="") as f:
+                table = list(csv.DictReader(f))
+        except (OSError, UnicodeDecodeError, csv.Error) as error:
+            raise CompareError(f"{path}: cannot read it as a table ({' '.join(str(error).split())})") from None
+        if not table:
+            raise CompareError(f"{path} holds no rows")
+        rows = [{key: parse_cell(text) for key, text in row.items() if key is not None} for row in table]
+        return [((path.parent / str(row.get("run", f"line {k + 2}"))).resolve(), f"{path} line {k + 2}", row) for k, row in enumerate(rows)]
+    if (path / SUMMARY_JSON).is_file():
+        summaries = [path / SUMMARY_JSON]
+    elif path.is_dir():
+        summaries = sorted(path.glob(f"*/{SUMMARY_JSON}"))
+        if not summaries:
+            raise CompareError(f"{path} holds no {SUMMARY_JSON} and no run folders with one (a sweep's table: give its summary.csv)")
+    elif not path.exists():
+        raise CompareError(f"{path} does not exist")
+    else:
+        raise CompareError(f"{path} is neither a run folder, a folder of run folders nor a summary.csv")
+    return [(summary.parent.resolve(), str(summary), _read_summary(summary)) for summary in summaries]
+
+
+def _read_summary(path: Path) -> dict:
+    try:
+        row = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as error:
+        raise CompareError(f"{path}: not a run summary ({' '.join(str(error).split())})") from None
+    if not isinstance(row, dict):
+        raise CompareError(f"{path}: not a run summary (a JSON object is expected)")
+    return row
+
+
+def parse_cell(text: str | None):
+    """A summary.csv cell (or a ``where`` value) as the value summary.json would hold: None for a
+    blank, True/False, a float for a number, else the text."""
+    if text is None or text.strip() == "":
+        return None
+    text = text.strip()
+    if text in ("True", "False"):
+        return text == "True"
+    try:
+        number = float(text)
+    except ValueError:
+        return text
+    return number if math.isfinite(number) else None
+
+
+def parse_where(texts) -> dict[str, list]:
+    """``COLUMN=VALUE[,VALUE...]`` strings as {column: values}; a column named twice takes the
+    values of both."""
+    where: dict[str, list] = {}
+    for text in texts:
+        column, equals, values = text.partition("=")
+        column = column.strip()
+        parsed = [parse_cell(v) for v in values.split(",")]
+        if not equals or not column or any(v is None for v in parsed):
+            raise CompareError(f"--where takes COLUMN=VALUE[,VALUE...], e.g. mass_ratio=1 or eta=3,6; got {text!r}")
+        where.setdefault(column, []).extend(parsed)
+    return where
+
+
+# --- values as keys ------------------------------------------------------------------------------
+
+
+def value_key(value):
+    """The value a row is grouped by: numbers to KEY_DIGITS significant digits, None for a missing
+    or non-finite one, anything else as it is."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return float(f"{value:.{KEY_DIGITS}g}") if math.isfinite(value) else None
+    return value
+
+
+def label(key) -> str:
+    """A key as printed: 3.0 as 3, text as it is."""
+    return f"{key:g}" if isinstance(key, float) else str(key)
+
+
+def _order(key):
+    """Sort key over numbers and text together: numbers first."""
+    return (1, key) if isinstance(key, str) else (0, float(key))
+
+
+def _matches(value, wanted) -> bool:
+    if isinstance(wanted, (int, float)) and not isinstance(wanted, bool):
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+        return ok and math.isclose(value, wanted, rel_tol=WHERE_TOLERANCE, abs_tol=1e-12)
+    return value == wanted
+
+
+# --- statistics --------------------------------------------------------------------------------
+
+
+def runs_needed(spread: float, delta: float, confidence: float = CONFIDENCE, power: float = POWER) -> int | None:
+    """Runs per group that resolve a difference ``delta`` between two groups of scatter ``spread``
+    (the metric's standard deviation, its units as ``delta``'s) at two-sided ``1 - confidence`` and
+    ``power``: the two-sample normal approximation n = 2 (z_(1-a/2) + z_power)^2 s^2 / delta^2,
+    rounded up, at least 2 (a group of one has no spread).  None: delta 0, never resolved."""
+    if delta == 0:
+        return None
+    z = stats.norm.ppf(0.5 + confidence / 2) + stats.norm.ppf(power)
+    return max(2, math.ceil(2 * z**2 * spread**2 / delta**2))
+
+
+def welch_interval(a: np.ndarray, b: np.ndarray, confidence: float = CONFIDENCE) -> tuple[float, float]:
+    """Welch's t interval of mean(a) - mean(b) (unequal variances, Welch-Satterthwaite degrees of
+    freedom); two groups without any scatter give the difference itself."""
+    va, vb = a.var(ddof=1) / a.size, b.var(ddof=1) / b.size
+    difference = a.mean() - b.mean()
+    if va + vb == 0:
+        return float(difference), float(difference)
+    freedom = (va + vb) ** 2 / (va**2 / (a.size - 1) + vb**2 / (b.size - 1))
+    half = stats.t.ppf(0.5 + confidence / 2, freedom) * math.sqrt(va + vb)
+    return float(difference - half), float(difference + half)
+
+
+def bootstrap_interval(samples: tuple[np.ndarray, ...], confidence: float = CONFIDENCE, resamples: int = RESAMPLES) -> tuple[float, float]:
+    """The BCa bootstrap interval of mean(samples[0]) (one sample) or of mean(samples[0]) -
+    mean(samples[1]) (two, resampled each on its own), drawn from SEED; samples without any
+    scatter give the statistic itself (BCa is undefined there)."""
+    statistic = _mean if len(samples) == 1 else _mean_difference
+    value = float(statistic(*samples, axis=-1))
+    if all(np.ptp(s) == 0 for s in samples):
+        return value, value
+    # random_state, not rng: the keyword of every SciPy from the 1.10 that pyproject admits.
+    result = stats.bootstrap(samples, statistic, n_resamples=resamples, confidence_level=confidence, vectorized=True,
+                             random_state=np.random.default_rng(SEED))  # fmt: skip
+    return float(result.confidence_interval.low), float(result.confidence_interval.high)
+
+
+def _mean(a, axis=-1):
+    return np.mean(a, axis=axis)
+
+
+def _mean_difference(a, b, axis=-1):
+    return np.mean(a, axis=axis) - np.mean(b, axis=axis)
+
+
+def mean_interval(values: np.ndarray, confidence: float = CONFIDENCE, resamples: int = RESAMPLES) -> tuple[float | None, float | None, str | None]:
+    """(low, high, method) of the ``confidence`` interval of the mean of ``values``: Student's t
+    below BOOTSTRAP_FROM values, the bootstrap from there; (None, None, None) for one value."""
+    if values.size < 2:
+        return None, None, None
+    if values.size < BOOTSTRAP_FROM:
+        half = stats.t.ppf(0.5 + confidence / 2, values.size - 1) * values.std(ddof=1) / math.sqrt(values.size)
+        return float(values.mean() - half), float(values.mean() + half), "t"
+    return (*bootstrap_interval((values,), confidence, resamples), "bootstrap")
+
+
+def difference_interval(a: np.ndarray, b: np.ndarray, confidence: float = CONFIDENCE, resamples: int = RESAMPLES) -> tuple[float, float, str]:
+    """(low, high, method) of the ``confidence`` interval of mean(a) - mean(b), both of at least 2
+    values: Welch's t where either has fewer than BOOTSTRAP_FROM, else the bootstrap."""
+    if min(a.size, b.size) < BOOTSTRAP_FROM:
+        return (*welch_interval(a, b, confidence), "Welch t")
+    return (*bootstrap_interval((a, b), confidence, resamples), "bootstrap")
+
+
+# --- the comparison ----------------------------------------------------------------------------
+
+
+@dataclass
+class Group:
+    """One group at one point: its runs' metric values and their statistics."""
+
+    group: object  #: the ``by`` value (a key: numbers to KEY_DIGITS significant digits)
+    n: int  #: runs
+    mean: float  #: mean of the metric [the metric's units]
+    std: float | None  #: standard deviation (ddof 1) [the metric's units]; None for one run
+    low: float | None  #: the mean's 95 % interval [the metric's units]
+    high: float | None
+    method: str | None  #: "t" or "bootstrap"
+    runs: list  #: the runs' names, as their summaries give them
+    values: list  #: the metric per run, in the order of ``runs``
+
+
+@dataclass
+class Difference:
+    """A group's mean minus the reference group's at one point, and what it takes to resolve it."""
+
+    group: object
+    reference: object
+    difference: float  #: [the metric's units]
+    low: float | None  #: its 95 % interval; None where a group has one run
+    high: float | None
+    method: str | None  #: "Welch t" or "bootstrap"
+    delta: float  #: the difference the runs estimate is for (``resolve``, else |difference|)
+    runs_needed: int | None  #: per group, for ``delta`` at the two groups' mean variance; None: never
+    resolved: bool
+    verdict: str
+
+
+@dataclass
+class Point:
+    """The groups at one value of the ``at`` column (None without one)."""
+
+    at: object
+    groups: list[Group]
+    differences: list[Difference]
+
+
+@dataclass
+class Comparison:
+    """The result of :func:`compare`: :meth:`lines` prints it, :meth:`as_dict` is its JSON."""
+
+    metric: str
+    by: str
+    at: str | None
+    reference: object
+    resolve: float | None
+    points: list[Point]
+    read: int  #: rows read
+    failed: int  #: rows of failed runs, left out
+    where: dict  #: the ``where`` asked, {column: values}
+    met: dict  #: the values of each ``where`` column that rows matched
+    missing: dict = field(default_factory=dict)  #: {column: rows left out without a value there}
+    resamples: int = RESAMPLES  #: of each bootstrap interval
+
+    def as_dict(self) -> dict:
+        """Plain data (numbers as floats, None where none exists), for JSON."""
+        return {"confidence": CONFIDENCE, "power": POWER, "bootstrap_from": BOOTSTRAP_FROM, "seed": SEED, **asdict(self)}
+
+    def single(self) -> list[tuple[object, object]]:
+        """(point, group) of every group of one run."""
+        return [(p.at, g.group) for p in self.points for g in p.groups if g.n < 2]
+
+    def lines(self) -> list[str]:
+        """The comparison as text: a header, then a table per point."""
+        where = " ".join(f"{_where_text({c: v})} (met: {', '.join(map(label, self.met[c])) or 'none'})" for c, v in self.where.items())
+        kept = sum(g.n for p in self.points for g in p.groups)
+        left = [f"{self.failed} failed"] if self.failed else []
+        left += [f"{n} without {column}" for column, n in self.missing.items()]
+        text = [
+            f"{self.metric} by {self.by}" + (f" at {self.at}" if self.at else "") + f"; reference: {label(self.reference)}",
+            f"runs: {self.read} read" + (f", {', '.join(left)} left out" if left else "") + (f", {kept} kept by --where {where}" if where else f", {kept} kept"),
+            f"difference to {label(self.reference)}: {100 * CONFIDENCE:g} % interval by Welch's t where a group has fewer than "
+            f"{BOOTSTRAP_FROM} runs, else by bootstrap (BCa, {self.resamples} resamples, seed {SEED}); runs to resolve: per group, for "
+            + (f"a difference of {self.resolve:g}" if self.resolve is not None else "the difference seen")
+            + f" (two-sided {100 * (1 - CONFIDENCE):g} %, power {POWER:g})",
+        ]
+        header = (self.by, "n", "mean", "std", "diff", f"{100 * CONFIDENCE:g} % interval", "method", "runs to resolve", "verdict")
+        for point in self.points:
+            rows = [header]
+            differences = {d.group: d for d in point.differences}
+            for g in point.groups:
+                d = differences.get(g.group)
+                row = [label(g.group), str(g.n), _digits(g.mean, 4), _digits(g.std, 2)]
+                if d is None:
+                    row += ["", "", "", "", "reference" if g.group == self.reference else ""]
+                else:
+                    interval = f"[{_digits(d.low, 3, '+')}, {_digits(d.high, 3, '+')}]" if d.low is not None else "-"
+                    needed = "-" if d.low is None else "never" if d.runs_needed is None else str(d.runs_needed)  # "-": a spread unknown
+                    row += [_digits(d.difference, 3, "+"), interval, d.method or "-", needed, d.verdict]
+                rows.append(row)
+            if self.reference not in {g.group for g in point.groups}:
+                rows.append(["", "", "", "", f"no {label(self.reference)} here: nothing to compare with", "", "", "", ""])
+            widths = [max(len(r[k]) for r in rows) for k in range(len(header))]
+            text.append(f"{self.at} {label(point.at)}:" if self.at else "all runs:")
+            text += ["  " + "  ".join(c.ljust(w) if k in (0, 5, 6, 8) else c.rjust(w) for k, (c, w) in enumerate(zip(r, widths))).rstrip() for r in rows]
+        return text
+
+
+def _where_text(where: dict) -> str:
+    """``where`` as the options that give it: mass_ratio=1 eta=3,6."""
+    return " ".join(f"{column}=" + ",".join(map(label, values)) for column, values in where.items())
+
+
+def _digits(value: float | None, digits: int, sign: str = "") -> str:
+    """``value`` to ``digits`` significant digits, trailing zeros kept (1.390, 0.020); "-" for None."""
+    return "-" if value is None else format(value, f"{sign}#.{digits}g").rstrip(".")
+
+
+def select(rows: list[dict], where: dict) -> tuple[list[dict], dict]:
+    """The rows whose every ``where`` column matches one of its values (numbers within
+    WHERE_TOLERANCE, anything else exactly), and the values met per column."""
+    kept = [row for row in rows if all(any(_matches(row.get(c), v) for v in values) for c, values in where.items())]
+    met = {c: sorted({value_key(row.get(c)) for row in kept}, key=_order) for c in where}
+    return kept, met
+
+
+def _check_columns(rows: list[dict], columns: dict[str, str]) -> None:
+    """Refuse a column (of the options ``columns``: {option: column}) that no row has."""
+    known = set().union(*(row.keys() for row in rows))
+    for option, column in columns.items():
+        if column not in known:
+            raise UnknownColumn(f"{option} {column}: no such column; the runs have: {', '.join(sorted(known))}")
+
+
+def _check_setups(point, rows: list[dict], by: str, at: str | None) -> None:
+    """Refuse rows at one point that differ in a set-up column other than ``by`` and ``at``."""
+    for column in SETUP_COLUMNS:
+        if column in (by, at):
+            continue
+        seen = sorted({value_key(row.get(column)) for row in rows} - {None}, key=_order)
+        if len(seen) > 1:
+            where = f" at {at} {label(point)}" if at else ""
+            raise MixedSetups(
+                f"the runs{where} differ in {column} ({', '.join(map(label, seen))}), not only in {by}: pick one with "
+                f"--where {column}=VALUE, or pass --allow-mixed to compare them anyway", column
+            )
+
+
+def compare(rows: list[dict], by: str, metric: str, at: str | None = None, reference=None, resolve: float | None = None,
+            where: dict | None = None, allow_mixed: bool = False, allow_single: bool = False,
+            resamples: int = RESAMPLES) -> Comparison:  # fmt: skip
+    """Group ``rows`` (run summaries) by ``by`` and ``at``, and compare each group's ``metric`` with
+    the ``reference`` group's at each point (default: "none" for spin_kind where present, else the
+    first group in sorted order).
+
+    Rows of failed runs (status "failed") are left out, and so are rows without a value of ``by``,
+    ``at`` or ``metric`` (counted in ``missing``).  ``where``: {column: values}, keep only the rows
+    that match (:func:`select`).  ``resolve``: the difference [the metric's units] the runs-needed
+    estimate is for (default: each difference seen).
+
+    Raises UnknownColumn, MixedSetups (unless ``allow_mixed``), SingleRunGroup (a group of one run
+    somewhere, unless ``allow_single``; the exception carries the comparison of the rest), and
+    CompareError for a metric that is not numeric, no rows left, or an unknown reference."""
+    where = where or {}
+    if not rows:
+        raise CompareError("no runs to compare")
+    options = {"--by": by, "--metric": metric, **({"--at": at} if at else {}), **{"--where": c for c in where}}
+    _check_columns(rows, options)
+    if resolve is not None and not (math.isfinite(resolve) and resolve > 0):
+        raise CompareError(f"--resolve must be a difference > 0; got {resolve:g}")
+    done = [row for row in rows if row.get("status") != "failed"]
+    kept, met = select(done, where)
+    if not kept:
+        raise CompareError(f"no run matches --where {_where_text(where)}")
+    missing = {}
+    for column in dict.fromkeys(c for c in (by, at, metric) if c):
+        present = [row for row in kept if value_key(row.get(column)) is not None]
+        if len(present) < len(kept):
+            missing[column] = len(kept) - len(present)
+        kept = present
+    if not kept:
+        raise CompareError(f"no run has values of {by}, {metric}" + (f" and {at}" if at else "") + " together")
+    for row in kept:
+        value = row[metric]
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            raise CompareError(f"--metric {metric} is not numeric (run {row.get('run', '?')}: {value!r}); pick a column of numbers")
+
+    points: dict = {}
+    for row in kept:
+        points.setdefault(value_key(row[at]) if at else None, {}).setdefault(value_key(row[by]), []).append(row)
+    groups = sorted({g for point in points.values() for g in point}, key=_order)
+    if reference is None:
+        reference = NO_SPIN if by == "spin_kind" and NO_SPIN in groups else groups[0]
+    else:
+        reference = value_key(parse_cell(str(reference)))
+        if reference not in groups:
+            raise CompareError(f"--reference {label(reference)}: no such {by} among the runs; they have: {', '.join(map(label, groups))}")
+
+    result = []
+    for at_key in sorted(points, key=lambda k: _order(k) if k is not None else (0, 0.0)):
+        point = points[at_key]
+        if not allow_mixed:
+            _check_setups(at_key, [row for members in point.values() for row in members], by, at)
+        order = sorted(point, key=lambda g: (g != reference, _order(g)))  # the reference first
+        stats_of = {g: _group(g, point[g], metric, resamples) for g in order}
+        differences = [_difference(stats_of[g], stats_of[reference], resolve, resamples) for g in order if g != reference and reference in point]
+        result.append(Point(at_key, [stats_of[g] for g in order], differences))
+    comparison = Comparison(metric, by, at, reference, resolve, result, len(rows), len(rows) - len(done), where, met, missing, resamples)
+    single = comparison.single()
+    if single and not allow_single:
+        named = "; ".join(f"{label(g)}" + (f" at {at} {label(p)}" if at else "") for p, g in single)
+        raise SingleRunGroup(f"{len(single)} group(s) of one run, whose spread is unknown: {named}; add runs, narrow "
+                             "with --where, or pass --allow-single to compare the rest", comparison)  # fmt: skip
+    return comparison
+
+
+def _group(key, rows: list[dict], metric: str, resamples: int) -> Group:
+    values = np.array([float(row[metric]) for row in rows])
+    low, high, method = mean_interval(values, resamples=resamples)
+    std = float(values.std(ddof=1)) if values.size > 1 else None
+    return Group(key, int(values.size), float(values.mean()), std, low, high, method, [row.get("run") for row in rows], values.tolist())
+
+
+def _difference(group: Group, reference: Group, resolve: float | None, resamples: int) -> Difference:
+    difference = group.mean - reference.mean
+    delta = resolve if resolve is not None else abs(difference)
+    if group.n < 2 or reference.n < 2:
+        one = group.group if group.n < 2 else reference.group
+        return Difference(group.group, reference.group, difference, None, None, None, delta, None, False, f"spread unknown: 1 run of {label(one)}")
+    low, high, method = difference_interval(np.array(group.values), np.array(reference.values), resamples=resamples)
+    needed = runs_needed(math.sqrt((group.std**2 + reference.std**2) / 2), delta)
+    resolved = low > 0 or high < 0
+    verdict = "resolved" if resolved else f"not resolved at n = {group.n} and {reference.n}"
+    return Difference(group.group, reference.group, difference, low, high, method, delta, needed, resolved, verdict)
+
+
+def error_bars(rows: list[dict], by: str, metric: str, at: str | None = None, where: dict | None = None,
+               allow_mixed: bool = False) -> dict:  # fmt: skip
+    """A figure's error bars: per ``by`` group, arrays over the points of ``at`` (sorted): ``at``,
+    ``mean``, ``minus`` and ``plus`` (the 95 % interval of the mean below and above it, the
+    metric's units; NaN for a group of one run), ``n`` and ``method`` ("t" or "bootstrap", None for
+    one run), as :func:`compare` computes them.  ``ax.errorbar(b["at"], b["mean"],
+    yerr=[b["minus"], b["plus"]])`` draws them."""
+    comparison = compare(rows, by, metric, at, where=where, allow_mixed=allow_mixed, allow_single=True)
+    bars: dict = {}
+    for point in comparison.points:
+        for g in point.groups:
+            bar = bars.setdefault(g.group, {"at": [], "mean": [], "minus": [], "plus": [], "n": [], "method": []})
+            bar["at"].append(point.at)
+            bar["mean"].append(g.mean)
+            bar["minus"].append(g.mean - g.low if g.low is not None else math.nan)
+            bar["plus"].append(g.high - g.mean if g.high is not None else math.nan)
+            bar["n"].append(g.n)
+            bar["method"].append(g.method)
+    return {group: {k: (v if k == "method" else np.array(v)) for k, v in bar.items()} for group, bar in bars.items()}

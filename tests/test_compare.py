@@ -1,0 +1,221 @@
+"""decco_warp.analysis.compare and ``decco-warp compare``: intervals that cover the truth at the
+stated rate, the runs-needed formula by hand, grouping, and each bad input as one line (exit 2)."""
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from decco_warp.analysis import compare as cmp
+from decco_warp.io import json_text
+
+from helpers import cli, cli_here
+
+#: Coverage over TRIALS seeded trials must lie within this many binomial standard deviations of
+#: 95 %: sqrt(0.95 0.05 / 400) = 1.09 %, so 3 of them admit 91.7 % to 98.3 %.
+TRIALS = 400
+COVERAGE_SIGMAS = 3
+COVERAGE_TOLERANCE = COVERAGE_SIGMAS * math.sqrt(0.95 * 0.05 / TRIALS)
+#: The set-up every fake run shares (equal masses, head-on, the paper's k_in and dt).
+SETUP = {"mass_ratio": 1.0, "theta_deg": 0.0, "k_in": 1e18, "dt": 0.04, "eta_potential": "self", "n_particles": 10000}
+
+
+def fake_rows(groups: dict, eta: float = 6.0, **setup) -> list[dict]:
+    """Summary rows: {spin_kind: metric values}, one run per value."""
+    return [
+        {"run": f"{kind}_eta{eta:g}_r{k}", "spin_kind": kind, "eta": eta, **SETUP, **setup, "largest_mass_ratio": float(value), "status": "ok"}
+        for kind, values in groups.items()
+        for k, value in enumerate(values)
+    ]
+
+
+def coverage(sizes: tuple[int, int], spreads: tuple[float, float], truth: float, resamples: int) -> float:
+    """The fraction of TRIALS seeded pairs of normal groups (``sizes``, ``spreads``, means
+    ``truth`` apart) whose interval of the difference, from compare(), holds ``truth``."""
+    covered = 0
+    for trial in range(TRIALS):
+        rng = np.random.default_rng(trial)
+        rows = fake_rows({"none": rng.normal(1.39, spreads[0], sizes[0]), "parallel": rng.normal(1.39 + truth, spreads[1], sizes[1])})
+        (difference,) = cmp.compare(rows, "spin_kind", "largest_mass_ratio", resamples=resamples).points[0].differences
+        covered += difference.low <= truth <= difference.high
+    return covered / TRIALS
+
+
+def test_welch_intervals_of_small_groups_cover_the_true_difference_95_percent_of_the_time():
+    rate = coverage((3, 5), (0.01, 0.02), truth=0.01, resamples=cmp.RESAMPLES)
+    assert abs(rate - 0.95) <= COVERAGE_TOLERANCE, rate
+
+
+def test_bootstrap_intervals_of_large_groups_cover_the_true_difference_95_percent_of_the_time():
+    # 2 000 resamples instead of 9 999 to keep the test fast: past ~1 000 the resamples only
+    # smooth the interval's ends; its coverage is set by the groups' sizes.
+    rate = coverage((cmp.BOOTSTRAP_FROM, cmp.BOOTSTRAP_FROM + 5), (0.01, 0.02), truth=0.01, resamples=2000)
+    assert abs(rate - 0.95) <= COVERAGE_TOLERANCE, rate
+
+
+def test_the_method_follows_the_group_sizes_and_the_bootstrap_is_reproducible():
+    rng = np.random.default_rng(7)
+    small = fake_rows({"none": rng.normal(0, 1, cmp.BOOTSTRAP_FROM - 1), "parallel": rng.normal(0, 1, 40)})
+    large = fake_rows({"none": rng.normal(0, 1, cmp.BOOTSTRAP_FROM), "parallel": rng.normal(3, 1, 40)})
+    assert cmp.compare(small, "spin_kind", "largest_mass_ratio").points[0].differences[0].method == "Welch t"
+    first, again = (cmp.compare(large, "spin_kind", "largest_mass_ratio").points[0].differences[0] for _ in range(2))
+    assert first.method == "bootstrap" and (first.low, first.high) == (again.low, again.high)
+    assert first.resolved and first.verdict == "resolved"
+
+
+def test_welch_interval_by_hand():
+    a, b = np.array([1.0, 2.0, 3.0]), np.array([2.0, 4.0, 6.0, 8.0])
+    # Variances of the means 1/3 and 5/3: se^2 = 2; Welch-Satterthwaite dof 4 / (1/18 + 25/27).
+    freedom = 4 / (1 / 18 + 25 / 27)
+    half = stats.t.ppf(0.975, freedom) * math.sqrt(2)
+    low, high = cmp.welch_interval(a, b)
+    assert low == pytest.approx(-3 - half, rel=1e-12) and high == pytest.approx(-3 + half, rel=1e-12)
+    assert half == pytest.approx(3.898, abs=1e-3)  # t_0.975 at 4.08 dof is 2.756 (a table gives 2.776 at 4)
+    scipy_interval = stats.ttest_ind(a, b, equal_var=False).confidence_interval(0.95)
+    assert (low, high) == pytest.approx((scipy_interval.low, scipy_interval.high), rel=1e-12)
+
+
+def test_runs_needed_by_hand():
+    # 2 (z_0.975 + z_0.8)^2 = 2 (1.959964 + 0.841621)^2 = 15.698
+    assert cmp.runs_needed(0.01, 0.01) == 16  # 15.70, rounded up
+    assert cmp.runs_needed(0.007, 0.01) == 8  # 15.698 x 0.49 = 7.69 (the issue's 8 to 16 for 0.01 apart)
+    assert cmp.runs_needed(0.011, 0.02) == 5  # 15.698 x 0.3025 = 4.75
+    assert cmp.runs_needed(0.05, 0.02) == 99  # 15.698 x 6.25 = 98.1
+    assert cmp.runs_needed(0.001, 1.0) == 2  # a group needs two runs for any spread
+    assert cmp.runs_needed(0.01, 0.0) is None  # no difference is ever resolved
+
+
+def test_the_table_groups_points_by_rounded_values_and_leaves_out_failed_runs():
+    rows = fake_rows({"none": [1.0, 1.2], "parallel": [1.5, 1.7]}, eta=3.0000000000000004)
+    rows += fake_rows({"none": [1.1], "anti-parallel": [0.9, 1.0]}, eta=3.0)
+    rows += fake_rows({"none": [5.0, 6.0]}, eta=9.0)
+    rows += [{**rows[0], "run": "broken", "status": "failed", "largest_mass_ratio": None}, {**rows[0], "run": "blank", "largest_mass_ratio": None}]
+    result = cmp.compare(rows, "spin_kind", "largest_mass_ratio", at="eta", resolve=0.1)
+    assert [p.at for p in result.points] == [3.0, 9.0]
+    three = result.points[0]
+    assert [g.group for g in three.groups] == ["none", "anti-parallel", "parallel"]  # the reference first
+    none = three.groups[0]
+    assert none.n == 3 and none.mean == pytest.approx(1.1) and none.std == pytest.approx(0.1)
+    parallel = {d.group: d for d in three.differences}["parallel"]
+    assert parallel.difference == pytest.approx(0.5)
+    # s^2 = (0.02 + 0.01) / 2: 15.698 x 0.015 / 0.01 = 23.5
+    assert parallel.runs_needed == 24 and parallel.delta == 0.1
+    assert result.points[1].differences == []  # the reference alone there
+    assert (result.read, result.failed, result.missing) == (11, 1, {"largest_mass_ratio": 1})
+
+
+def test_where_picks_numbers_within_a_tolerance_and_the_reference_can_be_named():
+    rows = fake_rows({"none": [0.6, 0.7], "parallel": [0.8, 0.9]}, mass_ratio=0.10031007751937988)
+    rows += fake_rows({"none": [1.3, 1.4], "parallel": [1.5, 1.6]})
+    result = cmp.compare(rows, "spin_kind", "largest_mass_ratio", where=cmp.parse_where(["mass_ratio=0.1"]), reference="parallel")
+    assert result.met == {"mass_ratio": [0.10031]} and result.reference == "parallel"
+    assert [g.mean for g in result.points[0].groups] == pytest.approx([0.85, 0.65])
+    both = cmp.parse_where(["mass_ratio=0.1", "mass_ratio=1", "spin_kind=none"])
+    assert both == {"mass_ratio": [0.1, 1.0], "spin_kind": ["none"]}
+    assert cmp.compare(rows, "spin_kind", "largest_mass_ratio", where=both, allow_mixed=True).points[0].groups[0].n == 4
+
+
+def test_error_bars_are_the_mean_and_its_t_interval():
+    rows = fake_rows({"none": [1.0, 2.0, 3.0], "parallel": [5.0]})
+    bars = cmp.error_bars(rows, "spin_kind", "largest_mass_ratio", at="eta")
+    half = stats.t.ppf(0.975, 2) * 1.0 / math.sqrt(3)
+    assert bars["none"]["at"].tolist() == [6.0] and bars["none"]["mean"].tolist() == [2.0]
+    assert bars["none"]["minus"] == pytest.approx([half]) and bars["none"]["plus"] == pytest.approx([half])
+    assert bars["none"]["method"] == ["t"] and np.isnan(bars["parallel"]["minus"]).all()
+
+
+# --- the command -------------------------------------------------------------------------------
+
+
+def write_runs(folder, rows):
+    """A sweep's folder as analyze leaves it: a run folder with summary.json per row, and summary.csv."""
+    folder.mkdir()
+    for row in rows:
+        (folder / row["run"]).mkdir()
+        (folder / row["run"] / "summary.json").write_text(json_text({k: v for k, v in row.items() if k != "status"}))
+    with (folder / "summary.csv").open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows({k: ("" if v is None else v) for k, v in row.items()} for row in rows)
+    return folder
+
+
+@pytest.fixture
+def sweep(tmp_path):
+    """Groups 0.05 apart at eta 6 (resolved) and equal at eta 9 (not), eta as a run set up writes it."""
+    rng = np.random.default_rng(3)
+    rows = fake_rows({"none": rng.normal(1.39, 0.005, 4), "parallel": rng.normal(1.34, 0.005, 3)}, eta=6.000000000000001)
+    rows += fake_rows({"none": rng.normal(0.75, 0.05, 3), "parallel": rng.normal(0.75, 0.05, 3)}, eta=9.0)
+    return write_runs(tmp_path / "fig9", rows)
+
+
+def test_compare_end_to_end_on_run_folders_and_on_summary_csv(sweep, tmp_path):
+    out = tmp_path / "compare.json"
+    args = ["--by", "spin_kind", "--metric", "largest_mass_ratio", "--at", "eta", "--resolve", "0.01"]
+    folders = cli("compare", str(sweep), *args, "--json", str(out))
+    assert folders.returncode == 0, folders.stderr
+    lines = folders.stdout.splitlines()
+    assert lines[0] == "largest_mass_ratio by spin_kind at eta; reference: none"
+    assert lines[1] == "runs: 13 read, 13 kept"
+    at6, at9 = lines.index("eta 6:"), lines.index("eta 9:")
+    assert lines[at6 + 2].split()[:2] == ["none", "4"] and lines[at6 + 2].endswith("reference")
+    parallel = lines[at6 + 3]
+    assert parallel.split()[:2] == ["parallel", "3"] and "Welch t" in parallel and parallel.endswith("  resolved")
+    assert lines[at9 + 3].endswith("not resolved at n = 3 and 3")
+    table = json.loads(out.read_text())
+    rows = cmp.read_rows([sweep])
+    expected = cmp.compare(rows, "spin_kind", "largest_mass_ratio", at="eta", resolve=0.01).as_dict()
+    assert table == json.loads(json_text(expected))
+    assert table["points"][0]["differences"][0]["runs_needed"] == cmp.runs_needed(
+        math.sqrt(sum(g["std"] ** 2 for g in table["points"][0]["groups"]) / 2), 0.01
+    )
+    # The sweep's table gives the same numbers, from its text.
+    sheet = cli_here("compare", str(sweep / "summary.csv"), *args)
+    assert sheet.returncode == 0, sheet.stderr
+    assert sheet.stdout.splitlines()[1:] == lines[1:-1] and lines[-1] == f"wrote {out}"
+
+
+@pytest.fixture
+def bad_inputs(sweep, tmp_path):
+    """{case: (decco-warp arguments, words its error line must hold)}: each bad input of compare."""
+    base = ["--by", "spin_kind", "--metric", "largest_mass_ratio"]
+    lone = write_runs(tmp_path / "lone", fake_rows({"none": [1.0, 1.1], "parallel": [1.2]}))
+    mixed = write_runs(tmp_path / "mixed", fake_rows({"none": [1.0, 1.1]}) + fake_rows({"parallel": [1.2, 1.3]}, mass_ratio=0.25))
+    (tmp_path / "empty").mkdir()
+    return {
+        "unknown column": ([str(sweep), "--by", "spin_kind", "--metric", "largest_mass"], ["--metric largest_mass: no such column", "spin_kind"]),
+        "unknown --at": ([str(sweep), *base, "--at", "etta"], ["--at etta: no such column", "eta"]),
+        "not numeric": ([str(sweep), "--by", "spin_kind", "--metric", "eta_potential"], ["--metric eta_potential is not numeric", "'self'"]),
+        "group of one": ([str(lone), *base], ["1 group(s) of one run", "parallel", "--allow-single"]),
+        "mixed set-ups": ([str(mixed), *base], ["differ in mass_ratio (0.25, 1)", "--allow-mixed"]),
+        "no runs": ([str(tmp_path / "empty"), *base], ["holds no summary.json"]),
+        "no such path": ([str(tmp_path / "nowhere"), *base], ["does not exist"]),
+        "nothing matches": ([str(sweep), *base, "--where", "eta=12"], ["no run matches --where eta=12"]),
+        "bad --where": ([str(sweep), *base, "--where", "eta"], ["--where takes COLUMN=VALUE"]),
+        "unknown reference": ([str(sweep), *base, "--reference", "oblique"], ["--reference oblique", "none, parallel"]),
+        "read twice": ([str(sweep), str(sweep / "summary.csv"), *base], ["is read twice"]),
+    }
+
+
+def test_each_bad_comparison_is_one_line_naming_it_and_exit_2(bad_inputs):
+    for case, (args, words) in bad_inputs.items():
+        result = cli_here("compare", *args)
+        assert result.returncode == 2, (case, result.stdout, result.stderr)
+        assert len(result.stderr.splitlines()) == 1 and result.stderr.startswith("decco-warp: error: "), (case, result.stderr)
+        for word in words:
+            assert word in result.stderr, (case, word, result.stderr)
+        if case != "group of one":
+            assert result.stdout == "", case  # refused before any table
+
+
+def test_a_group_of_one_still_shows_the_rest_and_the_allow_options_accept(bad_inputs):
+    lone, _ = bad_inputs["group of one"]
+    refused = cli_here("compare", *lone)
+    assert "spread unknown: 1 run of parallel" in refused.stdout and refused.returncode == 2
+    accepted = cli_here("compare", *lone, "--allow-single")
+    assert accepted.returncode == 0 and accepted.stdout == refused.stdout
+    mixed, _ = bad_inputs["mixed set-ups"]
+    assert cli_here("compare", *mixed, "--allow-mixed").returncode == 0
