@@ -334,7 +334,13 @@ def _spin_option(text: Optional[str], which: str) -> dict:
     except ValueError:
         fail(f"--spin-{which} must be FRACTION[,AXIS], e.g. 0.5,+z; got {text!r}")
     if axis:
-        values[f"{which}_spin_axis"] = axis.strip()
+        axis = axis.strip()
+        if "," in axis:  # a vector: FRACTION,X,Y,Z
+            try:
+                axis = [float(c) for c in axis.split(",")]
+            except ValueError:
+                fail(f"--spin-{which} must be FRACTION[,AXIS] with AXIS one of +-x, +-y, +-z or X,Y,Z; got {text!r}")
+        values[f"{which}_spin_axis"] = axis
     return values
 
 
@@ -453,7 +459,7 @@ def simulate(
     ),
     theta: Optional[float] = typer.Option(None, "--theta", help="Impact angle [degrees]."),
     gap: Optional[float] = typer.Option(None, "--gap", help="Initial surface gap along x [cm]."),
-    spin_target: Optional[str] = typer.Option(None, "--spin-target", help="FRACTION[,AXIS] of breakup spin, e.g. 0.5,+z."),
+    spin_target: Optional[str] = typer.Option(None, "--spin-target", help="FRACTION[,AXIS] of breakup spin, e.g. 0.5,+z or 0.5,1,0,1 (a vector)."),
     spin_projectile: Optional[str] = typer.Option(None, "--spin-projectile", help="FRACTION[,AXIS] of breakup spin."),
     orientation_seed: Optional[int] = typer.Option(
         None, "--orientation-seed", help="Turn each pile by a random rotation drawn from this seed (a realization of the collision)."

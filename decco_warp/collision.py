@@ -73,6 +73,22 @@ def rotate_pile(state: State, rotation: np.ndarray) -> State:
     return turned
 
 
+def spin_axis(axis, what: str = "spin axis") -> np.ndarray:
+    """The unit vector of a spin axis: one of SPIN_AXES by name ("+z"), or any vector of three
+    finite numbers, not all zero (normalised here)."""
+    if isinstance(axis, str):
+        if axis not in SPIN_AXES:
+            raise ValueError(f"{what} must be one of {', '.join(SPIN_AXES)} or a vector of three numbers; got {axis!r}")
+        return np.array(SPIN_AXES[axis])
+    try:
+        vector = np.array([float(c) for c in axis]) if not isinstance(axis, bool) and len(axis) == 3 else None
+    except (TypeError, ValueError):
+        vector = None
+    if vector is None or not np.isfinite(vector).all() or not np.linalg.norm(vector) > 0:
+        raise ValueError(f"{what} must be one of {', '.join(SPIN_AXES)} or a vector of three numbers, not all zero; got {axis!r}")
+    return vector / np.linalg.norm(vector)
+
+
 def _spin_vector(spin, state: State, G: float, which: str) -> np.ndarray | None:
     if spin is None:
         return None
@@ -82,9 +98,7 @@ def _spin_vector(spin, state: State, G: float, which: str) -> np.ndarray | None:
         raise ValueError(f"{which}_spin must be (fraction, axis), e.g. (0.5, '+z'); got {spin!r}") from None
     if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or not 0 <= fraction <= 1:
         raise ValueError(f"{which}_spin fraction of breakup must be in [0, 1]; got {fraction!r}")
-    if axis not in SPIN_AXES:
-        raise ValueError(f"{which}_spin axis must be one of {', '.join(SPIN_AXES)}; got {axis!r}")
-    return fraction * breakup_spin(state, G) * np.array(SPIN_AXES[axis])
+    return fraction * breakup_spin(state, G) * spin_axis(axis, f"{which}_spin axis")
 
 
 def setup_collision(
@@ -109,7 +123,8 @@ def setup_collision(
     ("all"; :data:`ETA_POTENTIALS`).  Give
     either ``eta`` or ``speed`` (the relative speed [cm/s]).  ``theta_deg`` is
     the impact angle, ``gap`` [cm] the initial surface separation along x, and a
-    spin is (fraction of breakup, axis) with axis one of +x, -x, +y, -y, +z, -z.
+    spin is (fraction of breakup, axis) with axis one of +x, -x, +y, -y, +z, -z or
+    any vector (x along the velocity, y towards the impact parameter).
     ``orientation_seed`` turns each pile about its centre of mass by a random rotation, uniform
     over all rotations and drawn from the seed (:func:`random_rotations`: the target's first),
     before anything else: a realization of the same collision (docs/model.md).  None keeps the

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-from .collision import ETA_POTENTIALS, SPIN_AXES
+from .collision import ETA_POTENTIALS, SPIN_AXES, spin_axis
 from .engine import LAYOUT_CHOICES, PRECISIONS
 from .params import GRAVITY_CHOICES, ROLLING_FRICTION_FORMS, Params, choose_gravity
 from .stability import DEFAULT_MAX_COMPRESSION, choose_stiffness, choose_time_step
@@ -64,6 +64,16 @@ def _any(v):
     return True
 
 
+def _axis(value) -> bool:
+    try:
+        spin_axis(value)
+    except ValueError:
+        return False
+    return True
+
+
+_AXES = ", ".join(SPIN_AXES) + " or a vector [x, y, z] (x along the velocity)"
+
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 _DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?")
 
@@ -99,9 +109,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "theta_deg": Key(float, 22.0, lambda v: 0 <= v < 90, "in [0, 90) degrees"),
         "gap": Key(float, 1e5, _non_negative, ">= 0 (cm)"),
         "target_spin": Key(float, 0.0, lambda v: 0 <= v <= 1, "in [0, 1] (fraction of breakup spin)"),
-        "target_spin_axis": Key(str, "+z", lambda v: v in SPIN_AXES, ", ".join(SPIN_AXES)),
+        "target_spin_axis": Key(object, "+z", _axis, _AXES),
         "projectile_spin": Key(float, 0.0, lambda v: 0 <= v <= 1, "in [0, 1] (fraction of breakup spin)"),
-        "projectile_spin_axis": Key(str, "+z", lambda v: v in SPIN_AXES, ", ".join(SPIN_AXES)),
+        "projectile_spin_axis": Key(object, "+z", _axis, _AXES),
         "orientation_seed": Key(
             int, None, _non_negative, "an integer >= 0 (turns each pile by a random rotation drawn from it: a realization)"
         ),
@@ -245,6 +255,8 @@ def _checked(table: str, key: str, value, rule: Key):
         if ok:
             value = float(value)
             ok = math.isfinite(value)
+    elif rule.kind is object:  # checked by its rule alone (a spin axis: a name or a vector)
+        ok = True
     else:
         ok = isinstance(value, str)
     if not ok:
@@ -283,6 +295,8 @@ def dumps(spec: dict, header: str = "") -> str:
 
 
 def _toml_value(value) -> str:
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int):

@@ -209,6 +209,8 @@ def realization_of(spec: dict) -> int:
 
 def _slug(value) -> str:
     """A value as a piece of a run name: a pile file by its stem, "+z" as "pz", "-z" as "mz"."""
+    if isinstance(value, (list, tuple)):  # a vector (a spin axis): its components
+        return "_".join(_slug(v) for v in value)
     text = Path(str(value)).stem if isinstance(value, str) else f"{value:g}" if isinstance(value, float) else str(value)
     text = text.replace("+", "p").replace("-", "m") if isinstance(value, str) else text
     return "".join(c if c.isalnum() or c in ".-" else "_" for c in text)

@@ -91,6 +91,8 @@ def test_bad_setups_are_refused(piles):
         (dict(eta=1.0, gap=-5.0), "gap must be >= 0"),
         (dict(eta=1.0, projectile_spin=(2.0, "+z")), r"fraction of breakup must be in \[0, 1\]"),
         (dict(eta=1.0, projectile_spin=(0.5, "up")), "axis must be one of"),
+        (dict(eta=1.0, projectile_spin=(0.5, (0, 0, 0))), "not all zero"),
+        (dict(eta=1.0, projectile_spin=(0.5, (1, 2))), "vector of three numbers"),
         (dict(eta=1.0, eta_potential="both"), "eta_potential must be one of self, all"),
     ]:
         with pytest.raises(ValueError, match=match):
@@ -147,3 +149,15 @@ def test_surface_motion_at_the_first_contact_by_kind_of_spin():
     assert first_contact_motion({**base, "theta_deg": 30.0, "target_spin": w * np.array(z), "projectile_spin": w * np.array(z)})[
         "contact_surface_speed"
     ] == pytest.approx(w * (r_t + r_p), rel=1e-12)
+
+
+def test_a_spin_axis_may_be_any_vector(piles):
+    """An axis given as a vector is normalised: (1, 0, 1) spins at the requested fraction of breakup
+    about the diagonal, as +x and +z together would at 1/sqrt(2) each."""
+    target, projectile = piles
+    s = dw.setup_collision(target, projectile, eta=1.0, projectile_spin=(0.5, (1, 0, 1)))
+    omega = 0.5 * breakup_spin(projectile) / math.sqrt(2)
+    np.testing.assert_allclose(_pile(s, 1).omegas[0], [omega, 0, omega], rtol=1e-12)
+    named = dw.setup_collision(target, projectile, eta=1.0, projectile_spin=(0.5, "+z"))
+    along = dw.setup_collision(target, projectile, eta=1.0, projectile_spin=(0.5, (0, 0, 3.5)))
+    np.testing.assert_array_equal(named.omegas, along.omegas)

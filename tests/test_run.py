@@ -240,6 +240,7 @@ def test_bad_input_is_one_line_and_exit_code_2(args, message, bad_piles, tmp_pat
         ("[run]\nsteps = 'many'\n", "[run] steps = 'many': must be int"),
         ("[params]\nrestitution = 1.5\n", "[params] restitution = 1.5: must be in (0, 1]"),
         ("[collision]\neta_potential = 'both'\n", "[collision] eta_potential = 'both': must be self (U: each pile's own pairs) or all"),
+        ("[collision]\ntarget_spin_axis = [0, 0, 0]\n", "[collision] target_spin_axis = [0, 0, 0]: must be +x, -x, +y, -y, +z, -z or a vector"),
         ("[run\nsteps = 1\n", "is not valid TOML"),
     ],
 )
@@ -383,3 +384,14 @@ def test_check_estimates_the_cost_and_a_missing_folder_does_not_exist(tmp_path):
     for command in (["analyze"], ["resume"], ["view"], ["export", "--xdmf"]):
         result = cli(*command, str(tmp_path / "nowhere"))
         assert result.returncode == 2 and f"{tmp_path / 'nowhere'} does not exist" in result.stderr, (command, result.stderr)
+
+
+def test_a_vector_spin_axis_from_the_command_line_is_recorded_and_repeats(tmp_path):
+    result = cli("simulate", "--check", "--spin-target", "0.5,1,0,1", "--device", "cpu", "--out", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    import tomllib
+
+    spec = specs.resolve_spec({"collision": {"target_spin": 0.5, "target_spin_axis": [1.0, 0.0, 1.0]}})
+    assert specs.resolve_spec(tomllib.loads(specs.dumps(spec))) == spec
+    result = cli("simulate", "--check", "--spin-target", "0.5,1,0,x", "--device", "cpu", "--out", str(tmp_path))
+    assert result.returncode == 2 and "X,Y,Z" in result.stderr
