@@ -451,7 +451,7 @@ def simulate(
     checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Steps between checkpoints."),
     precision: Optional[str] = typer.Option(None, "--precision", help="mixed or float64."),
     layout: Optional[str] = typer.Option(
-        None, "--layout", help="Force kernel layout: auto, split (contacts in their own pass), prefetch, split+prefetch or newton (each pair once)."
+        None, "--layout", help="Force kernel layout: auto (the device's default) or newton (each pair once, the CUDA default, on any device)."
     ),
     out: Optional[str] = typer.Option(None, "--out", help="Parent folder of run folders (default runs/out)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing run folder."),
@@ -558,7 +558,7 @@ def bench(
     budget: float = typer.Option(1.0, "--seconds", help="Seconds of timing per measurement."),
     precision: str = typer.Option("mixed", "--precision", help="mixed or float64."),
     layouts: str = typer.Option(
-        "", "--layouts", help="Also time these layouts, BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]][:split][:prefetch][:newton][:unfused],... (e.g. 128:1,128:4:4:96,128:4:4:0:split,128:4:4:128:prefetch,32:128:newton,32:64:newton:unfused; split: contacts in their own pass; prefetch: j loaded a tile ahead; newton: each pair once, a warp meeting two tiles of PER_BLOCK; unfused: each step's kicks and packing in launches of their own, as before they were fused)."
+        "", "--layouts", help="Also time these layouts, BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]][:newton][:unfused],... (e.g. 128:1,128:4:4:96,32:128:newton,32:64:newton:unfused; newton: each pair once, a warp meeting two tiles of PER_BLOCK; unfused: each step's kicks and packing in launches of their own, as before they were fused)."
     ),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the table as JSON here."),
     gravity: str = typer.Option("all-pairs", "--gravity", help="Gravity solvers to time, side by side: all-pairs, tree or all-pairs,tree."),
@@ -611,7 +611,7 @@ def bench(
         try:
             parts = item.split(":")
             flags = []
-            while parts and parts[-1] in ("split", "prefetch", "newton", "unfused") and parts[-1] not in flags:
+            while parts and parts[-1] in ("newton", "unfused") and parts[-1] not in flags:
                 flags.append(parts.pop())
             values = [int(v) for v in parts]
             if len(values) not in (2, 3, 4) or (not chosen.startswith("cuda") and values[0] != 1):
@@ -619,11 +619,11 @@ def bench(
             if "newton" in flags and chosen.startswith("cuda") and values[0] != 32:
                 raise ValueError
             extra_layouts.append(
-                Layout(*values, contact_pass="split" in flags, prefetch="prefetch" in flags, newton="newton" in flags, fuse_kicks="unfused" not in flags)
+                Layout(*values, newton="newton" in flags, fuse_kicks="unfused" not in flags)
             )
         except ValueError:
             fail(
-                "--layouts entries must be BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]][:split][:prefetch] or "
+                "--layouts entries must be BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]] or "
                 "BLOCK_DIM:TILE[:SLOTS[:MAX_REGISTERS]]:newton (BLOCK_DIM 32, TILE a multiple of it; SLOTS unused), "
                 f"either with :unfused (the kicks in launches of their own), BLOCK_DIM 1 on CPU; got {item!r}"
             )

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
@@ -24,7 +24,6 @@ from .kernels.fused import pair_forces_tiled
 from .kernels.newton import NEWTON_TILE_MAX, GatherRows, TilePair, contact_pass_ordered, gather_newton, pair_gravity_newton
 from .kernels.pair import ContactModel
 from .kernels.reference import pair_forces_reference
-from .kernels.split import pair_gravity_tiled
 from .params import Params
 from .state import State
 
@@ -62,16 +61,11 @@ class Layout:
     contact_slots: int = 4
     max_registers: int = 0
     """Cap on registers per thread on CUDA (0: the compiler's choice)."""
-    contact_pass: bool = False
-    """Split the step's forces in two launches: a gravity-only sweep noting contact candidates,
-    then the contacts one thread per particle (kernels/split.py).  ``contact_slots`` is unused."""
-    prefetch: bool = False
-    """Load each tile of j one tile ahead, while the tile before is swept (kernels/fused.py)."""
     newton: bool = False
     """Each pair once (Newton's third law, kernels/newton.py): a block is one
     warp (``block_dim`` 32 on a GPU, 1 on the CPU) meeting two tiles of ``particles_per_block``
-    particles, gravity given to both sides, then the contacts in their own pass as with
-    ``contact_pass``.  ``contact_slots`` and ``prefetch`` are unused."""
+    particles, gravity given to both sides, then the contacts in their own pass.
+    ``contact_slots`` is unused."""
     fuse_kicks: bool = True
     """Steps share launches (:meth:`Engine.advance`): the last half kick of a step, the next one's
     first half kick and drift and the packing of the bodies for its sweep are one kernel; the same
@@ -84,15 +78,13 @@ class Layout:
                 raise ValueError(f"Layout.{name} must be a positive integer; got {value!r}")
         if not isinstance(self.max_registers, int) or self.max_registers < 0:
             raise ValueError(f"Layout.max_registers must be an integer >= 0; got {self.max_registers!r}")
-        for name in ("contact_pass", "prefetch", "newton", "fuse_kicks"):
+        for name in ("newton", "fuse_kicks"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"Layout.{name} must be true or false; got {getattr(self, name)!r}")
-        if self.newton and (
-            self.particles_per_block % self.block_dim or self.particles_per_block > NEWTON_TILE_MAX or self.contact_pass or self.prefetch
-        ):
+        if self.newton and (self.particles_per_block % self.block_dim or self.particles_per_block > NEWTON_TILE_MAX):
             raise ValueError(
                 "a Newton layout's particles_per_block must be a multiple of its block_dim (each lane keeps "
-                f"as many particles) and at most {NEWTON_TILE_MAX}, without contact_pass or prefetch; got {self}"
+                f"as many particles) and at most {NEWTON_TILE_MAX}; got {self}"
             )
 
 
@@ -102,13 +94,7 @@ class Layout:
         kicks = "" if self.fuse_kicks else ", kicks unfused"
         if self.newton:
             return f"each pair once: a warp of {self.block_dim} meets tiles of {self.particles_per_block}" + registers + kicks
-        return (
-            f"{self.block_dim} threads x {self.particles_per_block} per block, "
-            + ("contacts in their own pass" if self.contact_pass else f"{self.contact_slots} slots")
-            + registers
-            + (", j a tile ahead" if self.prefetch else "")
-            + kicks
-        )
+        return f"{self.block_dim} threads x {self.particles_per_block} per block, {self.contact_slots} slots" + registers + kicks
 
 
 #: Systems up to this many particles take the Newton layout on CUDA, which keeps a field sum and
@@ -145,12 +131,10 @@ def choose_layout(n: int, device: str) -> Layout:
     return fused_layout(n, device)
 
 
-#: ``[run] layout``: the force kernel's layout for a run.  "auto" is :func:`choose_layout`; "split"
-#: puts the contacts of the fused layout in their own pass, "prefetch" loads each tile of j a tile
-#: ahead and "newton" computes each pair once (the CUDA default up to NEWTON_MAX), as
-#: ``decco-warp bench --layouts ...:split:prefetch`` times them (docs/benchmarks.md).  They change
-#: the order of float operations, so the motion differs from "auto" at round-off only.
-LAYOUT_CHOICES = ("auto", "split", "prefetch", "split+prefetch", "newton")
+#: ``[run] layout``: the force kernel's layout for a run.  "auto" is :func:`choose_layout`;
+#: "newton" computes each pair once (the CUDA default up to NEWTON_MAX) on any device, where it
+#: changes the order of float operations, so the motion differs from "auto" at round-off only.
+LAYOUT_CHOICES = ("auto", "newton")
 
 
 def newton_layout(device: str) -> Layout:
@@ -166,14 +150,7 @@ def layout_for(choice: str, n: int, device: str) -> Layout | None:
     (None for "auto": the engine's own choice)."""
     if choice not in LAYOUT_CHOICES:
         raise ValueError(f"layout must be one of {', '.join(LAYOUT_CHOICES)}; got {choice!r}")
-    if choice == "auto":
-        return None
-    if choice == "newton":
-        return newton_layout(device)
-    base = fused_layout(n, device)
-    split = "split" in choice
-    # The split sweep fits its registers uncapped (79 to 92 on sm_90), as benched.
-    return replace(base, contact_pass=split, prefetch="prefetch" in choice, max_registers=0 if split else base.max_registers)
+    return None if choice == "auto" else newton_layout(device)
 
 
 def system_sizes(systems: Sequence[int] | None, count: int) -> np.ndarray:
@@ -306,7 +283,7 @@ class Engine:
         # radius is no smaller than that of any other radius, so the bound holds).
         self._max_radius = (wp.float32 if precision == "mixed" else wp.float64)(self.max_radius)
         newton = tiled and self.layout.newton
-        split = self.tree is not None or tiled and (self.layout.contact_pass or newton)
+        split = self.tree is not None or newton
         if newton:
             # Per tile pair and side, per particle of the tile: the sweep's field sum and candidate bits.
             tiles, gather, rows = newton_tiles(starts, ends, self.layout.particles_per_block)
@@ -336,11 +313,6 @@ class Engine:
             self._gather_kernel = gather_newton(precision)
             # The gather lists each particle's candidates in increasing j: lanes can share them out.
             self._contact_kernel = contact_pass_ordered(params.rolling_friction, self._contact_block)
-        elif split:
-            self._force_kernel = pair_gravity_tiled(
-                self.layout.block_dim, self.layout.particles_per_block, precision, self.layout.max_registers, self.layout.prefetch
-            )
-            self._contact_kernel = contact_pass(params.rolling_friction)
         elif tiled:
             self._force_kernel = pair_forces_tiled(
                 self.layout.block_dim,
@@ -350,7 +322,6 @@ class Engine:
                 params.rolling_friction,
                 ledger,
                 self.layout.max_registers,
-                self.layout.prefetch,
             )
         else:
             self._force_kernel = pair_forces_reference(precision, params.rolling_friction)
@@ -402,22 +373,11 @@ class Engine:
             self._contacts(outputs)
             return
         tiled = {"dim": [self.blocks.shape[0]], "block_dim": self.layout.block_dim, "device": self.device}
-        if not self.layout.contact_pass:
-            wp.launch_tiled(self._force_kernel, inputs=[self.model, self.blocks, *state, self.body, self._max_radius], outputs=outputs, **tiled)
-            return
-        # The split layout: a gravity sweep noting contact candidates, then the contacts.
-        self.candidate_count.zero_()
-        wp.launch_tiled(
-            self._force_kernel,
-            inputs=[self.blocks, self.mass, self.body, self._max_radius],
-            outputs=[self.force, self.candidate_count, self.candidates],
-            **tiled,
-        )
-        self._contacts(outputs)
+        wp.launch_tiled(self._force_kernel, inputs=[self.model, self.blocks, *state, self.body, self._max_radius], outputs=outputs, **tiled)
 
     def candidate_overflows(self, first: int = 0, end: int | None = None) -> int:
         """Particles (of rows [first, end)) whose contact candidates overflowed the list at the last
-        force evaluation (the split layout and the tree path; 0 otherwise): each costs a walk over
+        force evaluation (the Newton layout and the tree path; 0 otherwise): each costs a walk over
         its whole system."""
         if self.candidates.shape[0] == 0:
             return 0
@@ -605,7 +565,7 @@ def memory_estimate(n: int, gravity: str, device: str = "cpu", ledger: bool = Tr
     per = 3 * f64 + 5 * vec3d  # radius, mass, inertia; position, velocity, omega, force, torque
     per += (len(LEDGER_CHANNELS) * vec3d + 32) if ledger else 0  # channels, work
     per += 8 + 32 + 8  # deepest contact, packed body, system range
-    per += i32 * (1 + CANDIDATES)  # the contact candidates of a split layout or the tree
+    per += i32 * (1 + CANDIDATES)  # the contact candidates of the Newton layout or the tree
     per += len(PAIR_OBSERVABLES) * f64  # a frame's pair observables
     if gravity == "tree":  # nodes (2n): mass, centre, quadrupole, box, size, offset, links (16), child, first,
         # last, parent, escape; keys, order (2n); leaf positions, grid points; each walk part's field and potential

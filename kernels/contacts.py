@@ -6,9 +6,8 @@ contact is then evaluated here, in float64 from the state arrays, with the pair 
 :mod:`.pair`: positions are ~1e7 cm and overlaps ~1e2 cm.  Contacts are few, so this code is kept
 out of the hot loops.
 
-``contact_pass`` (one thread per particle) lives here rather than with the split layout's sweep
-because it serves any candidate list whatever its order: the split sweep's (noted with atomics, in
-any order) and the tree path's hash grid (:mod:`.tree` ``grid_candidates``).  It walks each list in
+``contact_pass`` (one thread per particle) serves any candidate list whatever its order: the tree
+path's hash grid (:mod:`.tree` ``grid_candidates``).  It walks each list in
 increasing j, so its sums (and the ledger's channels) do not depend on scheduling, and the tree
 path's observables walk the lists the same way (``candidates_walk``, ``next_candidate``).  The
 Newton layout's gather lists its candidates already sorted; its own contact pass, a warp per
@@ -214,7 +213,7 @@ def next_candidate(i: int, listed: bool, candidates: wp.array2d(dtype=wp.int32),
 
 @functools.cache
 def contact_pass(rolling: str = "couple"):
-    """Build the contact pass of the split layout and the tree path, one thread per particle: its
+    """Build the contact pass of the tree path, one thread per particle: its
     noted candidates sorted by j, each evaluated in float64 and added to ``force_inout``;
     ``torque_out`` and the ledger's ``channels_out`` (when it has rows) are written whole."""
     add_contact = contact_sum_function(rolling)

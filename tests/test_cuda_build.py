@@ -14,7 +14,7 @@ SCRIPT = textwrap.dedent(
     """
     import tempfile, warp as wp
     import decco_warp
-    from decco_warp.kernels import bodies, contacts, fused, integrate, newton, observables, reference, split, tree
+    from decco_warp.kernels import bodies, contacts, fused, integrate, newton, observables, reference, tree
 
     kernels = []
     for precision in bodies.PRECISIONS:
@@ -22,9 +22,6 @@ SCRIPT = textwrap.dedent(
             kernels += [(fused.pair_forces_tiled(128, 4, 4, precision, "couple", ledger, 128), 128),
                         (fused.pair_forces_tiled(64, 4, 4, precision, "paper", ledger, 128), 64),
                         (reference.pair_forces_reference(precision, "couple"), 256)]
-        kernels.append((split.pair_gravity_tiled(128, 4, precision, 0), 128))
-        kernels.append((split.pair_gravity_tiled(128, 4, precision, 0, True), 128))
-        kernels.append((fused.pair_forces_tiled(128, 4, 4, precision, "couple", True, 128, True), 128))
         kernels += [(newton.pair_gravity_newton(2, precision), 32), (newton.gather_newton(precision), 256)]
     kernels += [(contacts.contact_pass(rolling), 256) for rolling in ("couple", "paper")]
     kernels += [(newton.contact_pass_ordered(rolling, 32), 32) for rolling in ("couple", "paper")]
