@@ -1,7 +1,7 @@
 """Device arrays of one particle system and the kernel launches that act on them.
 
-This module (with gravity_tree.py for the tree path) is the only one that touches Warp arrays
-and launches kernels; the public objects (:class:`~decco_warp.simulation.Simulation`,
+This module (with the force paths of forces.py and gravity_tree.py) is the only one that touches
+Warp arrays and launches kernels; the public objects (:class:`~decco_warp.simulation.Simulation`,
 :func:`~decco_warp.simulation.compute_forces`, :func:`~decco_warp.diagnostics.diagnostics`)
 are built on it, and the cluster finder's smoothed density on a GPU (:func:`smoothed_density`).
 """
@@ -16,14 +16,13 @@ import numpy as np
 import warp as wp
 
 from .device import resolve_device
-from .gravity_tree import GravityTree, walk_parts
+from .forces import FORCE_PATHS, path_name
+from .gravity_tree import walk_parts
 from .kernels import integrate, observables
 from .kernels.bodies import BODY_TYPES, PACK_KERNELS, PRECISIONS
-from .kernels.contacts import CANDIDATES, LEDGER_CHANNELS, contact_pass, unpack_depth
-from .kernels.fused import pair_forces_tiled
-from .kernels.newton import NEWTON_TILE_MAX, GatherRows, TilePair, contact_pass_ordered, gather_newton, pair_gravity_newton
+from .kernels.contacts import CANDIDATES, LEDGER_CHANNELS, unpack_depth
+from .kernels.newton import NEWTON_TILE_MAX
 from .kernels.pair import ContactModel
-from .kernels.reference import pair_forces_reference
 from .params import Params
 from .state import State
 
@@ -38,11 +37,6 @@ PAIR_OBSERVABLES = {
     "overlap_depth": wp.float64,
     "overlap_partner": wp.int32,
 }
-#: Threads per particle of the observables kernel on a GPU.
-OBSERVABLES_BLOCK = 128
-#: Lanes per particle of the Newton layout's contact pass on a GPU (one on the CPU): its
-#: candidates, at most kernels/contacts.py CANDIDATES, two a lane.
-CONTACT_BLOCK = 32
 
 
 @dataclass(frozen=True)
@@ -161,35 +155,6 @@ def system_sizes(systems: Sequence[int] | None, count: int) -> np.ndarray:
     return sizes
 
 
-def tiled_blocks(starts: np.ndarray, ends: np.ndarray, per_block: int) -> np.ndarray:
-    """Per block of a tiled launch: (first row, end of its rows, first and end of its system)."""
-    rows = [
-        (first, min(first + per_block, end), start, end)
-        for start, end in zip(starts, ends)
-        for first in range(int(start), int(end), per_block)
-    ]
-    return np.array(rows, dtype=np.int32).reshape(-1, 4)
-
-
-def newton_tiles(starts: np.ndarray, ends: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """The Newton layout's tile pairs (kernels/newton.py ``TilePair``), each particle's rows
-    (``GatherRows``) and the number of rows.  A system's particles are cut into tiles of ``size``;
-    its tile pairs (a, b), a <= b, each meet once; row a * n + b (after the rows of the systems
-    before) holds what tile a gets from tile b."""
-    tiles, gather, rows = [], [], 0
-    for start, end in zip(starts.tolist(), ends.tolist()):
-        firsts = np.arange(start, end, size)
-        n = len(firsts)
-        a, b = np.triu_indices(n)
-        tile_ends = np.minimum(firsts + size, end)
-        tiles.append(np.stack([firsts[a], tile_ends[a], firsts[b], tile_ends[b], rows + a * n + b, np.where(a < b, rows + b * n + a, -1)], axis=1))
-        index = np.arange(start, end)
-        tile = (index - start) // size
-        gather.append(np.stack([rows + tile * n, np.full_like(index, n), index - firsts[tile], np.full_like(index, start)], axis=1))
-        rows += n * n
-    return np.concatenate(tiles).astype(np.int32), np.concatenate(gather).astype(np.int32), rows
-
-
 def contact_model(params: Params) -> ContactModel:
     model = ContactModel()
     model.G = wp.float64(params.G)
@@ -256,80 +221,45 @@ class Engine:
         # (kernels/contacts.py note_depth): frames report the peak between them, not a sample.
         self.deepest_contact = wp.zeros(self.count, dtype=wp.int64, device=self.device)
 
-        # The tiled sweep reads packed bodies (kernels/bodies.py), refreshed before each sweep (the
-        # reference kernel and the tree path read the positions: none for them).
-        tiled = force_kernel == "tiled"
-        sweep = tiled and params.gravity != "tree"
-        self.body = wp.zeros(self.count if sweep else 0, dtype=BODY_TYPES[precision], device=self.device)
-        self._no_body = wp.zeros(0, dtype=BODY_TYPES[precision], device=self.device)  # a kick_drift that packs none
-        # The tree path: gravity from a radix tree, contacts from a hash grid, both into the contact pass.
-        # (A "reference" engine is the all-pairs yardstick, also for diagnostics: it never builds a tree.)
-        self.tree = GravityTree(self.count, self.device, precision) if params.gravity == "tree" and tiled else None
-        if self.tree is not None and len(self.systems) > 1:
-            raise ValueError("the tree path steps one system at a time; an ensemble needs gravity = \"all-pairs\"")
-        # Each particle's own system, [first, end), and for the tiled kernels each block's rows (a block
-        # never straddles two systems) with its system's range.
-        ends = np.cumsum(self.systems)
-        starts = ends - self.systems
-        ranges = np.repeat(np.stack([starts, ends], axis=1), self.systems, axis=0).astype(np.int32)
+        # Each particle's own system, [first, end).
+        self.ends = np.cumsum(self.systems)
+        self.starts = self.ends - self.systems
+        ranges = np.repeat(np.stack([self.starts, self.ends], axis=1), self.systems, axis=0).astype(np.int32)
         self.ranges = wp.array(ranges, dtype=wp.vec2i, device=self.device)
-        self.blocks = wp.array(
-            tiled_blocks(starts, ends, self.layout.particles_per_block) if tiled else np.zeros((0, 4), np.int32),
-            dtype=wp.vec4i,
-            device=self.device,
-        )
         self.max_radius = float(state.radii.max())
         # The sweeps' per-i contact bound, in their arithmetic (float32 rounding of the largest
         # radius is no smaller than that of any other radius, so the bound holds).
-        self._max_radius = (wp.float32 if precision == "mixed" else wp.float64)(self.max_radius)
-        newton = tiled and self.layout.newton
-        split = self.tree is not None or newton
-        if newton:
-            # Per tile pair and side, per particle of the tile: the sweep's field sum and candidate bits.
-            tiles, gather, rows = newton_tiles(starts, ends, self.layout.particles_per_block)
-            self.tiles = wp.array(tiles, dtype=TilePair, device=self.device)
-            self.gather = wp.array(gather, dtype=GatherRows, device=self.device)
-            vector = wp.vec3f if precision == "mixed" else wp.vec3d
-            self.tile_field = wp.zeros((rows, self.layout.particles_per_block), dtype=vector, device=self.device)
-            self.tile_near = wp.zeros((rows, self.layout.particles_per_block), dtype=wp.uint64, device=self.device)
-        self.candidate_count = wp.zeros(self.count if split else 0, dtype=wp.int32, device=self.device)
-        self.candidates = wp.zeros((self.count if split else 0, CANDIDATES), dtype=wp.int32, device=self.device)
-        # (Warp's CPU blocks, wp.config.enable_cpu_blocks, run every lane: tests use them to check
-        # the GPU layouts' reductions on a CPU.)
-        if tiled and not self.device.startswith("cuda") and self.layout.block_dim != 1 and (newton or not wp.config.enable_cpu_blocks):
-            raise ValueError("on the CPU a layout's block_dim must be 1 (Warp runs one thread per block)")
-        if newton and self.device.startswith("cuda") and self.layout.block_dim != 32:
-            raise ValueError(f"a Newton layout's block is one warp: block_dim must be 32 on CUDA; got {self.layout.block_dim}")
-        # The Newton layout's contact pass takes a warp per particle (with Warp's CPU blocks on, the
-        # CPU runs those lanes too: tests check the lanes' reduction so).
-        self._contact_kernel = None
-        self._tiled_contacts = newton and self.tree is None
-        self._contact_block = CONTACT_BLOCK if self.device.startswith("cuda") or wp.config.enable_cpu_blocks else 1
-        if self.tree is not None:
-            self._contact_kernel = contact_pass(params.rolling_friction)
-        elif newton:
-            lanes = self.layout.block_dim
-            self._force_kernel = pair_gravity_newton(self.layout.particles_per_block // lanes, precision, self.layout.max_registers)
-            self._gather_kernel = gather_newton(precision)
-            # The gather lists each particle's candidates in increasing j: lanes can share them out.
-            self._contact_kernel = contact_pass_ordered(params.rolling_friction, self._contact_block)
-        elif tiled:
-            self._force_kernel = pair_forces_tiled(
-                self.layout.block_dim,
-                self.layout.particles_per_block,
-                self.layout.contact_slots,
-                precision,
-                params.rolling_friction,
-                ledger,
-                self.layout.max_registers,
-            )
-        else:
-            self._force_kernel = pair_forces_reference(precision, params.rolling_friction)
+        self.sweep_max_radius = (wp.float32 if precision == "mixed" else wp.float64)(self.max_radius)
+
+        # The force path (decco_warp/forces.py), chosen by name in one place.  The all-pairs sweeps
+        # read packed bodies (kernels/bodies.py), refreshed before each sweep.
+        name = path_name(force_kernel, params, self.layout)
+        self.body = wp.zeros(self.count if FORCE_PATHS[name].packs_bodies else 0, dtype=BODY_TYPES[precision], device=self.device)
+        self._no_body = wp.zeros(0, dtype=BODY_TYPES[precision], device=self.device)  # a kick_drift that packs none
+        self.path = FORCE_PATHS[name](self)
+
+    def pair_state(self) -> list:
+        """What a pair kernel reads of the particles: radius, mass, position, velocity, omega."""
+        return [self.radius, self.mass, self.position, self.velocity, self.omega]
+
+    def contact_state(self) -> list:
+        """What a contact pass reads of the particles beside their radii: position, velocity, omega."""
+        return [self.position, self.velocity, self.omega]
+
+    @property
+    def candidate_count(self) -> wp.array:
+        """Per particle, the contact candidates its force path met at the last evaluation (empty if it lists none)."""
+        return self.path.candidate_count
+
+    @property
+    def candidates(self) -> wp.array:
+        """Per particle, the first CANDIDATES of them."""
+        return self.path.candidates
 
     # -- stages of a step -----------------------------------------------------------
 
-    def eval_forces(self) -> None:
-        """Force and torque on every particle at the current positions and velocities."""
+    def pack_bodies(self) -> None:
+        """The sweep's packed bodies from the current positions (none unless the path reads them)."""
         if self.body.shape[0] > 0:
             wp.launch(
                 PACK_KERNELS[self.precision],
@@ -338,58 +268,17 @@ class Engine:
                 outputs=[self.body],
                 device=self.device,
             )
-        self._forces()
 
-    def _forces(self) -> None:
-        """:meth:`eval_forces` with the bodies packed already (by the pack kernel or a fused kick)."""
-        outputs = [self.force, self.torque, self.channels, self.deepest_contact]
-        if self.tree is not None:
-            self.tree.build(self.position, self.mass)
-            self.tree.gravity(self.params.G, self.params.theta_open, self.mass, self.force)
-            self.tree.contact_candidates(self.position, self.radius, self.max_radius, self.candidate_count, self.candidates)
-            self._contacts(outputs)
-            return
-        state = [self.radius, self.mass, self.position, self.velocity, self.omega]
-        if self.force_kernel == "reference":
-            wp.launch(self._force_kernel, dim=self.count, inputs=[self.model, self.ranges, *state], outputs=outputs, device=self.device)
-            return
-        if self.layout.newton:
-            # Each pair once, per particle and tile; then each particle's gravity and sorted candidates.
-            wp.launch_tiled(
-                self._force_kernel,
-                dim=[self.tiles.shape[0]],
-                block_dim=self.layout.block_dim,
-                inputs=[self.tiles, self.body, self._max_radius],
-                outputs=[self.tile_field, self.tile_near],
-                device=self.device,
-            )
-            wp.launch(
-                self._gather_kernel,
-                dim=self.count,
-                inputs=[self.gather, self.mass, self.tile_field, self.tile_near],
-                outputs=[self.force, self.candidate_count, self.candidates],
-                device=self.device,
-            )
-            self._contacts(outputs)
-            return
-        tiled = {"dim": [self.blocks.shape[0]], "block_dim": self.layout.block_dim, "device": self.device}
-        wp.launch_tiled(self._force_kernel, inputs=[self.model, self.blocks, *state, self.body, self._max_radius], outputs=outputs, **tiled)
+    def eval_forces(self) -> None:
+        """Force and torque on every particle at the current positions and velocities."""
+        self.pack_bodies()
+        self.path.evaluate()
 
     def candidate_overflows(self, first: int = 0, end: int | None = None) -> int:
         """Particles (of rows [first, end)) whose contact candidates overflowed the list at the last
-        force evaluation (the Newton layout and the tree path; 0 otherwise): each costs a walk over
+        force evaluation (the paths that list candidates; 0 otherwise): each costs a walk over
         its whole system."""
-        if self.candidates.shape[0] == 0:
-            return 0
-        return int((self.candidate_count.numpy()[first:end] > self.candidates.shape[1]).sum())
-
-    def _contacts(self, outputs: list) -> None:
-        """The contact pass over the candidates noted by the sweep or the hash grid."""
-        inputs = [self.model, self.ranges, self.radius, self.position, self.velocity, self.omega, self.candidate_count, self.candidates]
-        if self._tiled_contacts:  # a block of lanes per particle
-            wp.launch_tiled(self._contact_kernel, dim=[self.count], block_dim=self._contact_block, inputs=inputs, outputs=outputs, device=self.device)
-        else:
-            wp.launch(self._contact_kernel, dim=self.count, inputs=inputs, outputs=outputs, device=self.device)
+        return self.path.candidate_overflows(first, end)
 
     def kick_drift(self, close_step: bool = False, pack: bool = False) -> None:
         """Half kick with the current forces, then a full drift; with ``close_step`` first the last
@@ -430,7 +319,7 @@ class Engine:
             return
         for k in range(steps):
             self.kick_drift(close_step=k > 0, pack=True)
-            self._forces()
+            self.path.evaluate()
         if steps > 0:
             self.kick()
 
@@ -440,29 +329,7 @@ class Engine:
         """Per particle: half its pair potential and elastic energy, its contacts, its largest
         overlap [cm], and its deepest contact as a fraction of the pair's smaller radius with that partner."""
         outputs = {name: wp.zeros(self.count, dtype=dtype, device=self.device) for name, dtype in PAIR_OBSERVABLES.items()}
-        if self.tree is None:
-            # A block per particle on a GPU (N threads alone would leave most of it idle).
-            block_dim = OBSERVABLES_BLOCK if self.device.startswith("cuda") else 1
-            wp.launch_tiled(
-                observables.pair_observables_tiled(block_dim),
-                dim=[self.count],
-                inputs=[self.model, self.ranges, self.radius, self.mass, self.position, self.velocity],
-                outputs=list(outputs.values()),
-                block_dim=block_dim,
-                device=self.device,
-            )
-        else:  # O(N log N): the potential from the tree, the contacts from the hash grid's candidates
-            potential, *contacts = outputs.values()
-            self.tree.build(self.position, self.mass)
-            self.tree.potential(self.params.G, self.params.theta_open, self.mass, potential)
-            self.tree.contact_candidates(self.position, self.radius, self.max_radius, self.candidate_count, self.candidates)
-            wp.launch(
-                observables.candidate_observables,
-                dim=self.count,
-                inputs=[self.model, self.ranges, self.radius, self.position, self.velocity, self.candidate_count, self.candidates],
-                outputs=contacts,
-                device=self.device,
-            )
+        self.path.observables(outputs)
         return {name: array.numpy() for name, array in outputs.items()}
 
     def take_deepest_contact(self, first: int = 0, end: int | None = None) -> dict:
@@ -526,6 +393,7 @@ class Engine:
         if records.shape != (self.count,):
             raise ValueError(f"snapshot deepest_contact has shape {records.shape}; expected {(self.count,)}")
         self.deepest_contact.assign(wp.array(records, dtype=wp.int64, device=self.device))
+        self.path.restored()
 
 
 def smoothed_density(sources: np.ndarray, norm: np.ndarray, inv_two_var: np.ndarray, targets: np.ndarray, device: str) -> np.ndarray:

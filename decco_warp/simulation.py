@@ -58,10 +58,11 @@ class Simulation:
         self._time_origin = state.time - state.step * params.dt
         self._step = state.step
         self._graph = None
-        # A tree step's level loop is a conditional graph node on CUDA (driver and toolkit 12.4+);
-        # without them its steps are launched one by one, which gives the same numbers.
+        # A loop or branch decided on the device (the tree's levels) is a conditional graph node on
+        # CUDA (driver and toolkit 12.4+); without them steps are launched one by one, which gives
+        # the same numbers.
         conditional_nodes = not self.engine.device.startswith("cuda") or wp.is_conditional_graph_supported()
-        self._record = self.engine.tree is None or conditional_nodes
+        self._record = not self.engine.path.graph_conditionals or conditional_nodes
         # Forces at x(0) with v(0): the first half kick needs them.
         self.engine.eval_forces()
         self.energy_start: dict | None = self.diagnostics() if ledger else None
