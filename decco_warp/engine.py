@@ -227,16 +227,16 @@ class Engine:
         ranges = np.repeat(np.stack([self.starts, self.ends], axis=1), self.systems, axis=0).astype(np.int32)
         self.ranges = wp.array(ranges, dtype=wp.vec2i, device=self.device)
         self.max_radius = float(state.radii.max())
+        self.min_radius = float(state.radii.min())
         # The sweeps' per-i contact bound, in their arithmetic (float32 rounding of the largest
         # radius is no smaller than that of any other radius, so the bound holds).
         self.sweep_max_radius = (wp.float32 if precision == "mixed" else wp.float64)(self.max_radius)
 
-        # The force path (decco_warp/forces.py), chosen by name in one place.  The all-pairs sweeps
-        # read packed bodies (kernels/bodies.py), refreshed before each sweep.
-        name = path_name(force_kernel, params, self.layout)
-        self.body = wp.zeros(self.count if FORCE_PATHS[name].packs_bodies else 0, dtype=BODY_TYPES[precision], device=self.device)
         self._no_body = wp.zeros(0, dtype=BODY_TYPES[precision], device=self.device)  # a kick_drift that packs none
-        self.path = FORCE_PATHS[name](self)
+        # The force path (decco_warp/forces.py), chosen by name in one place.
+        self.path = FORCE_PATHS[path_name(force_kernel, params, self.layout)](self)
+        self.gravity_every = params.gravity_every
+        """K: steps of dt per gravity evaluation (K > 1: the force path is RespaForces)."""
 
     def pair_state(self) -> list:
         """What a pair kernel reads of the particles: radius, mass, position, velocity, omega."""
@@ -259,13 +259,13 @@ class Engine:
     # -- stages of a step -----------------------------------------------------------
 
     def pack_bodies(self) -> None:
-        """The sweep's packed bodies from the current positions (none unless the path reads them)."""
-        if self.body.shape[0] > 0:
+        """The sweep's packed bodies (``path.body``) from the current positions (none unless the path reads them)."""
+        if self.path.body.shape[0] > 0:
             wp.launch(
                 PACK_KERNELS[self.precision],
                 dim=self.count,
                 inputs=[wp.float64(self.params.G), self.radius, self.mass, self.position],
-                outputs=[self.body],
+                outputs=[self.path.body],
                 device=self.device,
             )
 
@@ -289,7 +289,7 @@ class Engine:
             dim=self.count,
             inputs=[wp.float64(self.params.dt), wp.float64(self.params.G), self.radius, self.mass, self.inertia,
                     self.force, self.torque, self.channels, close_step],
-            outputs=[self.position, self.velocity, self.omega, self.work, self.body if pack else self._no_body],
+            outputs=[self.position, self.velocity, self.omega, self.work, self.path.body if pack else self._no_body],
             device=self.device,
         )  # fmt: skip
 
@@ -303,25 +303,86 @@ class Engine:
             device=self.device,
         )
 
+    # Gravity on its own clock (K = gravity_every > 1, docs/model.md): the path is RespaForces.
+
+    def kick_outer(self, close_step: bool = False) -> None:
+        """A gravity half kick of K dt / 2; with ``close_step`` first the last contact half kick (:meth:`kick`)."""
+        wp.launch(
+            integrate.kick_outer,
+            dim=self.count,
+            inputs=[wp.float64(self.params.dt), wp.float64(self.gravity_every * self.params.dt), self.mass, self.inertia,
+                    self.force, self.torque, self.channels, self.path.gravity_force, close_step],
+            outputs=[self.velocity, self.omega, self.work],
+            device=self.device,
+        )  # fmt: skip
+
+    def kick_drift_inner(self, close_step: bool = False, gravity_kicks: int = 0, pack: bool = False) -> None:
+        """A contact half kick and a full drift, then the neighbour list's displacement check; with
+        ``close_step`` first the last contact half kick of the step before, then ``gravity_kicks``
+        gravity half kicks (closing and opening outer steps); with ``pack`` the packing of the bodies
+        for the gravity sweep after the drift."""
+        neighbours = self.path.neighbours
+        wp.launch(
+            integrate.KICK_DRIFT_INNER[self.precision],
+            dim=self.count,
+            inputs=[wp.float64(self.params.dt), wp.float64(self.gravity_every * self.params.dt), wp.float64(self.params.G),
+                    self.radius, self.mass, self.inertia, self.force, self.torque, self.channels, self.path.gravity_force,
+                    close_step, gravity_kicks, neighbours.reference, wp.float64(0.5 * neighbours.skin)],
+            outputs=[self.position, self.velocity, self.omega, self.work, neighbours.stale,
+                     self.path.body if pack else self._no_body],
+            device=self.device,
+        )  # fmt: skip
+
     def step(self) -> None:
-        """One kick-drift-kick step (docs/model.md): forces at x(n+1) with the half-step velocities."""
-        self.kick_drift()
-        self.eval_forces()
-        self.kick()
+        """One step (docs/model.md), each stage a launch of its own: kick-drift, the forces at x(n+1)
+        with the half-step velocities, kick.  With gravity on its own clock, one outer step of K
+        steps: a gravity half kick, K steps of the contacts alone, gravity at the new positions and
+        the second gravity half kick."""
+        if self.gravity_every == 1:
+            self.kick_drift()
+            self.eval_forces()
+            self.kick()
+            return
+        self.kick_outer()
+        for k in range(self.gravity_every):
+            self.kick_drift_inner(pack=k == self.gravity_every - 1)
+            self.path.contacts()
+            self.kick()
+        self.path.gravity_step()
+        self.kick_outer()
 
     def advance(self, steps: int) -> None:
-        """``steps`` steps, ending at a whole step as :meth:`step` does, bit for bit the same: with
-        ``layout.fuse_kicks``, a step's last half kick, the next one's first half kick and drift and
-        the packing of its bodies are one launch (kernels/integrate.py ``kick_drift``)."""
+        """``steps`` steps (a multiple of K), ending at a whole step as :meth:`step` does, bit for bit
+        the same: with ``layout.fuse_kicks``, a step's last half kick, the next one's first half
+        kick and drift and the packing of its bodies are one launch (kernels/integrate.py
+        ``kick_drift``, ``kick_drift_inner``)."""
+        if steps % self.gravity_every:
+            raise ValueError(f"steps must be a multiple of gravity_every = {self.gravity_every}; got {steps}")
         if not self.layout.fuse_kicks:
-            for _ in range(steps):
+            for _ in range(steps // self.gravity_every):
                 self.step()
-            return
+        elif self.gravity_every == 1:
+            self._advance_one_clock(steps)
+        else:
+            self._advance_two_clocks(steps // self.gravity_every)
+
+    def _advance_one_clock(self, steps: int) -> None:
         for k in range(steps):
             self.kick_drift(close_step=k > 0, pack=True)
             self.path.evaluate()
         if steps > 0:
             self.kick()
+
+    def _advance_two_clocks(self, outer_steps: int) -> None:
+        last = self.gravity_every - 1
+        for s in range(outer_steps):
+            for k in range(self.gravity_every):
+                # The first inner step opens the outer step's gravity kick (after closing the one before).
+                self.kick_drift_inner(close_step=s > 0 or k > 0, gravity_kicks=(2 if s > 0 else 1) if k == 0 else 0, pack=k == last)
+                self.path.contacts()
+            self.path.gravity_step()
+        if outer_steps > 0:
+            self.kick_outer(close_step=True)
 
     # -- host side ----------------------------------------------------------------
 
@@ -351,23 +412,24 @@ class Engine:
         return self.position.numpy().copy(), self.velocity.numpy().copy(), self.omega.numpy().copy()
 
     def read_forces(self) -> tuple[np.ndarray, np.ndarray]:
-        """The last evaluated force [dyne] and torque [dyne cm], copied to the host."""
-        return self.force.numpy().copy(), self.torque.numpy().copy()
+        """The last evaluated force [dyne] (gravity included) and torque [dyne cm], copied to the host."""
+        return self.path.total_force(), self.torque.numpy().copy()
 
     def read_work(self) -> np.ndarray:
         """Work of (gravity, spring, sliding, rolling) on each particle since the start [erg], (N, 4)."""
         return self.work.numpy().copy() if self.ledger else np.zeros((self.count, 4))
 
     def snapshot(self) -> dict[str, np.ndarray]:
-        """Every array the next step depends on: enough to continue bit for bit."""
+        """Every array the next step depends on: enough to continue bit for bit.  With gravity on its
+        own clock ``force`` is the contact force; gravity, a function of the positions alone, is
+        evaluated anew on :meth:`restore`."""
         positions, velocities, omegas = self.read()
-        force, torque = self.read_forces()
         return {
             "positions": positions,
             "velocities": velocities,
             "omegas": omegas,
-            "force": force,
-            "torque": torque,
+            "force": self.force.numpy().copy(),
+            "torque": self.torque.numpy().copy(),
             "channels": self.channels.numpy().copy(),
             "work": self.work.numpy().copy(),
             "deepest_contact": self.deepest_contact.numpy().copy(),
@@ -433,7 +495,8 @@ def memory_estimate(n: int, gravity: str, device: str = "cpu", ledger: bool = Tr
     per = 3 * f64 + 5 * vec3d  # radius, mass, inertia; position, velocity, omega, force, torque
     per += (len(LEDGER_CHANNELS) * vec3d + 32) if ledger else 0  # channels, work
     per += 8 + 32 + 8  # deepest contact, packed body, system range
-    per += i32 * (1 + CANDIDATES)  # the contact candidates of the Newton layout or the tree
+    per += i32 * (1 + CANDIDATES)  # the contact candidates of the Newton layout, the tree or the neighbour list
+    per += 2 * vec3d + i32  # gravity on its own clock: gravity, the list's build positions, each particle's system
     per += len(PAIR_OBSERVABLES) * f64  # a frame's pair observables
     if gravity == "tree":  # nodes (2n): mass, centre, quadrupole, box, size, offset, links (16), child, first,
         # last, parent, escape; keys, order (2n); leaf positions, grid points; each walk part's field and potential

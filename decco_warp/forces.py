@@ -1,8 +1,9 @@
 """Force paths: each way of computing the forces of a step is one object that owns its scratch
 arrays and its launches, and :func:`path_name` chooses one by name, in one place.
 
-    path = FORCE_PATHS[path_name(force_kernel, params, layout)](engine)   # as Engine does
-    engine.pack_bodies()           # first, where path.packs_bodies
+    path = FORCE_PATHS[path_name(force_kernel, params, layout)](engine)   # as Engine does:
+                                   # "reference", "fused", "newton", "tree" or "respa"
+    engine.pack_bodies()           # first (into path.body, empty where the path reads none)
     path.evaluate()                # engine.force, torque, channels, deepest_contact at the current state
     path.observables(outputs)      # a frame's per-particle observables
     path.candidate_overflows()     # particles whose candidate list overflowed at the last evaluation
@@ -17,10 +18,12 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .gravity_tree import GravityTree
+from .gravity_tree import GRID_CELLS, GravityTree
 from .kernels import observables as observable_kernels
+from .kernels.bodies import BODY_TYPES
 from .kernels.contacts import CANDIDATES, contact_pass
 from .kernels.fused import pair_forces_tiled
+from .kernels.neighbours import REACH_MARGIN, build_neighbour_list, listed_contacts
 from .kernels.newton import GatherRows, TilePair, contact_pass_ordered, gather_newton, pair_gravity_newton
 from .kernels.reference import pair_forces_reference
 
@@ -69,13 +72,17 @@ def _candidate_arrays(count: int, device: str) -> tuple[wp.array, wp.array]:
     return wp.zeros(count, dtype=wp.int32, device=device), wp.zeros((count, CANDIDATES), dtype=wp.int32, device=device)
 
 
+def _bodies(engine, count: int) -> wp.array:
+    """Packed bodies (kernels/bodies.py) for an all-pairs sweep, refreshed before each (count 0: none)."""
+    return wp.zeros(count, dtype=BODY_TYPES[engine.precision], device=engine.device)
+
+
 class ForcePath:
     """What every force path gives the engine; a path that lists contact candidates fills
-    ``candidate_count`` and ``candidates`` (else they are empty)."""
+    ``candidate_count`` and ``candidates``, one that sweeps all pairs reads ``body`` (else they
+    are empty)."""
 
     name = ""
-    packs_bodies = False
-    """Whether :meth:`evaluate` reads the packed bodies (kernels/bodies.py), refreshed before it."""
     graph_conditionals = False
     """Whether its launches hold a loop or branch decided on the device (wp.capture_while,
     wp.capture_if): a CUDA graph of them needs conditional nodes (driver and toolkit 12.4+)."""
@@ -83,6 +90,7 @@ class ForcePath:
     def __init__(self, engine):
         self.engine = engine
         self.candidate_count, self.candidates = _candidate_arrays(0, engine.device)
+        self.body = _bodies(engine, 0)
 
     def evaluate(self) -> None:
         """engine.force, torque, channels (with the ledger) and deepest_contact at the current state."""
@@ -91,6 +99,14 @@ class ForcePath:
     def outputs(self) -> list:
         e = self.engine
         return [e.force, e.torque, e.channels, e.deepest_contact]
+
+    def total_force(self) -> np.ndarray:
+        """The force on every particle at the last evaluation [dyne], a host copy."""
+        return self.engine.force.numpy().copy()
+
+    def list_builds(self) -> int | None:
+        """Builds of a neighbour list since the engine began (None: the path keeps none)."""
+        return None
 
     def observables(self, outputs: dict) -> None:
         """Per particle, into ``outputs`` (engine.PAIR_OBSERVABLES): over every pair of its system,
@@ -144,11 +160,11 @@ class FusedForces(ForcePath):
     tiled kernel; blocks of ``layout.particles_per_block`` rows, never straddling two systems."""
 
     name = "fused"
-    packs_bodies = True
 
     def __init__(self, engine):
         super().__init__(engine)
         _check_cpu_blocks(engine, newton=False)
+        self.body = _bodies(engine, engine.count)
         layout = engine.layout
         self.blocks = wp.array(tiled_blocks(engine.starts, engine.ends, layout.particles_per_block), dtype=wp.vec4i, device=engine.device)
         self.kernel = pair_forces_tiled(
@@ -167,20 +183,24 @@ class FusedForces(ForcePath):
             self.kernel,
             dim=[self.blocks.shape[0]],
             block_dim=e.layout.block_dim,
-            inputs=[e.model, self.blocks, *e.pair_state(), e.body, e.sweep_max_radius],
+            inputs=[e.model, self.blocks, *e.pair_state(), self.body, e.sweep_max_radius],
             outputs=self.outputs(),
             device=e.device,
         )
 
 
 class NewtonGravity:
-    """Each pair's gravity once (kernels/newton.py): the sweep over a system's tile pairs, then the
-    gather of each particle's rows, with its contact candidates listed in increasing j."""
+    """Each pair's gravity once (kernels/newton.py): the sweep over a system's tile pairs of the packed
+    ``body``, then the gather of each particle's rows; given candidate arrays, with its contact
+    candidates listed in increasing j."""
 
-    def __init__(self, engine, layout, candidate_count: wp.array, candidates: wp.array):
+    def __init__(self, engine, layout, body: wp.array, candidate_count: wp.array | None = None, candidates: wp.array | None = None):
         if _on_cuda(engine.device) and layout.block_dim != 32:
             raise ValueError(f"a Newton layout's block is one warp: block_dim must be 32 on CUDA; got {layout.block_dim}")
-        self.engine, self.layout = engine, layout
+        self.engine, self.layout, self.body = engine, layout, body
+        listing = candidates is not None
+        if not listing:  # nothing listed, nothing noted: empty arrays in the kernels' signatures
+            candidate_count, candidates = _candidate_arrays(0, engine.device)
         self.candidate_count, self.candidates = candidate_count, candidates
         # Per tile pair and side, per particle of the tile: the sweep's field sum and candidate bits.
         tiles, gather, rows = newton_tiles(engine.starts, engine.ends, layout.particles_per_block)
@@ -189,9 +209,9 @@ class NewtonGravity:
         self.gather = wp.array(gather, dtype=GatherRows, device=device)
         vector = wp.vec3f if engine.precision == "mixed" else wp.vec3d
         self.tile_field = wp.zeros((rows, layout.particles_per_block), dtype=vector, device=device)
-        self.tile_near = wp.zeros((rows, layout.particles_per_block), dtype=wp.uint64, device=device)
-        self.sweep = pair_gravity_newton(layout.particles_per_block // layout.block_dim, engine.precision, layout.max_registers)
-        self.gather_kernel = gather_newton(engine.precision)
+        self.tile_near = wp.zeros((rows if listing else 0, layout.particles_per_block), dtype=wp.uint64, device=device)
+        self.sweep = pair_gravity_newton(layout.particles_per_block // layout.block_dim, engine.precision, layout.max_registers, listing)
+        self.gather_kernel = gather_newton(engine.precision, listing)
 
     def evaluate(self, force_out: wp.array) -> None:
         """``force_out`` = gravity on every particle (the bodies packed), and its candidates listed."""
@@ -200,7 +220,7 @@ class NewtonGravity:
             self.sweep,
             dim=[self.tiles.shape[0]],
             block_dim=self.layout.block_dim,
-            inputs=[self.tiles, e.body, e.sweep_max_radius],
+            inputs=[self.tiles, self.body, e.sweep_max_radius],
             outputs=[self.tile_field, self.tile_near],
             device=e.device,
         )
@@ -219,13 +239,13 @@ class NewtonForces(ForcePath):
     CPU runs those lanes too: tests check the lanes' reduction so)."""
 
     name = "newton"
-    packs_bodies = True
 
     def __init__(self, engine):
         super().__init__(engine)
         _check_cpu_blocks(engine, newton=True)
         self.candidate_count, self.candidates = _candidate_arrays(engine.count, engine.device)
-        self.gravity = NewtonGravity(engine, engine.layout, self.candidate_count, self.candidates)
+        self.body = _bodies(engine, engine.count)
+        self.gravity = NewtonGravity(engine, engine.layout, self.body, self.candidate_count, self.candidates)
         self.contact_block = CONTACT_BLOCK if _on_cuda(engine.device) or wp.config.enable_cpu_blocks else 1
         # The gather lists each particle's candidates in increasing j: lanes can share them out.
         self.contact_kernel = contact_pass_ordered(engine.params.rolling_friction, self.contact_block)
@@ -243,32 +263,63 @@ class NewtonForces(ForcePath):
         )
 
 
+class TreeGravity:
+    """Gravity from a radix tree (gravity_tree.py), built from the positions at every evaluation; one
+    system at a time."""
+
+    def __init__(self, engine):
+        if len(engine.systems) > 1:
+            raise ValueError('the tree path steps one system at a time; an ensemble needs gravity = "all-pairs"')
+        self.engine = engine
+        self.tree = GravityTree(engine.count, engine.device, engine.precision)
+
+    def evaluate(self, force_out: wp.array) -> None:
+        """``force_out`` = gravity on every particle."""
+        e = self.engine
+        self.tree.build(e.position, e.mass)
+        self.tree.gravity(e.params.G, e.params.theta_open, e.mass, force_out)
+
+    def potential(self, potential_out: wp.array) -> None:
+        """``potential_out`` = half of each particle's gravitational energy, from the same walk."""
+        e = self.engine
+        self.tree.build(e.position, e.mass)
+        self.tree.potential(e.params.G, e.params.theta_open, e.mass, potential_out)
+
+
+def _candidate_observables(engine, contacts: list, candidate_count: wp.array, candidates: wp.array) -> None:
+    """The contact observables of a frame from each particle's candidate list (a superset of its contacts)."""
+    e = engine
+    wp.launch(
+        observable_kernels.candidate_observables,
+        dim=e.count,
+        inputs=[e.model, e.ranges, e.radius, e.position, e.velocity, candidate_count, candidates],
+        outputs=contacts,
+        device=e.device,
+    )
+
+
 class TreeForces(ForcePath):
-    """The tree path: gravity from a radix tree, contacts from a hash grid's candidates, one thread
-    per particle in increasing j (kernels/tree.py, kernels/contacts.py ``contact_pass``); one
-    system at a time.  Frames too cost O(N log N): the potential from the tree, the contact
-    observables from the grid's candidates."""
+    """The tree path: :class:`TreeGravity`, contacts from a hash grid's candidates, one thread per
+    particle in increasing j (kernels/tree.py, kernels/contacts.py ``contact_pass``).  Frames too
+    cost O(N log N): the potential from the tree, the contact observables from the grid's candidates."""
 
     name = "tree"
     graph_conditionals = True  # the moments' levels: wp.capture_while
 
     def __init__(self, engine):
         super().__init__(engine)
-        if len(engine.systems) > 1:
-            raise ValueError('the tree path steps one system at a time; an ensemble needs gravity = "all-pairs"')
-        self.tree = GravityTree(engine.count, engine.device, engine.precision)
+        self.gravity = TreeGravity(engine)
         self.candidate_count, self.candidates = _candidate_arrays(engine.count, engine.device)
         self.contact_kernel = contact_pass(engine.params.rolling_friction)
 
     def _candidates(self) -> None:
         """Each particle's contact candidates from the hash grid (the tree built)."""
         e = self.engine
-        self.tree.contact_candidates(e.position, e.radius, e.max_radius, self.candidate_count, self.candidates)
+        self.gravity.tree.contact_candidates(e.position, e.radius, e.max_radius, self.candidate_count, self.candidates)
 
     def evaluate(self) -> None:
         e = self.engine
-        self.tree.build(e.position, e.mass)
-        self.tree.gravity(e.params.G, e.params.theta_open, e.mass, e.force)
+        self.gravity.evaluate(e.force)
         self._candidates()
         wp.launch(
             self.contact_kernel,
@@ -279,29 +330,155 @@ class TreeForces(ForcePath):
         )
 
     def observables(self, outputs: dict) -> None:
-        e = self.engine
         potential, *contacts = outputs.values()
-        self.tree.build(e.position, e.mass)
-        self.tree.potential(e.params.G, e.params.theta_open, e.mass, potential)
+        self.gravity.potential(potential)
         self._candidates()
+        _candidate_observables(self.engine, contacts, self.candidate_count, self.candidates)
+
+
+#: The neighbour list's skin, as a fraction of the smallest radius: 0.2 (1.5 km at the paper's
+#: 7.5 km spheres).  A wider skin rebuilds the list less often but lists more pairs that do not
+#: touch, each evaluated every step: at 0.2 a small sphere of a settled pile lists ~1.5 times its
+#: contacts, and the list is rebuilt after skin / 2 of travel (0.75 km: ~10 steps of dt = 0.04 s
+#: at the paper's fastest particles, ~2 km/s; a settled pile far more rarely).
+SKIN_FRACTION = 0.2
+
+
+class NeighbourList:
+    """Each particle's neighbours within R_i + R_j + skin, in increasing j (kernels/neighbours.py),
+    in the candidate arrays; rebuilt on the device once any particle has moved skin / 2 since the
+    last build (``stale``, set by the inner drift: kernels/integrate.py ``kick_drift_inner``)."""
+
+    def __init__(self, engine, min_radius: float):
+        device, count = engine.device, engine.count
+        self.engine = engine
+        self.skin = SKIN_FRACTION * min_radius
+        """[cm]"""
+        self.candidate_count, self.candidates = _candidate_arrays(count, device)
+        self.reference = wp.zeros(count, dtype=wp.vec3d, device=device)
+        """The positions of the last build."""
+        self.stale = wp.zeros(1, dtype=wp.int32, device=device)
+        """[0] = 1 once a particle has moved past skin / 2 since the last build."""
+        self.builds = wp.zeros(1, dtype=wp.int64, device=device)
+        """[0]: builds since the engine began."""
+        # Each particle's system is its group in the grid: the systems of an ensemble never meet.
+        self.system = wp.array(np.repeat(np.arange(len(engine.systems)), engine.systems).astype(np.int32), device=device)
+        self.grid = wp.HashGrid(GRID_CELLS, GRID_CELLS, GRID_CELLS, device=device, dtype=wp.float64)
+        self.grid.reserve(count, with_groups=True)
+        # A cell holds the farthest reach of a query, R_i + R_max + skin.
+        self.cell = (2.0 * engine.max_radius + self.skin) * REACH_MARGIN
+
+    def build(self) -> None:
+        """List every particle's neighbours at the current positions."""
+        e = self.engine
+        self.grid.build(e.position, self.cell, groups=self.system)
         wp.launch(
-            observable_kernels.candidate_observables,
+            build_neighbour_list,
             dim=e.count,
-            inputs=[e.model, e.ranges, e.radius, e.position, e.velocity, self.candidate_count, self.candidates],
-            outputs=contacts,
+            inputs=[self.grid.id, self.system, e.radius, wp.float64(e.max_radius), wp.float64(self.skin), e.position],
+            outputs=[self.reference, self.candidate_count, self.candidates, self.stale, self.builds],
             device=e.device,
         )
 
+    def refresh(self) -> None:
+        """Rebuild the list if it is stale, decided on the device (a conditional graph node on CUDA)."""
+        wp.capture_if(self.stale, self.build)
+
+
+class RespaForces(ForcePath):
+    """Gravity on its own clock (``Params.gravity_every`` K > 1; docs/model.md): gravity every K steps
+    into its own array (the Newton sweep of every pair once, or with ``gravity = "tree"`` the tree),
+    the contacts every step from a neighbour list.  The engine kicks each on its clock
+    (kernels/integrate.py ``kick_outer``, ``kick_drift_inner``)."""
+
+    name = "respa"
+    graph_conditionals = True  # the neighbour list's rebuild: wp.capture_if
+
+    def __init__(self, engine):
+        from .engine import NEWTON_MAX, newton_layout
+
+        super().__init__(engine)
+        if engine.params.gravity == "tree":
+            self.gravity = TreeGravity(engine)
+        else:
+            largest = int(engine.systems.max())
+            if _on_cuda(engine.device) and largest > NEWTON_MAX:
+                raise ValueError(
+                    f"gravity_every > 1 sums all-pairs gravity with the Newton sweep, which holds systems of up to "
+                    f"{NEWTON_MAX} particles; this one has {largest}: use gravity = \"tree\""
+                )
+            layout = engine.layout if engine.layout.newton else newton_layout(engine.device)
+            self.body = _bodies(engine, engine.count)
+            self.gravity = NewtonGravity(engine, layout, self.body)
+        self.gravity_force = wp.zeros(engine.count, dtype=wp.vec3d, device=engine.device)
+        """Gravity at the positions of the last outer step [dyne]."""
+        self.neighbours = NeighbourList(engine, engine.min_radius)
+        self.candidate_count, self.candidates = self.neighbours.candidate_count, self.neighbours.candidates
+        self.contact_kernel = listed_contacts(engine.params.rolling_friction)
+
+    def evaluate(self) -> None:
+        """Gravity and the contacts at the current state, the neighbour list built afresh."""
+        self.gravity.evaluate(self.gravity_force)
+        self.neighbours.build()
+        self._contact_pass()
+
+    def gravity_step(self) -> None:
+        """Gravity at the current positions (the bodies packed by the last inner drift)."""
+        self.gravity.evaluate(self.gravity_force)
+
+    def contacts(self) -> None:
+        """The contacts of an inner step, at the positions after its drift: the list first rebuilt if stale."""
+        self.neighbours.refresh()
+        self._contact_pass()
+
+    def _contact_pass(self) -> None:
+        e = self.engine
+        wp.launch(
+            self.contact_kernel,
+            dim=e.count,
+            inputs=[e.model, e.ranges, e.radius, *e.contact_state(), self.candidate_count, self.candidates],
+            outputs=self.outputs(),
+            device=e.device,
+        )
+
+    def restored(self) -> None:
+        """Gravity at the restored positions (what the uninterrupted run holds, bit for bit: the same
+        kernels on the same positions) and the list built afresh; the contact force is the snapshot's."""
+        self.engine.pack_bodies()
+        self.gravity.evaluate(self.gravity_force)
+        self.neighbours.build()
+
+    def total_force(self) -> np.ndarray:
+        """Gravity plus the contact force [dyne], both at the current positions."""
+        return self.engine.force.numpy() + self.gravity_force.numpy()
+
+    def list_builds(self) -> int:
+        return int(self.neighbours.builds.numpy()[0])
+
+    def observables(self, outputs: dict) -> None:
+        if not isinstance(self.gravity, TreeGravity):
+            super().observables(outputs)
+            return
+        # O(N log N) as the tree path: the potential from the tree, the contacts from the list (which
+        # holds every touching pair: its last check was at the current positions).
+        potential, *contacts = outputs.values()
+        self.gravity.potential(potential)
+        _candidate_observables(self.engine, contacts, self.candidate_count, self.candidates)
+
 
 #: Every force path, by name.
-FORCE_PATHS = {path.name: path for path in (ReferenceForces, FusedForces, NewtonForces, TreeForces)}
+FORCE_PATHS = {path.name: path for path in (ReferenceForces, FusedForces, NewtonForces, TreeForces, RespaForces)}
 
 
 def path_name(force_kernel: str, params, layout) -> str:
     """The one switch: the force path of an engine with ``force_kernel`` ("tiled" or "reference"),
     ``params`` and ``layout``."""
     if force_kernel == "reference":
+        if params.gravity_every > 1:
+            raise ValueError("the reference kernel evaluates gravity with every force: it steps with gravity_every = 1 only")
         return "reference"
+    if params.gravity_every > 1:
+        return "respa"
     if params.gravity == "tree":
         return "tree"
     return "newton" if layout.newton else "fused"

@@ -1,0 +1,244 @@
+"""Gravity on its own clock (Params.gravity_every = K > 1, docs/model.md): impulse multiple time
+stepping against a float64 NumPy RESPA step, the neighbour list that feeds the contacts, the energy
+ledger, bit-exact restarts and ensembles."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from helpers import assert_fused_steps_equal_one_step_at_a_time
+from oracle import pair_loop_forces
+from scenes import contact_cluster
+
+import decco_warp as dw
+from decco_warp.diagnostics import energy_ledger
+from decco_warp.forces import SKIN_FRACTION
+
+#: One outer step against NumPy, as a fraction of the largest change of each quantity over the
+#: step: float64 to round-off; mixed within float32 gravity's error (measured ~1e-8 in velocity).
+RESPA_FLOAT64_TOLERANCE = 1e-10
+RESPA_MIXED_TOLERANCE = 1e-6
+#: Ledger closure: the books balance to round-off of float64 sums, as with K = 1 (tests/test_ledger.py).
+CLOSURE_TOLERANCE = 1e-10
+
+
+def _oracle_forces(x, v, w, state, params, gravity: bool):
+    """tests/oracle.py's forces, gravity alone (contacts off: k_in = 0) or the contacts alone (G = 0)."""
+    args = (x, v, w, state.radii, state.masses)
+    if gravity:
+        return pair_loop_forces(*args, 0.0, params.restitution, 0.0, 0.0, params.G)[:2]
+    return pair_loop_forces(*args, params.k_in, params.restitution, params.mu_k, params.mu_r, 0.0, rolling=params.rolling_friction)[:2]
+
+
+def _numpy_respa_step(state, params, every):
+    """One outer step in float64 NumPy, written from docs/model.md: a gravity half kick of K dt / 2,
+    K kick-drift-kick steps of the contacts alone (forces at the new positions with the half-step
+    velocities), gravity at the new positions, the second gravity half kick."""
+    x, v, w = state.positions.copy(), state.velocities.copy(), state.omegas.copy()
+    m, inertia, dt = state.masses[:, None], state.inertia[:, None], params.dt
+    contact, couple = _oracle_forces(x, v, w, state, params, gravity=False)
+    v = v + _oracle_forces(x, v, w, state, params, gravity=True)[0] / m * (every * dt / 2)
+    for _ in range(every):
+        v, w = v + contact / m * (dt / 2), w + couple / inertia * (dt / 2)
+        x = x + v * dt
+        contact, couple = _oracle_forces(x, v, w, state, params, gravity=False)
+        v, w = v + contact / m * (dt / 2), w + couple / inertia * (dt / 2)
+    v = v + _oracle_forces(x, v, w, state, params, gravity=True)[0] / m * (every * dt / 2)
+    return x, v, w
+
+
+def _relative_errors(got, want, start):
+    """Per quantity: the largest error as a fraction of the largest change over the step."""
+    return [np.abs(g - w).max() / np.abs(w - s).max() for g, w, s in zip(got, want, start)]
+
+
+@pytest.mark.parametrize(("precision", "tolerance"), [("float64", RESPA_FLOAT64_TOLERANCE), ("mixed", RESPA_MIXED_TOLERANCE)])
+def test_one_outer_step_equals_a_numpy_respa_step(precision, tolerance):
+    """A contact clump whose gravity is as strong as its contacts (~1e20 dyne each): after one outer
+    step of K = 5, positions, velocities and spins equal the NumPy RESPA step's; K plain velocity
+    Verlet steps (gravity every step) differ from it ~1e5 times more in float64."""
+    state = contact_cluster(40, seed=4, overlap_range=(1.0, 1e2), speed=1e3, spin=1e-3)
+    every = 5
+    params = dw.Params(gravity_every=every)
+    contact = _oracle_forces(state.positions, state.velocities, state.omegas, state, params, gravity=False)[0]
+    gravity = _oracle_forces(state.positions, state.velocities, state.omegas, state, params, gravity=True)[0]
+    assert 0.1 < np.abs(gravity).max() / np.abs(contact).max() < 10
+    want = _numpy_respa_step(state, params, every)
+    sim = dw.Simulation(state, params, device="cpu", precision=precision)
+    sim.step(every)
+    after = sim.state
+    start = (state.positions, state.velocities, state.omegas)
+    errors = _relative_errors((after.positions, after.velocities, after.omegas), want, start)
+    assert max(errors) <= tolerance, errors
+    if precision == "float64":
+        verlet = state
+        for _ in range(every):
+            verlet = replace(verlet, **dict(zip(("positions", "velocities", "omegas"), _numpy_respa_step(verlet, params, 1))))
+        apart = _relative_errors((verlet.positions, verlet.velocities, verlet.omegas), want, start)
+        assert min(apart[1:]) > 1e4 * tolerance, apart
+
+
+def _fast_clump(n=80, seed=7):
+    """A contact clump whose particles move ~5e4 cm/s: 2e3 cm a step, past half the skin (7.5e4 cm)
+    in a few tens of steps, so that the neighbour list is rebuilt again and again."""
+    return contact_cluster(n, seed=seed, overlap_range=(1.0, 1e3), speed=5e4, spin=1e-3)
+
+
+def _touching_pairs(positions, radii):
+    r = positions[:, None, :] - positions[None, :, :]
+    distance = np.sqrt((r**2).sum(axis=-1))
+    np.fill_diagonal(distance, np.inf)
+    return distance, radii[:, None] + radii[None, :]
+
+
+def test_the_neighbour_list_holds_every_touching_pair_and_is_rebuilt_past_half_the_skin():
+    """Stepped two steps at a time: every particle stays within skin / 2 of its position at the
+    list's last build (the rebuild rule), each list is in increasing j and is exactly the pairs
+    within R_i + R_j + skin at that build, so it holds every pair that touches now (NumPy, all
+    pairs); the list is rebuilt as the particles travel, and kept while nothing moves far."""
+    state = _fast_clump()
+    sim = dw.Simulation(state, dw.Params(gravity_every=2), device="cpu", allow_unstable=True)
+    neighbours = sim.engine.path.neighbours
+    skin = SKIN_FRACTION * state.radii.min()
+    assert neighbours.skin == skin
+    builds = [sim.neighbour_list_builds()]
+    touched = 0
+    for _ in range(40):
+        sim.step(2)
+        positions = sim.state.positions
+        reference = neighbours.reference.numpy()
+        assert np.linalg.norm(positions - reference, axis=1).max() <= skin / 2
+        counts, lists = sim.engine.candidate_count.numpy(), sim.engine.candidates.numpy()
+        assert counts.max() <= lists.shape[1]
+        at_build, reach = _touching_pairs(reference, state.radii)
+        now, contact = _touching_pairs(positions, state.radii)
+        for i in range(state.n):
+            row = lists[i, : counts[i]]
+            assert np.all(np.diff(row) > 0)
+            near = np.flatnonzero(at_build[i] < reach[i] + skin)
+            # Pairs at the reach to within its margin may fall either way.
+            edge = np.flatnonzero(np.abs(at_build[i] - reach[i] - skin) < 1e-6 * (reach[i] + skin))
+            assert set(near) - set(edge) <= set(row) <= set(near) | set(edge)
+            touching = np.flatnonzero(now[i] < contact[i])
+            assert set(touching) <= set(row)
+            touched += len(touching)
+        builds.append(sim.neighbour_list_builds())
+    travelled = np.linalg.norm(sim.state.positions - state.positions, axis=1).max()
+    assert touched > state.n and travelled > 2 * skin  # contacts all along, and particles far travelled
+    assert builds[0] == 1 and builds[-1] >= travelled / (skin / 2) / 2 and builds[-1] < 80
+    # A clump at rest lists once and keeps its list.
+    slow = dw.Simulation(replace(state, velocities=state.velocities * 1e-4), dw.Params(gravity_every=2, G=0.0), device="cpu", allow_unstable=True)
+    slow.step(40)
+    assert slow.neighbour_list_builds() == 1
+
+
+def _books(sim):
+    now = sim.diagnostics()
+    ledger = energy_ledger(now, sim.energy_start, sim.work())
+    return ledger, now["total_energy"] + sum(ledger.values())
+
+
+@pytest.mark.parametrize("gravity", ["all-pairs", "tree"])
+@pytest.mark.parametrize("precision", ["mixed", "float64"])
+def test_the_ledger_closes_with_gravity_booked_at_the_outer_kicks(precision, gravity):
+    """K = 10 on a dissipative clump: the books balance to round-off (gravity's work booked at the
+    outer kicks as the exact kinetic-energy change of each, the contact channels at the inner ones),
+    every dissipation channel counts, and gravity did work."""
+    clump = contact_cluster(100, seed=3, overlap_range=(1.0, 1e3), speed=20.0, spin=1e-4)
+    sim = dw.Simulation(clump, dw.Params(gravity_every=10, gravity=gravity), device="cpu", precision=precision, ledger=True)
+    sim.step(1000)
+    ledger, balance = _books(sim)
+    start = sim.energy_start["total_energy"]
+    assert abs(balance - start) <= CLOSURE_TOLERANCE * abs(start)
+    for channel in ("dissipated_sliding", "dissipated_rolling", "dissipated_hysteresis"):
+        assert ledger[channel] > 0, channel
+    assert abs(sim.work()[:, 0]).max() > 0
+
+
+def test_elastic_frictionless_clump_dissipates_nothing_on_two_clocks():
+    """Restitution 1, no friction, K = 5: nothing is dissipated, and what the books call the
+    integration error stays tiny against the kinetic energy exchanged."""
+    clump = contact_cluster(100, seed=3, overlap_range=(1.0, 1e3), speed=20.0)
+    sim = dw.Simulation(clump, dw.Params(restitution=1.0, mu_k=0.0, mu_r=0.0, gravity_every=5), device="cpu", precision="float64", ledger=True)
+    sim.step(1000)
+    ledger, balance = _books(sim)
+    kinetic = sim.diagnostics()["kinetic_translational"]
+    assert abs(balance - sim.energy_start["total_energy"]) <= CLOSURE_TOLERANCE * abs(sim.energy_start["total_energy"])
+    assert ledger["dissipated_sliding"] == 0.0 and ledger["dissipated_rolling"] == 0.0
+    assert abs(ledger["dissipated_hysteresis"]) < 1e-4 * kinetic and abs(ledger["integration_error"]) < 1e-4 * kinetic
+
+
+@pytest.mark.parametrize("precision", ["mixed", "float64"])
+def test_a_restart_from_a_snapshot_is_bit_identical(precision):
+    """Stopped at step 60 and restored (gravity evaluated anew at the restored positions, the
+    neighbour list built afresh: another superset of the contacts than the uninterrupted run's
+    list), then stepped to 150: every array the next step depends on, bit for bit."""
+    clump, params = _fast_clump(), dw.Params(gravity_every=5)
+    straight = dw.Simulation(clump, params, device="cpu", precision=precision, ledger=True, allow_unstable=True)
+    straight.step(150)
+    first = dw.Simulation(clump, params, device="cpu", precision=precision, ledger=True, allow_unstable=True)
+    first.step(60)
+    snap = first.snapshot()
+    second = dw.Simulation.from_snapshot(clump, params, snap, device="cpu", precision=precision)
+    assert second.step_count == 60
+    second.step(90)
+    a, b = straight.snapshot(), second.snapshot()
+    for key in ("positions", "velocities", "omegas", "force", "torque", "channels", "work", "deepest_contact"):
+        assert np.array_equal(a[key], b[key]), key
+    assert straight.time == second.time and second.step_count == 150
+    assert straight.neighbour_list_builds() > 2  # lists were rebuilt, at other steps in the two
+
+
+@pytest.mark.parametrize("precision", ["mixed", "float64"])
+def test_steps_sharing_launches_equal_the_launches_of_an_outer_step(precision):
+    """Engine.advance (the kicks closing and opening outer and inner steps, the drift, the packing
+    and the displacement check in one launch per inner step) equals Engine.step's launches one after
+    another, bit for bit, also over recorded graphs (blocks of 50 steps)."""
+    every = 5
+    state = _fast_clump(40, seed=6)
+
+    def make():
+        return dw.Simulation(state, dw.Params(gravity_every=every), device="cpu", precision=precision, ledger=True, allow_unstable=True)
+
+    assert_fused_steps_equal_one_step_at_a_time(make, pieces=(every, 0, 10 * every + every))
+
+
+def test_an_ensemble_on_two_clocks_moves_each_system_as_alone():
+    """Three clumps centred on the same point (the neighbour list's hash grid groups each system
+    apart) stepped together at K = 4: each moves bit for bit as it would alone."""
+    sizes = (37, 64, 23)
+    states = [_fast_clump(n, seed=seed) for seed, n in enumerate(sizes)]
+    joined = dw.State.from_arrays(*[np.concatenate([getattr(s, name) for s in states])
+                                    for name in ("positions", "velocities", "omegas", "radii", "masses")])  # fmt: skip
+    params = dw.Params(gravity_every=4)
+    ensemble = dw.Simulation(joined, params, device="cpu", systems=sizes, ledger=True, allow_unstable=True)
+    ensemble.step(60)
+    cuts = np.cumsum((0, *sizes))
+    force, torque = ensemble.forces()
+    for k, state in enumerate(states):
+        alone = dw.Simulation(state, params, device="cpu", ledger=True, allow_unstable=True)
+        alone.step(60)
+        part = slice(cuts[k], cuts[k + 1])
+        assert np.array_equal(ensemble.state.positions[part], alone.state.positions)
+        assert np.array_equal(ensemble.state.velocities[part], alone.state.velocities)
+        assert np.array_equal(ensemble.work()[part], alone.work())
+        own_force, own_torque = alone.forces()
+        assert np.array_equal(force[part], own_force) and np.array_equal(torque[part], own_torque)
+
+
+def test_bad_clocks_are_refused_with_one_line():
+    state = contact_cluster(10, seed=1)
+    for bad in (0, -1, 2.5, "x", True, None):
+        with pytest.raises(ValueError, match="gravity_every must be an integer >= 1") as error:
+            dw.Params(gravity_every=bad)
+        assert "\n" not in str(error.value)
+    sim = dw.Simulation(state, dw.Params(gravity_every=5), device="cpu")
+    with pytest.raises(ValueError, match="with gravity_every = 5 the step count must be a multiple of 5.*got 7"):
+        sim.step(7)
+    assert sim.step_count == 0
+    with pytest.raises(ValueError, match="reference kernel .* gravity_every = 1 only"):
+        dw.Simulation(state, dw.Params(gravity_every=5), device="cpu", force_kernel="reference")
+    # Observables of one state do not depend on the clock: diagnostics take any K.
+    clocked, plain = dw.diagnostics(state, dw.Params(gravity_every=5)), dw.diagnostics(state, dw.Params())
+    for key, value in plain.items():
+        assert np.array_equal(clocked[key], value), key
