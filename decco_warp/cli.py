@@ -334,8 +334,9 @@ def _rerun_observer(prepared, mode_text: str | None, every: int | None):
     try:
         mode, address = parse_mode(mode_text)
         every = every or prepared.plan.outputs.output_every
-        if every < 1:
-            raise ValueError("--rerun-every must be >= 1")
+        outer = prepared.plan.params.gravity_every
+        if every < 1 or every % outer:
+            raise ValueError(f"--rerun-every must be a multiple of [params] gravity_every = {outer} (>= 1); got {every}")
         if prepared.resume:
             first_particles, first_observables, static = read_frame(prepared.run_dir / TRAJECTORY_FILE, 0)
         else:
@@ -446,6 +447,9 @@ def simulate(
     gravity: Optional[str] = typer.Option(
         None, "--gravity", help="all-pairs (exact), tree (O(N log N), for large piles) or auto (by size and device)."
     ),
+    gravity_every: Optional[str] = typer.Option(
+        None, "--gravity-every", help="K: gravity evaluated every K steps, the contacts every step (docs/model.md, \"Gravity on its own clock\"); 1 is the paper's scheme. Step counts must then be multiples of K."
+    ),
     check: bool = typer.Option(False, "--check", help="Set up the collision, print its margins and predicted deepest overlap, run nothing."),
     output_every: Optional[int] = typer.Option(None, "--output-every", help="Steps between trajectory frames."),
     checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Steps between checkpoints."),
@@ -483,7 +487,8 @@ def simulate(
             "run": run_overrides,
             "piles": {"target": target, "projectile": projectile},
             "collision": collision,
-            "params": {"dt": _number_or_auto(dt, "--dt"), "k_in": _number_or_auto(k_in, "--k-in"), "gravity": gravity},
+            "params": {"dt": _number_or_auto(dt, "--dt"), "k_in": _number_or_auto(k_in, "--k-in"), "gravity": gravity,
+                       "gravity_every": _integer_or_auto(gravity_every, "--gravity-every")},
         }
         spec = specs.resolve_spec(raw, overrides)
     except specs.SpecError as error:
@@ -505,6 +510,16 @@ def _number_or_auto(text: Optional[str], option: str):
         return float(text)
     except ValueError:
         fail(f'{option} must be a number or "auto"; got {text!r}')
+
+
+def _integer_or_auto(text: Optional[str], option: str):
+    """An option that takes an integer or "auto"; None when not given (the specification checks its range)."""
+    if text is None or text.strip() == "auto":
+        return None if text is None else "auto"
+    try:
+        return int(text)
+    except ValueError:
+        fail(f'{option} must be an integer or "auto"; got {text!r}')
 
 
 def _check(spec: dict) -> None:

@@ -43,7 +43,7 @@ def auto_gravity_every() -> int:
     """The K of ``gravity_every = "auto"``; ValueError while the equivalence table awaits its runs."""
     if GRAVITY_EVERY_AUTO is None:
         raise ValueError(
-            'gravity_every = "auto" awaits the equivalence table of docs/benchmarks.md ("Gravity on its own clock"); '
+            '"auto" awaits the equivalence table of docs/benchmarks.md ("Gravity on its own clock"); '
             "give an integer K >= 1 (1: gravity every step, the paper's scheme)"
         )
     return GRAVITY_EVERY_AUTO

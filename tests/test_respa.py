@@ -242,3 +242,84 @@ def test_bad_clocks_are_refused_with_one_line():
     clocked, plain = dw.diagnostics(state, dw.Params(gravity_every=5)), dw.diagnostics(state, dw.Params())
     for key, value in plain.items():
         assert np.array_equal(clocked[key], value), key
+
+
+# --- runs: the specification, run folders, resume ------------------------------------------------
+
+
+def _spec(tmp_path, name, params=None, **run):
+    from decco_warp import spec as specs
+
+    values = {"name": name, "out": str(tmp_path), "device": "cpu", "steps": 300, "output_every": 100, "checkpoint_every": 100, **run}
+    return specs.resolve_spec({"run": values, "params": {"gravity_every": 5, **(params or {})}})
+
+
+def test_a_run_on_two_clocks_records_its_clock_and_resumes_bit_identically(tmp_path):
+    """The shipped collision at gravity_every = 5: spec.toml and the trajectory's parameters record
+    it, run.log says it, and a run stopped at step 200 and resumed (its neighbour list built
+    afresh, gravity evaluated anew) writes the frames and checkpoint of a run never stopped."""
+    from helpers import assert_same_run
+
+    from decco_warp import spec as specs
+    from decco_warp.io import read_checkpoint
+    from decco_warp.run import prepare_resume, resume_run, start_run
+
+    straight = start_run(_spec(tmp_path, "straight"))
+    start_run(_spec(tmp_path, "parts", steps=200))
+    resume_run(tmp_path / "parts", steps=300)
+    a, b = dw.read_trajectory(straight.run_dir / "trajectory.h5"), dw.read_trajectory(tmp_path / "parts" / "trajectory.h5")
+    assert_same_run(a, b)
+    for key, values in read_checkpoint(straight.run_dir / "checkpoint.h5")[0].items():
+        if isinstance(values, np.ndarray):
+            assert np.array_equal(read_checkpoint(tmp_path / "parts" / "checkpoint.h5")[0][key], values), key
+    assert specs.load_spec_file(tmp_path / "parts" / "spec.toml")["params"]["gravity_every"] == 5
+    assert a["parameters"]["spec"]["params"]["gravity_every"] == 5
+    assert "gravity every 5 steps" in (straight.run_dir / "run.log").read_text()
+    books = sum(a["observables"][k] for k in ("total_energy", "dissipated_sliding", "dissipated_rolling", "dissipated_hysteresis", "integration_error"))
+    np.testing.assert_allclose(books, a["observables"]["total_energy"][0], rtol=CLOSURE_TOLERANCE)
+    with pytest.raises(specs.SpecError, match=r"\[run\] steps = 333: with \[params\] gravity_every = 5"):
+        prepare_resume(tmp_path / "parts", steps=333)
+
+
+@pytest.mark.parametrize(
+    ("params", "run", "message"),
+    [
+        ({"gravity_every": 0}, {}, r"\[params\] gravity_every = 0: must be an integer >= 1"),
+        ({"gravity_every": -1}, {}, r"\[params\] gravity_every = -1: must be an integer >= 1"),
+        ({"gravity_every": 2.5}, {}, r"\[params\] gravity_every = 2.5: must be int an integer >= 1"),
+        ({"gravity_every": "x"}, {}, r"\[params\] gravity_every = 'x': must be int an integer >= 1"),
+        ({"gravity_every": True}, {}, r"\[params\] gravity_every = True: must be int an integer >= 1"),
+        ({"gravity_every": "auto"}, {}, r"\[params\] gravity_every = 'auto': \"auto\" awaits the equivalence table of docs/benchmarks.md"),
+        ({}, {"steps": 302}, r"\[run\] steps = 302: with \[params\] gravity_every = 5, steps, output_every and checkpoint_every must be multiples of 5"),
+        ({}, {"output_every": 7, "checkpoint_every": 12}, r"\[run\] output_every = 7, checkpoint_every = 12: with \[params\] gravity_every = 5"),
+    ],
+)
+def test_a_bad_clock_in_a_specification_is_one_clear_line(tmp_path, params, run, message):
+    from decco_warp import spec as specs
+
+    with pytest.raises(specs.SpecError, match=message) as error:
+        _spec(tmp_path, "bad", params, **run)
+    assert "\n" not in str(error.value)
+
+
+def test_a_duration_becomes_whole_outer_steps():
+    """A duration that is not a whole number of outer steps rounds up to the next one."""
+    from decco_warp import spec as specs
+
+    spec = specs.resolve_spec({"run": {"duration": 10.0}, "params": {"gravity_every": 20, "dt": 0.04}})
+    assert spec["run"]["steps"] == 260  # 250 steps of 0.04 s, rounded up to 13 outer steps of 20
+
+
+def test_the_command_line_takes_the_clock_and_refuses_bad_ones(tmp_path):
+    from helpers import cli
+
+    for option, message in (("0", "[params] gravity_every = 0: must be an integer >= 1"), ("x", '--gravity-every must be an integer or "auto"; got \'x\'')):
+        result = cli("simulate", "--gravity-every", option, "--steps", "10", "--out", str(tmp_path), "--device", "cpu")
+        assert result.returncode == 2 and message in result.stderr and len(result.stderr.strip().splitlines()) == 1, result.stderr
+    result = cli("simulate", "--check", "--gravity-every", "5", "--steps", "100", "--output-every", "50", "--checkpoint-every", "100",
+                 "--out", str(tmp_path), "--device", "cpu")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert "100 steps (4 s), gravity every 5 steps" in result.stdout and "contacts every step from a neighbour list" in result.stdout
+    result = cli("simulate", "--gravity-every", "5", "--steps", "12", "--out", str(tmp_path), "--device", "cpu")
+    assert result.returncode == 2 and "[run] steps = 12: with [params] gravity_every = 5" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
