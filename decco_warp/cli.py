@@ -583,6 +583,9 @@ def bench(
     system: str = typer.Option(
         "lattice", "--system", help="Test systems, side by side: lattice (equal spheres, 6 contacts each), piles (copies of the shipped pile: the paper's radii, up to ~27 contacts) or lattice,piles."
     ),
+    gravity_every: str = typer.Option(
+        "", "--gravity-every", help="Also time gravity on its own clock at these K, e.g. 5,10,20 (gravity every K steps, contacts from a neighbour list), against the K = 1 step of the same call; 1 in the list is the default row."
+    ),
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Pairs/s of the force kernel and of the full step, beside a one-thread-per-particle baseline."""
@@ -614,6 +617,13 @@ def bench(
         ensembles = [0]
     if any(k < 2 for k in ensembles):
         fail(f"--ensemble must list system counts >= 2, e.g. 2,4,8; got {ensemble!r}")
+    try:
+        clocks = [int(v) for v in filter(None, (part.strip() for part in gravity_every.split(",")))]
+    except ValueError:
+        clocks = [0]
+    if any(k < 1 for k in clocks):
+        fail(f"--gravity-every must list integers >= 1, e.g. 5,10,20; got {gravity_every!r}")
+    clocks = [k for k in dict.fromkeys(clocks) if k > 1]
     kinds = [k.strip() for k in system.split(",") if k.strip()]
     if not kinds or any(k not in benchmarks.TEST_SYSTEMS for k in kinds):
         fail(f"--system must list {' and/or '.join(benchmarks.TEST_SYSTEMS)}; got {system!r}")
@@ -652,24 +662,30 @@ def bench(
     for size, kind in itertools.product(sizes, kinds):
         runs = [("all-pairs", layout) for layout in [None, *extra_layouts]] if "all-pairs" in solvers else []
         runs += [("tree", None)] if "tree" in solvers else []
-        runs = [(solver, layout, 1) for solver, layout in runs]
-        runs += [("all-pairs", None, k) for k in ensembles]
-        alone = None
-        for solver, layout, systems in runs:
-            first = (solver, layout, systems) == runs[0]
+        runs = [(solver, layout, 1, 1) for solver, layout in runs]
+        runs += [("all-pairs", None, k, 1) for k in ensembles]
+        runs += [(solver, None, 1, every) for every in clocks for solver in solvers]
+        alone, every_step = None, {}
+        for solver, layout, systems, every in runs:
+            first = (solver, layout, systems, every) == runs[0]
             row = benchmarks.bench_size(
-                size, chosen, precision, layout, budget, steps, baseline=first, gravity=solver, systems=systems, system=kind
-            )
+                size, chosen, precision, layout, budget, steps, baseline=first, gravity=solver, systems=systems, system=kind,
+                gravity_every=every,
+            )  # fmt: skip
             if len(kinds) > 1:
                 row.layout += f", {kind}"
             rows.append(row)
-            if systems == 1 and layout is None and solver == "all-pairs":
-                alone = row
+            if systems == 1 and layout is None and every == 1:
+                every_step[solver] = row
+                alone = row if solver == "all-pairs" else alone
             if systems > 1 and alone is not None:
                 row.layout += f": {row.step_pairs_per_s / alone.step_pairs_per_s:.2f}x one at a time"
-            if solver == "tree" and alone is not None:  # the tree in its own terms: its time against all-pairs'
+            if solver == "tree" and every == 1 and alone is not None:  # the tree in its own terms: its time against all-pairs'
                 row.versus_all_pairs = alone.step_seconds / row.step_seconds
                 row.layout += f": {row.versus_all_pairs:.2f}x the all-pairs step"
+            if every > 1:  # against gravity every step with the same solver, and how often the list was built
+                row.versus_every_step = every_step[solver].step_seconds / row.step_seconds
+                row.layout += f": {row.versus_every_step:.2f}x the K = 1 step, {row.list_builds_per_step:.3g} list builds a step"
             fraction = f"{100 * row.fraction_of_limit:8.1f}%" if row.fraction_of_limit is not None else f"{'n/a':>9}"
             baseline_text = f"{row.baseline_pairs_per_s:17.3g} {row.speedup:8.1f}x" if first else f"{'':>17} {'':>9}"
             rates = f"{row.force_pairs_per_s:14.3g} {row.step_pairs_per_s:13.3g}" if solver == "all-pairs" else f"{'-':>14} {'-':>13}"

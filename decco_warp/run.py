@@ -617,7 +617,16 @@ class RunDriver:
                 + ", ".join(f"{what} {seconds:.1f} s" for what, seconds in self.outside.items())
                 + "); "
                 f"{self.overlaps.summary()}"
+                + self._list_builds()
             )
+
+    def _list_builds(self) -> str:
+        """How often the contacts' neighbour list was built this session (gravity on its own clock), or nothing."""
+        builds = self.sim.neighbour_list_builds()
+        if builds is None:
+            return ""
+        steps = self.sim.step_count - self.first_step
+        return f"; neighbour list built {builds} times in {steps} steps" + (f" (every {steps / builds:.3g} steps)" if builds else "")
 
     def result(self) -> RunResult:
         sim = self.sim
