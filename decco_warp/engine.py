@@ -496,7 +496,7 @@ def memory_estimate(n: int, gravity: str, device: str = "cpu", ledger: bool = Tr
     per += (len(LEDGER_CHANNELS) * vec3d + 32) if ledger else 0  # channels, work
     per += 8 + 32 + 8  # deepest contact, packed body, system range
     per += i32 * (1 + CANDIDATES)  # the contact candidates of the Newton layout, the tree or the neighbour list
-    per += 2 * vec3d + i32  # gravity on its own clock: gravity, the list's build positions, each particle's system
+    per += 2 * vec3d + 5 * i32  # gravity on its own clock: gravity, the list's build positions; system, cell keys and order (2 N)
     per += len(PAIR_OBSERVABLES) * f64  # a frame's pair observables
     if gravity == "tree":  # nodes (2n): mass, centre, quadrupole, box, size, offset, links (16), child, first,
         # last, parent, escape; keys, order (2n); leaf positions, grid points; each walk part's field and potential

@@ -18,12 +18,12 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .gravity_tree import GRID_CELLS, GravityTree
+from .gravity_tree import GravityTree
 from .kernels import observables as observable_kernels
 from .kernels.bodies import BODY_TYPES
 from .kernels.contacts import CANDIDATES, contact_pass
 from .kernels.fused import pair_forces_tiled
-from .kernels.neighbours import REACH_MARGIN, build_neighbour_list, listed_contacts
+from .kernels.neighbours import GRID_CELLS, REACH_MARGIN, build_neighbour_list, cell_keys, cell_ranges, listed_contacts
 from .kernels.newton import GatherRows, TilePair, contact_pass_ordered, gather_newton, pair_gravity_newton
 from .kernels.reference import pair_forces_reference
 
@@ -347,7 +347,8 @@ SKIN_FRACTION = 0.2
 class NeighbourList:
     """Each particle's neighbours within R_i + R_j + skin, in increasing j (kernels/neighbours.py),
     in the candidate arrays; rebuilt on the device once any particle has moved skin / 2 since the
-    last build (``stale``, set by the inner drift: kernels/integrate.py ``kick_drift_inner``)."""
+    last build (``stale``, set by the inner drift: kernels/integrate.py ``kick_drift_inner``).  The
+    grid's cell tables take 8 bytes per cell, GRID_CELLS^3 cells per system (2 MiB)."""
 
     def __init__(self, engine, min_radius: float):
         device, count = engine.device, engine.count
@@ -361,21 +362,29 @@ class NeighbourList:
         """[0] = 1 once a particle has moved past skin / 2 since the last build."""
         self.builds = wp.zeros(1, dtype=wp.int64, device=device)
         """[0]: builds since the engine began."""
-        # Each particle's system is its group in the grid: the systems of an ensemble never meet.
+        # The grid: a cell as wide as the farthest reach, 2 R_max + skin; its keys hold each particle's
+        # system, so that the systems of an ensemble never meet.
         self.system = wp.array(np.repeat(np.arange(len(engine.systems)), engine.systems).astype(np.int32), device=device)
-        self.grid = wp.HashGrid(GRID_CELLS, GRID_CELLS, GRID_CELLS, device=device, dtype=wp.float64)
-        self.grid.reserve(count, with_groups=True)
-        # A cell holds the farthest reach of a query, R_i + R_max + skin.
-        self.cell = (2.0 * engine.max_radius + self.skin) * REACH_MARGIN
+        self.cell_width = (2.0 * engine.max_radius + self.skin) * REACH_MARGIN
+        self.keys = wp.zeros(2 * count, dtype=wp.int32, device=device)  # radix_sort_pairs needs room for 2 N
+        self.order = wp.zeros(2 * count, dtype=wp.int32, device=device)
+        cells = len(engine.systems) * GRID_CELLS**3
+        self.cell_start = wp.zeros(cells, dtype=wp.int32, device=device)
+        self.cell_end = wp.zeros(cells, dtype=wp.int32, device=device)
 
     def build(self) -> None:
         """List every particle's neighbours at the current positions."""
         e = self.engine
-        self.grid.build(e.position, self.cell, groups=self.system)
+        width = wp.float64(self.cell_width)
+        wp.launch(cell_keys, dim=e.count, inputs=[self.system, width, e.position], outputs=[self.keys, self.order], device=e.device)
+        wp.utils.radix_sort_pairs(self.keys, self.order, e.count)
+        self.cell_start.zero_()
+        self.cell_end.zero_()
+        wp.launch(cell_ranges, dim=e.count, inputs=[self.keys, e.count], outputs=[self.cell_start, self.cell_end], device=e.device)
         wp.launch(
             build_neighbour_list,
             dim=e.count,
-            inputs=[self.grid.id, self.system, e.radius, wp.float64(e.max_radius), wp.float64(self.skin), e.position],
+            inputs=[self.system, e.radius, wp.float64(self.skin), width, self.order, self.cell_start, self.cell_end, e.position],
             outputs=[self.reference, self.candidate_count, self.candidates, self.stale, self.builds],
             device=e.device,
         )
