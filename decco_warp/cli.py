@@ -566,6 +566,14 @@ def resume(
 # --- bench -------------------------------------------------------------------------------
 
 
+def _integer_list(text: str) -> list[int]:
+    """A comma-separated list of integers (empty: none); [0] for one that is not, which every caller refuses."""
+    try:
+        return [int(v) for v in filter(None, (part.strip() for part in text.split(",")))]
+    except ValueError:
+        return [0]
+
+
 @app.command()
 def bench(
     n: str = typer.Option("", "--n", help="Comma-separated particle counts (default: 2048,10240,65536,131072 on CUDA; 256,1024 on CPU)."),
@@ -611,16 +619,10 @@ def bench(
     solvers = [g.strip() for g in gravity.split(",") if g.strip()]
     if not solvers or any(g not in GRAVITY_SOLVERS for g in solvers):
         fail(f"--gravity must list {' and/or '.join(GRAVITY_SOLVERS)}; got {gravity!r}")
-    try:
-        ensembles = [int(v) for v in filter(None, (part.strip() for part in ensemble.split(",")))]
-    except ValueError:
-        ensembles = [0]
+    ensembles = _integer_list(ensemble)
     if any(k < 2 for k in ensembles):
         fail(f"--ensemble must list system counts >= 2, e.g. 2,4,8; got {ensemble!r}")
-    try:
-        clocks = [int(v) for v in filter(None, (part.strip() for part in gravity_every.split(",")))]
-    except ValueError:
-        clocks = [0]
+    clocks = _integer_list(gravity_every)
     if any(k < 1 for k in clocks):
         fail(f"--gravity-every must list integers >= 1, e.g. 5,10,20; got {gravity_every!r}")
     clocks = [k for k in dict.fromkeys(clocks) if k > 1]

@@ -23,7 +23,7 @@ from .kernels import observables as observable_kernels
 from .kernels.bodies import BODY_TYPES
 from .kernels.contacts import CANDIDATES, contact_pass
 from .kernels.fused import pair_forces_tiled
-from .kernels.neighbours import GRID_CELLS, REACH_MARGIN, build_neighbour_list, cell_keys, cell_ranges, listed_contacts
+from .kernels.neighbours import GRID_CELLS, REACH_MARGIN, build_neighbour_list, cell_keys, cell_ranges
 from .kernels.newton import GatherRows, TilePair, contact_pass_ordered, gather_newton, pair_gravity_newton
 from .kernels.reference import pair_forces_reference
 
@@ -286,6 +286,18 @@ class TreeGravity:
         self.tree.potential(e.params.G, e.params.theta_open, e.mass, potential_out)
 
 
+def _contact_pass(path) -> None:
+    """A path's contact pass (kernels/contacts.py ``contact_pass``) over its candidate lists."""
+    e = path.engine
+    wp.launch(
+        path.contact_kernel,
+        dim=e.count,
+        inputs=[e.model, e.ranges, e.radius, *e.contact_state(), path.candidate_count, path.candidates],
+        outputs=path.outputs(),
+        device=e.device,
+    )
+
+
 def _candidate_observables(engine, contacts: list, candidate_count: wp.array, candidates: wp.array) -> None:
     """The contact observables of a frame from each particle's candidate list (a superset of its contacts)."""
     e = engine
@@ -310,7 +322,7 @@ class TreeForces(ForcePath):
         super().__init__(engine)
         self.gravity = TreeGravity(engine)
         self.candidate_count, self.candidates = _candidate_arrays(engine.count, engine.device)
-        self.contact_kernel = contact_pass(engine.params.rolling_friction)
+        self.contact_kernel = contact_pass(engine.params.rolling_friction)  # added to gravity's force
 
     def _candidates(self) -> None:
         """Each particle's contact candidates from the hash grid (the tree built)."""
@@ -318,16 +330,9 @@ class TreeForces(ForcePath):
         self.gravity.tree.contact_candidates(e.position, e.radius, e.max_radius, self.candidate_count, self.candidates)
 
     def evaluate(self) -> None:
-        e = self.engine
-        self.gravity.evaluate(e.force)
+        self.gravity.evaluate(self.engine.force)
         self._candidates()
-        wp.launch(
-            self.contact_kernel,
-            dim=e.count,
-            inputs=[e.model, e.ranges, e.radius, *e.contact_state(), self.candidate_count, self.candidates],
-            outputs=self.outputs(),
-            device=e.device,
-        )
+        _contact_pass(self)
 
     def observables(self, outputs: dict) -> None:
         potential, *contacts = outputs.values()
@@ -423,13 +428,13 @@ class RespaForces(ForcePath):
         """Gravity at the positions of the last outer step [dyne]."""
         self.neighbours = NeighbourList(engine, engine.min_radius)
         self.candidate_count, self.candidates = self.neighbours.candidate_count, self.neighbours.candidates
-        self.contact_kernel = listed_contacts(engine.params.rolling_friction)
+        self.contact_kernel = contact_pass(engine.params.rolling_friction, accumulate=False)
 
     def evaluate(self) -> None:
         """Gravity and the contacts at the current state, the neighbour list built afresh."""
         self.gravity.evaluate(self.gravity_force)
         self.neighbours.build()
-        self._contact_pass()
+        _contact_pass(self)
 
     def gravity_step(self) -> None:
         """Gravity at the current positions (the bodies packed by the last inner drift)."""
@@ -438,17 +443,7 @@ class RespaForces(ForcePath):
     def contacts(self) -> None:
         """The contacts of an inner step, at the positions after its drift: the list first rebuilt if stale."""
         self.neighbours.refresh()
-        self._contact_pass()
-
-    def _contact_pass(self) -> None:
-        e = self.engine
-        wp.launch(
-            self.contact_kernel,
-            dim=e.count,
-            inputs=[e.model, e.ranges, e.radius, *e.contact_state(), self.candidate_count, self.candidates],
-            outputs=self.outputs(),
-            device=e.device,
-        )
+        _contact_pass(self)
 
     def restored(self) -> None:
         """Gravity at the restored positions (what the uninterrupted run holds, bit for bit: the same

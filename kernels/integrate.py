@@ -170,14 +170,14 @@ def gravity_half_kick(
     work_inout: wp.array(dtype=wp.vec4d),
 ):
     """v += g/m half_dt for particle i (gravity exerts no torque on a sphere), its kinetic energy
-    change booked to gravity's work (the first entry of the ledger)."""
+    change booked to gravity's work (``half_kick_work`` without contact channels: all of it gravity's)."""
     gravity = gravity_in[i]
     velocity_old = velocity_inout[i]
     velocity = velocity_old + (half_dt / mass_in[i]) * gravity
     velocity_inout[i] = velocity
     if work_inout.shape[0] > 0:
-        work = half_dt * wp.dot(gravity, wp.float64(0.5) * (velocity_old + velocity))
-        work_inout[i] = work_inout[i] + wp.vec4d(work, wp.float64(0.0), wp.float64(0.0), wp.float64(0.0))
+        none = wp.vec3d()
+        work_inout[i] = work_inout[i] + half_kick_work(gravity, none, none, none, none, none, velocity_old, velocity, none, none, half_dt)
 
 
 @wp.kernel
