@@ -133,6 +133,31 @@ def test_the_neighbour_list_holds_every_touching_pair_and_is_rebuilt_past_half_t
     assert slow.neighbour_list_builds() == 1
 
 
+@pytest.mark.parametrize("precision", ["mixed", "float64"])
+def test_forces_on_two_clocks_are_gravity_plus_the_listed_contacts_even_past_a_full_list(precision):
+    """A 22.5 km sphere touched by more small ones than a list holds: its list overflows (counted,
+    and its whole system walked), and the force at the start (gravity into its own array plus the
+    contacts from the list) equals the plain loop's, as the torque does."""
+    from decco_warp.engine import Engine
+    from decco_warp.kernels.contacts import CANDIDATES
+    from scenes import sphere_mass
+
+    count = CANDIDATES + 6
+    rng = np.random.default_rng(4)
+    direction = rng.normal(size=(count, 3))
+    direction /= np.linalg.norm(direction, axis=1)[:, None]
+    x = np.vstack([[0.0, 0.0, 0.0], direction * (2.25e6 + 0.75e6 - 500.0)]) + 1.5e7
+    radii = np.array([2.25e6] + [0.75e6] * count)
+    state = dw.State.from_arrays(x, rng.normal(size=(count + 1, 3)), rng.normal(size=(count + 1, 3)) * 1e-4, radii, sphere_mass(radii))
+    engine = Engine(state, dw.Params(gravity_every=3), "cpu", precision)
+    engine.eval_forces()
+    assert engine.candidate_overflows() >= 1
+    want = dw.compute_forces(state, dw.Params(), device="cpu", precision="float64", force_kernel="reference")
+    tolerance = 1e-12 if precision == "float64" else 1e-5
+    for got, expected in zip(engine.read_forces(), want):
+        np.testing.assert_allclose(got, expected, rtol=0, atol=tolerance * np.abs(expected).max())
+
+
 def _books(sim):
     now = sim.diagnostics()
     ledger = energy_ledger(now, sim.energy_start, sim.work())
