@@ -6,6 +6,9 @@ of ~1e2 cm (``lattice``: the tables of docs/benchmarks.md), or copies of the
 shipped settled target pile side by side (``piles``: the paper's three radii,
 a large grain touching up to ~27 small ones, as in a run).  Throughput is N^2 /
 time (pairs per second, every ordered pair evaluated once per force evaluation).
+With gravity on its own clock (``gravity_every`` K > 1) a step evaluates gravity once every K
+steps and the contacts from a neighbour list: its pairs/s is the all-pairs step's N^2 over its
+mean step time, the rate an all-pairs step would need to keep up.
 """
 
 from __future__ import annotations
@@ -59,6 +62,12 @@ class BenchRow:
     fuse_kicks: bool = True
     """The steps shared launches (Layout.fuse_kicks); False: each step's kicks and packing in
     launches of their own (``--layouts ...:unfused``)."""
+    gravity_every: int = 1
+    """K: steps per gravity evaluation (K > 1: contacts from a neighbour list)."""
+    list_builds_per_step: float | None = None
+    """Neighbour-list builds per step while the full step was timed (K > 1)."""
+    versus_every_step: float | None = None
+    """The K = 1 step time over this row's, at the same N in the same call (K > 1 rows)."""
 
 
 #: The test systems of :func:`bench_size`.
@@ -173,19 +182,25 @@ def bench_size(
     gravity: str = "all-pairs",
     systems: int = 1,
     system: str = "lattice",
+    gravity_every: int = 1,
 ) -> BenchRow:
     """One row: the force evaluation and the full step at ``n`` (pairs/s counts N^2 pairs; a tree row
     gives none, only its times and particles/s), beside the one-thread-per-particle kernel.
-    With ``systems`` > 1, that many systems of ``n`` stepped together, and pairs/s counts them all."""
+    With ``systems`` > 1, that many systems of ``n`` stepped together, and pairs/s counts them all.
+    With ``gravity_every`` K > 1 a call is ``steps`` rounded up to whole outer steps, and the row
+    counts the neighbour list's builds per step."""
     state = bench_system(system, n, systems)
     sizes = [n] * systems
-    params = Params(gravity=gravity)
+    params = Params(gravity=gravity, gravity_every=gravity_every)
     layout = layout or choose_layout(n, device)
     tiled = Engine(state, params, device, precision, "tiled", layout, systems=sizes)
     force_seconds = _seconds_per_call(tiled.eval_forces, device, budget)
     # The full step as runs take it: with the energy ledger.
     sim = Simulation(state, params, device=device, precision=precision, layout=layout, allow_unstable=True, ledger=True, systems=sizes)
+    steps = gravity_every * math.ceil(steps / gravity_every)
+    first_step, first_builds = sim.step_count, sim.neighbour_list_builds()
     step_seconds = _seconds_per_call(lambda: sim.step(steps), device, budget) / steps
+    builds = None if first_builds is None else (sim.neighbour_list_builds() - first_builds) / (sim.step_count - first_step)
     if baseline:
         reference = Engine(state, Params(), device, precision, "reference")
         baseline_seconds = _seconds_per_call(reference.eval_forces, device, budget)
@@ -193,11 +208,15 @@ def bench_size(
         baseline_seconds = math.nan
     limit, _ = device_limit_pairs_per_s(device)
     pairs = float(n) * n * systems if gravity == "all-pairs" else math.nan
+    if gravity_every > 1:
+        solver = "the tree" if gravity == "tree" else "each pair once"
+        what = f"gravity every {gravity_every} steps ({solver}), neighbour-list contacts"
+    else:
+        what = layout.describe() if gravity == "all-pairs" else f"tree (theta_open {params.theta_open:g}), hash-grid contacts"
     return BenchRow(
         n=n,
         device=device,
-        layout=(layout.describe() if gravity == "all-pairs" else f"tree (theta_open {params.theta_open:g}), hash-grid contacts")
-        + (f", {systems} systems together" if systems > 1 else ""),
+        layout=what + (f", {systems} systems together" if systems > 1 else ""),
         force_seconds=force_seconds,
         force_pairs_per_s=pairs / force_seconds,
         step_seconds=step_seconds,
@@ -211,6 +230,8 @@ def bench_size(
         particles_per_s=n * systems / step_seconds,
         gravity=gravity,
         fuse_kicks=layout.fuse_kicks,
+        gravity_every=gravity_every,
+        list_builds_per_step=builds,
     )
 
 

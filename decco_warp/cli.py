@@ -361,8 +361,9 @@ def _rerun_observer(prepared, mode_text: str | None, every: int | None):
     try:
         mode, address = parse_mode(mode_text)
         every = every or prepared.plan.outputs.output_every
-        if every < 1:
-            raise ValueError("--rerun-every must be >= 1")
+        outer = prepared.plan.params.gravity_every
+        if every < 1 or every % outer:
+            raise ValueError(f"--rerun-every must be a multiple of [params] gravity_every = {outer} (>= 1); got {every}")
         if prepared.resume:
             first_particles, first_observables, static = read_frame(prepared.run_dir / TRAJECTORY_FILE, 0)
         else:
@@ -476,12 +477,15 @@ def simulate(
     gravity: Optional[str] = typer.Option(
         None, "--gravity", help="all-pairs (exact), tree (O(N log N), for large piles) or auto (by size and device)."
     ),
+    gravity_every: Optional[str] = typer.Option(
+        None, "--gravity-every", help="K: gravity evaluated every K steps, the contacts every step (docs/model.md, \"Gravity on its own clock\"); 1 is the paper's scheme. Step counts must then be multiples of K."
+    ),
     check: bool = typer.Option(False, "--check", help="Set up the collision, print its margins and predicted deepest overlap, run nothing."),
     output_every: Optional[int] = typer.Option(None, "--output-every", help="Steps between trajectory frames."),
     checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Steps between checkpoints."),
     precision: Optional[str] = typer.Option(None, "--precision", help="mixed or float64."),
     layout: Optional[str] = typer.Option(
-        None, "--layout", help="Force kernel layout: auto, split (contacts in their own pass), prefetch, split+prefetch or newton (each pair once)."
+        None, "--layout", help="Force kernel layout: auto (the device's default) or newton (each pair once, the CUDA default, on any device)."
     ),
     out: Optional[str] = typer.Option(None, "--out", help="Parent folder of run folders (default runs/out)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing run folder."),
@@ -513,7 +517,8 @@ def simulate(
             "run": run_overrides,
             "piles": {"target": target, "projectile": projectile},
             "collision": collision,
-            "params": {"dt": _number_or_auto(dt, "--dt"), "k_in": _number_or_auto(k_in, "--k-in"), "gravity": gravity},
+            "params": {"dt": _number_or_auto(dt, "--dt"), "k_in": _number_or_auto(k_in, "--k-in"), "gravity": gravity,
+                       "gravity_every": _integer_or_auto(gravity_every, "--gravity-every")},
         }
         spec = specs.resolve_spec(raw, overrides)
     except specs.SpecError as error:
@@ -535,6 +540,16 @@ def _number_or_auto(text: Optional[str], option: str):
         return float(text)
     except ValueError:
         fail(f'{option} must be a number or "auto"; got {text!r}')
+
+
+def _integer_or_auto(text: Optional[str], option: str):
+    """An option that takes an integer or "auto"; None when not given (the specification checks its range)."""
+    if text is None or text.strip() == "auto":
+        return None if text is None else "auto"
+    try:
+        return int(text)
+    except ValueError:
+        fail(f'{option} must be an integer or "auto"; got {text!r}')
 
 
 def _check(spec: dict) -> None:
@@ -635,6 +650,14 @@ def _resume_until_settled(run_dir: Path, max_steps: int | None, min_members: int
 # --- bench -------------------------------------------------------------------------------
 
 
+def _integer_list(text: str) -> list[int]:
+    """A comma-separated list of integers (empty: none); [0] for one that is not, which every caller refuses."""
+    try:
+        return [int(v) for v in filter(None, (part.strip() for part in text.split(",")))]
+    except ValueError:
+        return [0]
+
+
 @app.command()
 def bench(
     n: str = typer.Option("", "--n", help="Comma-separated particle counts (default: 2048,10240,65536,131072 on CUDA; 256,1024 on CPU)."),
@@ -642,7 +665,7 @@ def bench(
     budget: float = typer.Option(1.0, "--seconds", help="Seconds of timing per measurement."),
     precision: str = typer.Option("mixed", "--precision", help="mixed or float64."),
     layouts: str = typer.Option(
-        "", "--layouts", help="Also time these layouts, BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]][:split][:prefetch][:newton][:unfused],... (e.g. 128:1,128:4:4:96,128:4:4:0:split,128:4:4:128:prefetch,32:128:newton,32:64:newton:unfused; split: contacts in their own pass; prefetch: j loaded a tile ahead; newton: each pair once, a warp meeting two tiles of PER_BLOCK; unfused: each step's kicks and packing in launches of their own, as before they were fused)."
+        "", "--layouts", help="Also time these layouts, BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]][:newton][:unfused],... (e.g. 128:1,128:4:4:96,32:128:newton,32:64:newton:unfused; newton: each pair once, a warp meeting two tiles of PER_BLOCK; unfused: each step's kicks and packing in launches of their own, as before they were fused)."
     ),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the table as JSON here."),
     gravity: str = typer.Option("all-pairs", "--gravity", help="Gravity solvers to time, side by side: all-pairs, tree or all-pairs,tree."),
@@ -651,6 +674,9 @@ def bench(
     ),
     system: str = typer.Option(
         "lattice", "--system", help="Test systems, side by side: lattice (equal spheres, 6 contacts each), piles (copies of the shipped pile: the paper's radii, up to ~27 contacts) or lattice,piles."
+    ),
+    gravity_every: str = typer.Option(
+        "", "--gravity-every", help="Also time gravity on its own clock at these K, e.g. 5,10,20 (gravity every K steps, contacts from a neighbour list), against the K = 1 step of the same call; 1 in the list is the default row."
     ),
     device: Optional[str] = DeviceOption,
 ) -> None:
@@ -676,12 +702,13 @@ def bench(
     solvers = [g.strip() for g in gravity.split(",") if g.strip()]
     if not solvers or any(g not in GRAVITY_SOLVERS for g in solvers):
         fail(f"--gravity must list {' and/or '.join(GRAVITY_SOLVERS)}; got {gravity!r}")
-    try:
-        ensembles = [int(v) for v in filter(None, (part.strip() for part in ensemble.split(",")))]
-    except ValueError:
-        ensembles = [0]
+    ensembles = _integer_list(ensemble)
     if any(k < 2 for k in ensembles):
         fail(f"--ensemble must list system counts >= 2, e.g. 2,4,8; got {ensemble!r}")
+    clocks = _integer_list(gravity_every)
+    if any(k < 1 for k in clocks):
+        fail(f"--gravity-every must list integers >= 1, e.g. 5,10,20; got {gravity_every!r}")
+    clocks = [k for k in dict.fromkeys(clocks) if k > 1]
     kinds = [k.strip() for k in system.split(",") if k.strip()]
     if not kinds or any(k not in benchmarks.TEST_SYSTEMS for k in kinds):
         fail(f"--system must list {' and/or '.join(benchmarks.TEST_SYSTEMS)}; got {system!r}")
@@ -694,7 +721,7 @@ def bench(
         try:
             parts = item.split(":")
             flags = []
-            while parts and parts[-1] in ("split", "prefetch", "newton", "unfused") and parts[-1] not in flags:
+            while parts and parts[-1] in ("newton", "unfused") and parts[-1] not in flags:
                 flags.append(parts.pop())
             values = [int(v) for v in parts]
             if len(values) not in (2, 3, 4) or (not chosen.startswith("cuda") and values[0] != 1):
@@ -702,11 +729,11 @@ def bench(
             if "newton" in flags and chosen.startswith("cuda") and values[0] != 32:
                 raise ValueError
             extra_layouts.append(
-                Layout(*values, contact_pass="split" in flags, prefetch="prefetch" in flags, newton="newton" in flags, fuse_kicks="unfused" not in flags)
+                Layout(*values, newton="newton" in flags, fuse_kicks="unfused" not in flags)
             )
         except ValueError:
             fail(
-                "--layouts entries must be BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]][:split][:prefetch] or "
+                "--layouts entries must be BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]] or "
                 "BLOCK_DIM:TILE[:SLOTS[:MAX_REGISTERS]]:newton (BLOCK_DIM 32, TILE a multiple of it; SLOTS unused), "
                 f"either with :unfused (the kicks in launches of their own), BLOCK_DIM 1 on CPU; got {item!r}"
             )
@@ -720,24 +747,30 @@ def bench(
     for size, kind in itertools.product(sizes, kinds):
         runs = [("all-pairs", layout) for layout in [None, *extra_layouts]] if "all-pairs" in solvers else []
         runs += [("tree", None)] if "tree" in solvers else []
-        runs = [(solver, layout, 1) for solver, layout in runs]
-        runs += [("all-pairs", None, k) for k in ensembles]
-        alone = None
-        for solver, layout, systems in runs:
-            first = (solver, layout, systems) == runs[0]
+        runs = [(solver, layout, 1, 1) for solver, layout in runs]
+        runs += [("all-pairs", None, k, 1) for k in ensembles]
+        runs += [(solver, None, 1, every) for every in clocks for solver in solvers]
+        alone, every_step = None, {}
+        for solver, layout, systems, every in runs:
+            first = (solver, layout, systems, every) == runs[0]
             row = benchmarks.bench_size(
-                size, chosen, precision, layout, budget, steps, baseline=first, gravity=solver, systems=systems, system=kind
-            )
+                size, chosen, precision, layout, budget, steps, baseline=first, gravity=solver, systems=systems, system=kind,
+                gravity_every=every,
+            )  # fmt: skip
             if len(kinds) > 1:
                 row.layout += f", {kind}"
             rows.append(row)
-            if systems == 1 and layout is None and solver == "all-pairs":
-                alone = row
+            if systems == 1 and layout is None and every == 1:
+                every_step[solver] = row
+                alone = row if solver == "all-pairs" else alone
             if systems > 1 and alone is not None:
                 row.layout += f": {row.step_pairs_per_s / alone.step_pairs_per_s:.2f}x one at a time"
-            if solver == "tree" and alone is not None:  # the tree in its own terms: its time against all-pairs'
+            if solver == "tree" and every == 1 and alone is not None:  # the tree in its own terms: its time against all-pairs'
                 row.versus_all_pairs = alone.step_seconds / row.step_seconds
                 row.layout += f": {row.versus_all_pairs:.2f}x the all-pairs step"
+            if every > 1:  # against gravity every step with the same solver, and how often the list was built
+                row.versus_every_step = every_step[solver].step_seconds / row.step_seconds
+                row.layout += f": {row.versus_every_step:.2f}x the K = 1 step, {row.list_builds_per_step:.3g} list builds a step"
             fraction = f"{100 * row.fraction_of_limit:8.1f}%" if row.fraction_of_limit is not None else f"{'n/a':>9}"
             baseline_text = f"{row.baseline_pairs_per_s:17.3g} {row.speedup:8.1f}x" if first else f"{'':>17} {'':>9}"
             rates = f"{row.force_pairs_per_s:14.3g} {row.step_pairs_per_s:13.3g}" if solver == "all-pairs" else f"{'-':>14} {'-':>13}"

@@ -1,7 +1,7 @@
 """Device arrays of one particle system and the kernel launches that act on them.
 
-This module (with gravity_tree.py for the tree path) is the only one that touches Warp arrays
-and launches kernels; the public objects (:class:`~decco_warp.simulation.Simulation`,
+This module (with the force paths of forces.py and gravity_tree.py) is the only one that touches
+Warp arrays and launches kernels; the public objects (:class:`~decco_warp.simulation.Simulation`,
 :func:`~decco_warp.simulation.compute_forces`, :func:`~decco_warp.diagnostics.diagnostics`)
 are built on it, and the cluster finder's smoothed density on a GPU (:func:`smoothed_density`).
 """
@@ -10,21 +10,19 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
 
 from .device import resolve_device
-from .gravity_tree import GravityTree, walk_parts
+from .forces import FORCE_PATHS, path_name
+from .gravity_tree import walk_parts
 from .kernels import integrate, observables
 from .kernels.bodies import BODY_TYPES, PACK_KERNELS, PRECISIONS
-from .kernels.contacts import CANDIDATES, LEDGER_CHANNELS, contact_pass, unpack_depth
-from .kernels.fused import pair_forces_tiled
-from .kernels.newton import NEWTON_TILE_MAX, GatherRows, TilePair, contact_pass_ordered, gather_newton, pair_gravity_newton
+from .kernels.contacts import CANDIDATES, LEDGER_CHANNELS, unpack_depth
+from .kernels.newton import NEWTON_TILE_MAX
 from .kernels.pair import ContactModel
-from .kernels.reference import pair_forces_reference
-from .kernels.split import pair_gravity_tiled
 from .params import Params
 from .state import State
 
@@ -39,11 +37,6 @@ PAIR_OBSERVABLES = {
     "overlap_depth": wp.float64,
     "overlap_partner": wp.int32,
 }
-#: Threads per particle of the observables kernel on a GPU.
-OBSERVABLES_BLOCK = 128
-#: Lanes per particle of the Newton layout's contact pass on a GPU (one on the CPU): its
-#: candidates, at most kernels/contacts.py CANDIDATES, two a lane.
-CONTACT_BLOCK = 32
 
 
 @dataclass(frozen=True)
@@ -62,16 +55,11 @@ class Layout:
     contact_slots: int = 4
     max_registers: int = 0
     """Cap on registers per thread on CUDA (0: the compiler's choice)."""
-    contact_pass: bool = False
-    """Split the step's forces in two launches: a gravity-only sweep noting contact candidates,
-    then the contacts one thread per particle (kernels/split.py).  ``contact_slots`` is unused."""
-    prefetch: bool = False
-    """Load each tile of j one tile ahead, while the tile before is swept (kernels/fused.py)."""
     newton: bool = False
     """Each pair once (Newton's third law, kernels/newton.py): a block is one
     warp (``block_dim`` 32 on a GPU, 1 on the CPU) meeting two tiles of ``particles_per_block``
-    particles, gravity given to both sides, then the contacts in their own pass as with
-    ``contact_pass``.  ``contact_slots`` and ``prefetch`` are unused."""
+    particles, gravity given to both sides, then the contacts in their own pass.
+    ``contact_slots`` is unused."""
     fuse_kicks: bool = True
     """Steps share launches (:meth:`Engine.advance`): the last half kick of a step, the next one's
     first half kick and drift and the packing of the bodies for its sweep are one kernel; the same
@@ -84,15 +72,13 @@ class Layout:
                 raise ValueError(f"Layout.{name} must be a positive integer; got {value!r}")
         if not isinstance(self.max_registers, int) or self.max_registers < 0:
             raise ValueError(f"Layout.max_registers must be an integer >= 0; got {self.max_registers!r}")
-        for name in ("contact_pass", "prefetch", "newton", "fuse_kicks"):
+        for name in ("newton", "fuse_kicks"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"Layout.{name} must be true or false; got {getattr(self, name)!r}")
-        if self.newton and (
-            self.particles_per_block % self.block_dim or self.particles_per_block > NEWTON_TILE_MAX or self.contact_pass or self.prefetch
-        ):
+        if self.newton and (self.particles_per_block % self.block_dim or self.particles_per_block > NEWTON_TILE_MAX):
             raise ValueError(
                 "a Newton layout's particles_per_block must be a multiple of its block_dim (each lane keeps "
-                f"as many particles) and at most {NEWTON_TILE_MAX}, without contact_pass or prefetch; got {self}"
+                f"as many particles) and at most {NEWTON_TILE_MAX}; got {self}"
             )
 
 
@@ -102,13 +88,7 @@ class Layout:
         kicks = "" if self.fuse_kicks else ", kicks unfused"
         if self.newton:
             return f"each pair once: a warp of {self.block_dim} meets tiles of {self.particles_per_block}" + registers + kicks
-        return (
-            f"{self.block_dim} threads x {self.particles_per_block} per block, "
-            + ("contacts in their own pass" if self.contact_pass else f"{self.contact_slots} slots")
-            + registers
-            + (", j a tile ahead" if self.prefetch else "")
-            + kicks
-        )
+        return f"{self.block_dim} threads x {self.particles_per_block} per block, {self.contact_slots} slots" + registers + kicks
 
 
 #: Systems up to this many particles take the Newton layout on CUDA, which keeps a field sum and
@@ -145,12 +125,10 @@ def choose_layout(n: int, device: str) -> Layout:
     return fused_layout(n, device)
 
 
-#: ``[run] layout``: the force kernel's layout for a run.  "auto" is :func:`choose_layout`; "split"
-#: puts the contacts of the fused layout in their own pass, "prefetch" loads each tile of j a tile
-#: ahead and "newton" computes each pair once (the CUDA default up to NEWTON_MAX), as
-#: ``decco-warp bench --layouts ...:split:prefetch`` times them (docs/benchmarks.md).  They change
-#: the order of float operations, so the motion differs from "auto" at round-off only.
-LAYOUT_CHOICES = ("auto", "split", "prefetch", "split+prefetch", "newton")
+#: ``[run] layout``: the force kernel's layout for a run.  "auto" is :func:`choose_layout`;
+#: "newton" computes each pair once (the CUDA default up to NEWTON_MAX) on any device, where it
+#: changes the order of float operations, so the motion differs from "auto" at round-off only.
+LAYOUT_CHOICES = ("auto", "newton")
 
 
 def newton_layout(device: str) -> Layout:
@@ -166,14 +144,7 @@ def layout_for(choice: str, n: int, device: str) -> Layout | None:
     (None for "auto": the engine's own choice)."""
     if choice not in LAYOUT_CHOICES:
         raise ValueError(f"layout must be one of {', '.join(LAYOUT_CHOICES)}; got {choice!r}")
-    if choice == "auto":
-        return None
-    if choice == "newton":
-        return newton_layout(device)
-    base = fused_layout(n, device)
-    split = "split" in choice
-    # The split sweep fits its registers uncapped (79 to 92 on sm_90), as benched.
-    return replace(base, contact_pass=split, prefetch="prefetch" in choice, max_registers=0 if split else base.max_registers)
+    return None if choice == "auto" else newton_layout(device)
 
 
 def system_sizes(systems: Sequence[int] | None, count: int) -> np.ndarray:
@@ -182,35 +153,6 @@ def system_sizes(systems: Sequence[int] | None, count: int) -> np.ndarray:
     if sizes.ndim != 1 or len(sizes) == 0 or (sizes <= 0).any() or sizes.sum() != count:
         raise ValueError(f"systems must be positive sizes adding up to the {count} particles; got {list(sizes)}")
     return sizes
-
-
-def tiled_blocks(starts: np.ndarray, ends: np.ndarray, per_block: int) -> np.ndarray:
-    """Per block of a tiled launch: (first row, end of its rows, first and end of its system)."""
-    rows = [
-        (first, min(first + per_block, end), start, end)
-        for start, end in zip(starts, ends)
-        for first in range(int(start), int(end), per_block)
-    ]
-    return np.array(rows, dtype=np.int32).reshape(-1, 4)
-
-
-def newton_tiles(starts: np.ndarray, ends: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """The Newton layout's tile pairs (kernels/newton.py ``TilePair``), each particle's rows
-    (``GatherRows``) and the number of rows.  A system's particles are cut into tiles of ``size``;
-    its tile pairs (a, b), a <= b, each meet once; row a * n + b (after the rows of the systems
-    before) holds what tile a gets from tile b."""
-    tiles, gather, rows = [], [], 0
-    for start, end in zip(starts.tolist(), ends.tolist()):
-        firsts = np.arange(start, end, size)
-        n = len(firsts)
-        a, b = np.triu_indices(n)
-        tile_ends = np.minimum(firsts + size, end)
-        tiles.append(np.stack([firsts[a], tile_ends[a], firsts[b], tile_ends[b], rows + a * n + b, np.where(a < b, rows + b * n + a, -1)], axis=1))
-        index = np.arange(start, end)
-        tile = (index - start) // size
-        gather.append(np.stack([rows + tile * n, np.full_like(index, n), index - firsts[tile], np.full_like(index, start)], axis=1))
-        rows += n * n
-    return np.concatenate(tiles).astype(np.int32), np.concatenate(gather).astype(np.int32), rows
 
 
 def contact_model(params: Params) -> ContactModel:
@@ -279,157 +221,64 @@ class Engine:
         # (kernels/contacts.py note_depth): frames report the peak between them, not a sample.
         self.deepest_contact = wp.zeros(self.count, dtype=wp.int64, device=self.device)
 
-        # The tiled sweep reads packed bodies (kernels/bodies.py), refreshed before each sweep (the
-        # reference kernel and the tree path read the positions: none for them).
-        tiled = force_kernel == "tiled"
-        sweep = tiled and params.gravity != "tree"
-        self.body = wp.zeros(self.count if sweep else 0, dtype=BODY_TYPES[precision], device=self.device)
-        self._no_body = wp.zeros(0, dtype=BODY_TYPES[precision], device=self.device)  # a kick_drift that packs none
-        # The tree path: gravity from a radix tree, contacts from a hash grid, both into the contact pass.
-        # (A "reference" engine is the all-pairs yardstick, also for diagnostics: it never builds a tree.)
-        self.tree = GravityTree(self.count, self.device, precision) if params.gravity == "tree" and tiled else None
-        if self.tree is not None and len(self.systems) > 1:
-            raise ValueError("the tree path steps one system at a time; an ensemble needs gravity = \"all-pairs\"")
-        # Each particle's own system, [first, end), and for the tiled kernels each block's rows (a block
-        # never straddles two systems) with its system's range.
-        ends = np.cumsum(self.systems)
-        starts = ends - self.systems
-        ranges = np.repeat(np.stack([starts, ends], axis=1), self.systems, axis=0).astype(np.int32)
+        # Each particle's own system, [first, end).
+        self.ends = np.cumsum(self.systems)
+        self.starts = self.ends - self.systems
+        ranges = np.repeat(np.stack([self.starts, self.ends], axis=1), self.systems, axis=0).astype(np.int32)
         self.ranges = wp.array(ranges, dtype=wp.vec2i, device=self.device)
-        self.blocks = wp.array(
-            tiled_blocks(starts, ends, self.layout.particles_per_block) if tiled else np.zeros((0, 4), np.int32),
-            dtype=wp.vec4i,
-            device=self.device,
-        )
         self.max_radius = float(state.radii.max())
+        self.min_radius = float(state.radii.min())
         # The sweeps' per-i contact bound, in their arithmetic (float32 rounding of the largest
         # radius is no smaller than that of any other radius, so the bound holds).
-        self._max_radius = (wp.float32 if precision == "mixed" else wp.float64)(self.max_radius)
-        newton = tiled and self.layout.newton
-        split = self.tree is not None or tiled and (self.layout.contact_pass or newton)
-        if newton:
-            # Per tile pair and side, per particle of the tile: the sweep's field sum and candidate bits.
-            tiles, gather, rows = newton_tiles(starts, ends, self.layout.particles_per_block)
-            self.tiles = wp.array(tiles, dtype=TilePair, device=self.device)
-            self.gather = wp.array(gather, dtype=GatherRows, device=self.device)
-            vector = wp.vec3f if precision == "mixed" else wp.vec3d
-            self.tile_field = wp.zeros((rows, self.layout.particles_per_block), dtype=vector, device=self.device)
-            self.tile_near = wp.zeros((rows, self.layout.particles_per_block), dtype=wp.uint64, device=self.device)
-        self.candidate_count = wp.zeros(self.count if split else 0, dtype=wp.int32, device=self.device)
-        self.candidates = wp.zeros((self.count if split else 0, CANDIDATES), dtype=wp.int32, device=self.device)
-        # (Warp's CPU blocks, wp.config.enable_cpu_blocks, run every lane: tests use them to check
-        # the GPU layouts' reductions on a CPU.)
-        if tiled and not self.device.startswith("cuda") and self.layout.block_dim != 1 and (newton or not wp.config.enable_cpu_blocks):
-            raise ValueError("on the CPU a layout's block_dim must be 1 (Warp runs one thread per block)")
-        if newton and self.device.startswith("cuda") and self.layout.block_dim != 32:
-            raise ValueError(f"a Newton layout's block is one warp: block_dim must be 32 on CUDA; got {self.layout.block_dim}")
-        # The Newton layout's contact pass takes a warp per particle (with Warp's CPU blocks on, the
-        # CPU runs those lanes too: tests check the lanes' reduction so).
-        self._contact_kernel = None
-        self._tiled_contacts = newton and self.tree is None
-        self._contact_block = CONTACT_BLOCK if self.device.startswith("cuda") or wp.config.enable_cpu_blocks else 1
-        if self.tree is not None:
-            self._contact_kernel = contact_pass(params.rolling_friction)
-        elif newton:
-            lanes = self.layout.block_dim
-            self._force_kernel = pair_gravity_newton(self.layout.particles_per_block // lanes, precision, self.layout.max_registers)
-            self._gather_kernel = gather_newton(precision)
-            # The gather lists each particle's candidates in increasing j: lanes can share them out.
-            self._contact_kernel = contact_pass_ordered(params.rolling_friction, self._contact_block)
-        elif split:
-            self._force_kernel = pair_gravity_tiled(
-                self.layout.block_dim, self.layout.particles_per_block, precision, self.layout.max_registers, self.layout.prefetch
-            )
-            self._contact_kernel = contact_pass(params.rolling_friction)
-        elif tiled:
-            self._force_kernel = pair_forces_tiled(
-                self.layout.block_dim,
-                self.layout.particles_per_block,
-                self.layout.contact_slots,
-                precision,
-                params.rolling_friction,
-                ledger,
-                self.layout.max_registers,
-                self.layout.prefetch,
-            )
-        else:
-            self._force_kernel = pair_forces_reference(precision, params.rolling_friction)
+        self.sweep_max_radius = (wp.float32 if precision == "mixed" else wp.float64)(self.max_radius)
+
+        self._no_body = wp.zeros(0, dtype=BODY_TYPES[precision], device=self.device)  # a kick_drift that packs none
+        # The force path (decco_warp/forces.py), chosen by name in one place.
+        self.path = FORCE_PATHS[path_name(force_kernel, params, self.layout)](self)
+        self.gravity_every = params.gravity_every
+        """K: steps of dt per gravity evaluation (K > 1: the force path is RespaForces)."""
+
+    def pair_state(self) -> list:
+        """What a pair kernel reads of the particles: radius, mass, position, velocity, omega."""
+        return [self.radius, self.mass, self.position, self.velocity, self.omega]
+
+    def contact_state(self) -> list:
+        """What a contact pass reads of the particles beside their radii: position, velocity, omega."""
+        return [self.position, self.velocity, self.omega]
+
+    @property
+    def candidate_count(self) -> wp.array:
+        """Per particle, the contact candidates its force path met at the last evaluation (empty if it lists none)."""
+        return self.path.candidate_count
+
+    @property
+    def candidates(self) -> wp.array:
+        """Per particle, the first CANDIDATES of them."""
+        return self.path.candidates
 
     # -- stages of a step -----------------------------------------------------------
 
-    def eval_forces(self) -> None:
-        """Force and torque on every particle at the current positions and velocities."""
-        if self.body.shape[0] > 0:
+    def pack_bodies(self) -> None:
+        """The sweep's packed bodies (``path.body``) from the current positions (none unless the path reads them)."""
+        if self.path.body.shape[0] > 0:
             wp.launch(
                 PACK_KERNELS[self.precision],
                 dim=self.count,
                 inputs=[wp.float64(self.params.G), self.radius, self.mass, self.position],
-                outputs=[self.body],
+                outputs=[self.path.body],
                 device=self.device,
             )
-        self._forces()
 
-    def _forces(self) -> None:
-        """:meth:`eval_forces` with the bodies packed already (by the pack kernel or a fused kick)."""
-        outputs = [self.force, self.torque, self.channels, self.deepest_contact]
-        if self.tree is not None:
-            self.tree.build(self.position, self.mass)
-            self.tree.gravity(self.params.G, self.params.theta_open, self.mass, self.force)
-            self.tree.contact_candidates(self.position, self.radius, self.max_radius, self.candidate_count, self.candidates)
-            self._contacts(outputs)
-            return
-        state = [self.radius, self.mass, self.position, self.velocity, self.omega]
-        if self.force_kernel == "reference":
-            wp.launch(self._force_kernel, dim=self.count, inputs=[self.model, self.ranges, *state], outputs=outputs, device=self.device)
-            return
-        if self.layout.newton:
-            # Each pair once, per particle and tile; then each particle's gravity and sorted candidates.
-            wp.launch_tiled(
-                self._force_kernel,
-                dim=[self.tiles.shape[0]],
-                block_dim=self.layout.block_dim,
-                inputs=[self.tiles, self.body, self._max_radius],
-                outputs=[self.tile_field, self.tile_near],
-                device=self.device,
-            )
-            wp.launch(
-                self._gather_kernel,
-                dim=self.count,
-                inputs=[self.gather, self.mass, self.tile_field, self.tile_near],
-                outputs=[self.force, self.candidate_count, self.candidates],
-                device=self.device,
-            )
-            self._contacts(outputs)
-            return
-        tiled = {"dim": [self.blocks.shape[0]], "block_dim": self.layout.block_dim, "device": self.device}
-        if not self.layout.contact_pass:
-            wp.launch_tiled(self._force_kernel, inputs=[self.model, self.blocks, *state, self.body, self._max_radius], outputs=outputs, **tiled)
-            return
-        # The split layout: a gravity sweep noting contact candidates, then the contacts.
-        self.candidate_count.zero_()
-        wp.launch_tiled(
-            self._force_kernel,
-            inputs=[self.blocks, self.mass, self.body, self._max_radius],
-            outputs=[self.force, self.candidate_count, self.candidates],
-            **tiled,
-        )
-        self._contacts(outputs)
+    def eval_forces(self) -> None:
+        """Force and torque on every particle at the current positions and velocities."""
+        self.pack_bodies()
+        self.path.evaluate()
 
     def candidate_overflows(self, first: int = 0, end: int | None = None) -> int:
         """Particles (of rows [first, end)) whose contact candidates overflowed the list at the last
-        force evaluation (the split layout and the tree path; 0 otherwise): each costs a walk over
+        force evaluation (the paths that list candidates; 0 otherwise): each costs a walk over
         its whole system."""
-        if self.candidates.shape[0] == 0:
-            return 0
-        return int((self.candidate_count.numpy()[first:end] > self.candidates.shape[1]).sum())
-
-    def _contacts(self, outputs: list) -> None:
-        """The contact pass over the candidates noted by the sweep or the hash grid."""
-        inputs = [self.model, self.ranges, self.radius, self.position, self.velocity, self.omega, self.candidate_count, self.candidates]
-        if self._tiled_contacts:  # a block of lanes per particle
-            wp.launch_tiled(self._contact_kernel, dim=[self.count], block_dim=self._contact_block, inputs=inputs, outputs=outputs, device=self.device)
-        else:
-            wp.launch(self._contact_kernel, dim=self.count, inputs=inputs, outputs=outputs, device=self.device)
+        return self.path.candidate_overflows(first, end)
 
     def kick_drift(self, close_step: bool = False, pack: bool = False) -> None:
         """Half kick with the current forces, then a full drift; with ``close_step`` first the last
@@ -440,7 +289,7 @@ class Engine:
             dim=self.count,
             inputs=[wp.float64(self.params.dt), wp.float64(self.params.G), self.radius, self.mass, self.inertia,
                     self.force, self.torque, self.channels, close_step],
-            outputs=[self.position, self.velocity, self.omega, self.work, self.body if pack else self._no_body],
+            outputs=[self.position, self.velocity, self.omega, self.work, self.path.body if pack else self._no_body],
             device=self.device,
         )  # fmt: skip
 
@@ -454,25 +303,86 @@ class Engine:
             device=self.device,
         )
 
+    # Gravity on its own clock (K = gravity_every > 1, docs/model.md): the path is RespaForces.
+
+    def kick_outer(self, close_step: bool = False) -> None:
+        """A gravity half kick of K dt / 2; with ``close_step`` first the last contact half kick (:meth:`kick`)."""
+        wp.launch(
+            integrate.kick_outer,
+            dim=self.count,
+            inputs=[wp.float64(self.params.dt), wp.float64(self.gravity_every * self.params.dt), self.mass, self.inertia,
+                    self.force, self.torque, self.channels, self.path.gravity_force, close_step],
+            outputs=[self.velocity, self.omega, self.work],
+            device=self.device,
+        )  # fmt: skip
+
+    def kick_drift_inner(self, close_step: bool = False, gravity_kicks: int = 0, pack: bool = False) -> None:
+        """A contact half kick and a full drift, then the neighbour list's displacement check; with
+        ``close_step`` first the last contact half kick of the step before, then ``gravity_kicks``
+        gravity half kicks (closing and opening outer steps); with ``pack`` the packing of the bodies
+        for the gravity sweep after the drift."""
+        neighbours = self.path.neighbours
+        wp.launch(
+            integrate.KICK_DRIFT_INNER[self.precision],
+            dim=self.count,
+            inputs=[wp.float64(self.params.dt), wp.float64(self.gravity_every * self.params.dt), wp.float64(self.params.G),
+                    self.radius, self.mass, self.inertia, self.force, self.torque, self.channels, self.path.gravity_force,
+                    close_step, gravity_kicks, neighbours.reference, wp.float64(0.5 * neighbours.skin)],
+            outputs=[self.position, self.velocity, self.omega, self.work, neighbours.stale,
+                     self.path.body if pack else self._no_body],
+            device=self.device,
+        )  # fmt: skip
+
     def step(self) -> None:
-        """One kick-drift-kick step (docs/model.md): forces at x(n+1) with the half-step velocities."""
-        self.kick_drift()
-        self.eval_forces()
-        self.kick()
+        """One step (docs/model.md), each stage a launch of its own: kick-drift, the forces at x(n+1)
+        with the half-step velocities, kick.  With gravity on its own clock, one outer step of K
+        steps: a gravity half kick, K steps of the contacts alone, gravity at the new positions and
+        the second gravity half kick."""
+        if self.gravity_every == 1:
+            self.kick_drift()
+            self.eval_forces()
+            self.kick()
+            return
+        self.kick_outer()
+        for k in range(self.gravity_every):
+            self.kick_drift_inner(pack=k == self.gravity_every - 1)
+            self.path.contacts()
+            self.kick()
+        self.path.gravity_step()
+        self.kick_outer()
 
     def advance(self, steps: int) -> None:
-        """``steps`` steps, ending at a whole step as :meth:`step` does, bit for bit the same: with
-        ``layout.fuse_kicks``, a step's last half kick, the next one's first half kick and drift and
-        the packing of its bodies are one launch (kernels/integrate.py ``kick_drift``)."""
+        """``steps`` steps (a multiple of K), ending at a whole step as :meth:`step` does, bit for bit
+        the same: with ``layout.fuse_kicks``, a step's last half kick, the next one's first half
+        kick and drift and the packing of its bodies are one launch (kernels/integrate.py
+        ``kick_drift``, ``kick_drift_inner``)."""
+        if steps % self.gravity_every:
+            raise ValueError(f"steps must be a multiple of gravity_every = {self.gravity_every}; got {steps}")
         if not self.layout.fuse_kicks:
-            for _ in range(steps):
+            for _ in range(steps // self.gravity_every):
                 self.step()
-            return
+        elif self.gravity_every == 1:
+            self._advance_one_clock(steps)
+        else:
+            self._advance_two_clocks(steps // self.gravity_every)
+
+    def _advance_one_clock(self, steps: int) -> None:
         for k in range(steps):
             self.kick_drift(close_step=k > 0, pack=True)
-            self._forces()
+            self.path.evaluate()
         if steps > 0:
             self.kick()
+
+    def _advance_two_clocks(self, outer_steps: int) -> None:
+        last = self.gravity_every - 1
+        for s in range(outer_steps):
+            for k in range(self.gravity_every):
+                # The first inner step opens the outer step's gravity kick (after closing the one before).
+                self.kick_drift_inner(close_step=s > 0 or k > 0, gravity_kicks=(2 if s > 0 else 1) if k == 0 else 0, pack=k == last)
+                self.path.contacts()
+            self.path.gravity_step()
+        if outer_steps > 0:
+            self.kick_outer(close_step=True)
 
     # -- host side ----------------------------------------------------------------
 
@@ -480,29 +390,7 @@ class Engine:
         """Per particle: half its pair potential and elastic energy, its contacts, its largest
         overlap [cm], and its deepest contact as a fraction of the pair's smaller radius with that partner."""
         outputs = {name: wp.zeros(self.count, dtype=dtype, device=self.device) for name, dtype in PAIR_OBSERVABLES.items()}
-        if self.tree is None:
-            # A block per particle on a GPU (N threads alone would leave most of it idle).
-            block_dim = OBSERVABLES_BLOCK if self.device.startswith("cuda") else 1
-            wp.launch_tiled(
-                observables.pair_observables_tiled(block_dim),
-                dim=[self.count],
-                inputs=[self.model, self.ranges, self.radius, self.mass, self.position, self.velocity],
-                outputs=list(outputs.values()),
-                block_dim=block_dim,
-                device=self.device,
-            )
-        else:  # O(N log N): the potential from the tree, the contacts from the hash grid's candidates
-            potential, *contacts = outputs.values()
-            self.tree.build(self.position, self.mass)
-            self.tree.potential(self.params.G, self.params.theta_open, self.mass, potential)
-            self.tree.contact_candidates(self.position, self.radius, self.max_radius, self.candidate_count, self.candidates)
-            wp.launch(
-                observables.candidate_observables,
-                dim=self.count,
-                inputs=[self.model, self.ranges, self.radius, self.position, self.velocity, self.candidate_count, self.candidates],
-                outputs=contacts,
-                device=self.device,
-            )
+        self.path.observables(outputs)
         return {name: array.numpy() for name, array in outputs.items()}
 
     def take_deepest_contact(self, first: int = 0, end: int | None = None) -> dict:
@@ -524,23 +412,24 @@ class Engine:
         return self.position.numpy().copy(), self.velocity.numpy().copy(), self.omega.numpy().copy()
 
     def read_forces(self) -> tuple[np.ndarray, np.ndarray]:
-        """The last evaluated force [dyne] and torque [dyne cm], copied to the host."""
-        return self.force.numpy().copy(), self.torque.numpy().copy()
+        """The last evaluated force [dyne] (gravity included) and torque [dyne cm], copied to the host."""
+        return self.path.total_force(), self.torque.numpy().copy()
 
     def read_work(self) -> np.ndarray:
         """Work of (gravity, spring, sliding, rolling) on each particle since the start [erg], (N, 4)."""
         return self.work.numpy().copy() if self.ledger else np.zeros((self.count, 4))
 
     def snapshot(self) -> dict[str, np.ndarray]:
-        """Every array the next step depends on: enough to continue bit for bit."""
+        """Every array the next step depends on: enough to continue bit for bit.  With gravity on its
+        own clock ``force`` is the contact force; gravity, a function of the positions alone, is
+        evaluated anew on :meth:`restore`."""
         positions, velocities, omegas = self.read()
-        force, torque = self.read_forces()
         return {
             "positions": positions,
             "velocities": velocities,
             "omegas": omegas,
-            "force": force,
-            "torque": torque,
+            "force": self.force.numpy().copy(),
+            "torque": self.torque.numpy().copy(),
             "channels": self.channels.numpy().copy(),
             "work": self.work.numpy().copy(),
             "deepest_contact": self.deepest_contact.numpy().copy(),
@@ -566,6 +455,7 @@ class Engine:
         if records.shape != (self.count,):
             raise ValueError(f"snapshot deepest_contact has shape {records.shape}; expected {(self.count,)}")
         self.deepest_contact.assign(wp.array(records, dtype=wp.int64, device=self.device))
+        self.path.restored()
 
 
 def smoothed_density(sources: np.ndarray, norm: np.ndarray, inv_two_var: np.ndarray, targets: np.ndarray, device: str) -> np.ndarray:
@@ -605,7 +495,8 @@ def memory_estimate(n: int, gravity: str, device: str = "cpu", ledger: bool = Tr
     per = 3 * f64 + 5 * vec3d  # radius, mass, inertia; position, velocity, omega, force, torque
     per += (len(LEDGER_CHANNELS) * vec3d + 32) if ledger else 0  # channels, work
     per += 8 + 32 + 8  # deepest contact, packed body, system range
-    per += i32 * (1 + CANDIDATES)  # the contact candidates of a split layout or the tree
+    per += i32 * (1 + CANDIDATES)  # the contact candidates of the Newton layout, the tree or the neighbour list
+    per += 2 * vec3d + 5 * i32  # gravity on its own clock: gravity, the list's build positions; system, cell keys and order (2 N)
     per += len(PAIR_OBSERVABLES) * f64  # a frame's pair observables
     if gravity == "tree":  # nodes (2n): mass, centre, quadrupole, box, size, offset, links (16), child, first,
         # last, parent, escape; keys, order (2n); leaf positions, grid points; each walk part's field and potential

@@ -153,6 +153,10 @@ class SystemView:
     def candidate_overflows(self) -> int:
         return self._ensemble.sim.engine.candidate_overflows(self.first, self.end)
 
+    def neighbour_list_builds(self) -> int | None:
+        """The ensemble's (one list for all its systems)."""
+        return self._ensemble.sim.neighbour_list_builds()
+
     def snapshot(self) -> dict:
         """This system's part of the ensemble's snapshot: what a Simulation stepped alone would give."""
         whole = self._ensemble.sim.engine.snapshot()

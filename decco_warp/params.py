@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass, fields
 
 #: Gravitational constant [cm^3 g^-1 s^-2] (CODATA 2018).
@@ -30,6 +31,22 @@ TREE_FROM = {"cpu": 1200, "cuda": 45_000}
 def choose_gravity(n: int, device: str) -> str:
     """The gravity solver ``gravity = "auto"`` takes for ``n`` particles on ``device`` ("cpu", "cuda:0")."""
     return "tree" if n >= TREE_FROM["cuda" if device.startswith("cuda") else "cpu"] else "all-pairs"
+
+
+#: The K that ``gravity_every = "auto"`` stands for: the largest K whose outcomes sit inside the
+#: spread of K = 1 realizations on the paper's runs (docs/benchmarks.md, "Gravity on its own
+#: clock").  None until that table is measured: "auto" is refused meanwhile.
+GRAVITY_EVERY_AUTO: int | None = None
+
+
+def auto_gravity_every() -> int:
+    """The K of ``gravity_every = "auto"``; ValueError while the equivalence table awaits its runs."""
+    if GRAVITY_EVERY_AUTO is None:
+        raise ValueError(
+            '"auto" awaits the equivalence table of docs/benchmarks.md ("Gravity on its own clock"); '
+            "give an integer K >= 1 (1: gravity every step, the paper's scheme)"
+        )
+    return GRAVITY_EVERY_AUTO
 
 
 @dataclass(frozen=True)
@@ -60,6 +77,10 @@ class Params:
     theta_open: float = 0.4
     """Tree opening angle: a node is used whole beyond size / theta_open (plus its centre's offset);
     0.4 keeps the rms relative gravity error on settled piles below 1e-3 (tests/test_tree.py)."""
+    gravity_every: int = 1
+    """K: steps of dt per evaluation of gravity.  1 is the paper's scheme (gravity and contacts every
+    step); K > 1 kicks gravity every K dt around K steps of contacts alone (impulse multiple time
+    stepping, docs/model.md "Gravity on its own clock"), and step counts are multiples of K."""
 
     def __post_init__(self):
         _require(self, "k_in", lambda v: v > 0, "> 0 [dyne/cm]")
@@ -69,6 +90,10 @@ class Params:
         _require(self, "dt", lambda v: v > 0, "> 0 [s]")
         _require(self, "G", lambda v: v >= 0, ">= 0 [cm^3 g^-1 s^-2]")
         _require(self, "theta_open", lambda v: 0 < v < 2, "in (0, 2)")
+        every = self.gravity_every
+        if isinstance(every, bool) or not isinstance(every, numbers.Integral) or every < 1:
+            raise ValueError(f"gravity_every must be an integer >= 1 (steps of dt per gravity evaluation); got {every!r}")
+        object.__setattr__(self, "gravity_every", int(every))
         if self.gravity not in GRAVITY_SOLVERS:
             raise ValueError(f"gravity must be one of {', '.join(GRAVITY_SOLVERS)}; got {self.gravity!r}")
         if self.rolling_friction not in ROLLING_FRICTION_FORMS:

@@ -158,6 +158,7 @@ class Plan:
             *self.notes,
             f"parameters: k_in {params.k_in:.6g} dyne/cm, dt {params.dt:.6g} s, {self.steps} steps "
             f"({self.steps * params.dt:.6g} s)"
+            + (f", gravity every {params.gravity_every} steps" if params.gravity_every > 1 else "")
             + (f", force layout {run['layout']}" if run["layout"] != "auto" else ""),
             f"stability: {self.stability.summary()}",
             f"compression: {self.forecast.summary()}",
@@ -170,7 +171,13 @@ class Plan:
             f"piles: {', '.join(f'{pile.which} {pile.file} (sha256 {pile.sha256[:12]})' for pile in self.piles)}",
             f"physics: restitution {p.restitution:g}, mu_k {p.mu_k:g}, mu_r {p.mu_r:g} ({p.rolling_friction}), "
             f"G {p.G:.6g}, gravity {p.gravity}" + (f" (theta_open {p.theta_open:g})" if p.gravity == "tree" else ""),
-            f"device: {self.device}, precision {self.precision}, force layout {self.layout.describe()}",
+            f"device: {self.device}, precision {self.precision}, force layout {self.layout.describe()}"
+            + (
+                f"; gravity every {p.gravity_every} steps ({'the tree' if p.gravity == 'tree' else 'each pair once'}), "
+                "contacts every step from a neighbour list"
+                if p.gravity_every > 1
+                else ""
+            ),
             f"outputs: {self.outputs.run_dir}, a frame every {self.outputs.output_every} steps, "
             f"a checkpoint every {self.outputs.checkpoint_every} steps"
             + (f", stop past an overlap of {self.max_overlap:g}" if self.max_overlap is not None else ""),
@@ -191,6 +198,7 @@ def _read_only(state: State) -> State:
 
 def _resolved(spec: dict, state: State, device: str, **given) -> Plan:
     """The plan of a settled ``spec`` (no "auto" left) for ``state`` on ``device``."""
+    specs.check_clock(spec)  # a resume's new total of steps too
     run = spec["run"]
     n = state.n
     return Plan(

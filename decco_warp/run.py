@@ -25,7 +25,7 @@ from .io import (
 )  # fmt: skip
 from .lock import RunFolderLock
 from .plan import Plan, RunError, builtin_pile, pile_path, plan_resume, plan_start, run_dir_of  # noqa: F401 (run's names)
-from .simulation import GRAPH_STEPS, Simulation
+from .simulation import Simulation, graph_steps
 from .stops import StopRequests
 from .stability import MIN_TIME_STEP_MARGIN, StabilityReport
 from .xdmf import write_xdmf
@@ -471,8 +471,10 @@ class RunDriver:
         # Where the time outside stepping goes (this session): frames' observables, trajectory writes, checkpoints.
         self.outside = {"observables": 0.0, "trajectory": 0.0, "checkpoints": 0.0}
         self.started = _time.perf_counter()
-        # Progress is reported about 200 times per run, never between graph blocks.
-        self.report_every = max(50, self.total // 200)
+        # Progress is reported about 200 times per run, never between graph blocks (nor outer steps).
+        outer = plan.params.gravity_every  # steps of an outer step: every stop is a whole number of them
+        self.graph_steps = graph_steps(outer)
+        self.report_every = outer * max(-(-50 // outer), self.total // 200 // outer)
         self.start_energy = sim.energy_start["total_energy"]
         # Dissipation only lowers the total energy; a gain of a fraction of this means the integration broke down.
         self.scale = energy_scale(sim.energy_start)
@@ -498,8 +500,8 @@ class RunDriver:
         asked for (Ctrl-C, SIGTERM) is answered that soon, however far apart the run's reports are."""
         done = self.sim.step_count - self.first_step
         if done == 0 or self.stepping <= 0.0:
-            return GRAPH_STEPS
-        return max(GRAPH_STEPS, int(seconds * done / self.stepping) // GRAPH_STEPS * GRAPH_STEPS)
+            return self.graph_steps
+        return max(self.graph_steps, int(seconds * done / self.stepping) // self.graph_steps * self.graph_steps)
 
     def checkpoint(self, step: int) -> None:
         began = _time.perf_counter()
@@ -615,7 +617,16 @@ class RunDriver:
                 + ", ".join(f"{what} {seconds:.1f} s" for what, seconds in self.outside.items())
                 + "); "
                 f"{self.overlaps.summary()}"
+                + self._list_builds()
             )
+
+    def _list_builds(self) -> str:
+        """How often the contacts' neighbour list was built this session (gravity on its own clock), or nothing."""
+        builds = self.sim.neighbour_list_builds()
+        if builds is None:
+            return ""
+        steps = self.sim.step_count - self.first_step
+        return f"; neighbour list built {builds} times in {steps} steps" + (f" (every {steps / builds:.3g} steps)" if builds else "")
 
     def result(self) -> RunResult:
         sim = self.sim

@@ -20,6 +20,12 @@ from .state import State
 GRAPH_STEPS = 50
 
 
+def graph_steps(gravity_every: int) -> int:
+    """The steps of one recorded graph: GRAPH_STEPS, or whole outer steps of gravity_every (as many
+    as fit in GRAPH_STEPS, at least one)."""
+    return gravity_every * max(1, GRAPH_STEPS // gravity_every)
+
+
 class Simulation:
     """A particle system being integrated on one device.
 
@@ -58,10 +64,12 @@ class Simulation:
         self._time_origin = state.time - state.step * params.dt
         self._step = state.step
         self._graph = None
-        # A tree step's level loop is a conditional graph node on CUDA (driver and toolkit 12.4+);
-        # without them its steps are launched one by one, which gives the same numbers.
+        self._graph_steps = graph_steps(params.gravity_every)
+        # A loop or branch decided on the device (the tree's levels) is a conditional graph node on
+        # CUDA (driver and toolkit 12.4+); without them steps are launched one by one, which gives
+        # the same numbers.
         conditional_nodes = not self.engine.device.startswith("cuda") or wp.is_conditional_graph_supported()
-        self._record = self.engine.tree is None or conditional_nodes
+        self._record = not self.engine.path.graph_conditionals or conditional_nodes
         # Forces at x(0) with v(0): the first half kick needs them.
         self.engine.eval_forces()
         self.energy_start: dict | None = self.diagnostics() if ledger else None
@@ -114,18 +122,22 @@ class Simulation:
         return self._time_origin + self._step * self.params.dt
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` steps of ``params.dt``: whole blocks of steps replay a recorded graph (the
-        steps of a block, and those left over, share launches: :meth:`Engine.advance`)."""
+        """Advance ``n`` steps of ``params.dt`` (with gravity on its own clock, a multiple of
+        ``params.gravity_every``: whole outer steps): whole blocks of steps replay a recorded graph
+        (the steps of a block, and those left over, share launches: :meth:`Engine.advance`)."""
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise ValueError(f"step count must be a non-negative integer; got {n!r}")
         n = int(n)
-        while self._record and n >= GRAPH_STEPS:
+        every = self.params.gravity_every
+        if n % every:
+            raise ValueError(f"with gravity_every = {every} the step count must be a multiple of {every} (whole outer steps); got {n}")
+        while self._record and n >= self._graph_steps:
             graph = self._step_graph()
             if graph is None:
                 break
             wp.capture_launch(graph)
-            n -= GRAPH_STEPS
-            self._step += GRAPH_STEPS
+            n -= self._graph_steps
+            self._step += self._graph_steps
         self.engine.advance(n)
         self._step += n
 
@@ -139,7 +151,7 @@ class Simulation:
         if self._graph is None:
             try:
                 with wp.ScopedCapture(device=self.engine.device) as capture:
-                    self.engine.advance(GRAPH_STEPS)
+                    self.engine.advance(self._graph_steps)
             except Exception as error:  # e.g. a driver without conditional graph nodes for the tree
                 warnings.warn(f"steps are launched one by one: recording them in a graph failed ({error})", stacklevel=3)
                 self._record = False
@@ -178,6 +190,11 @@ class Simulation:
         state = self.state if state is None else state
         pairs = self.pair_observables() if pairs is None else pairs
         return state_diagnostics(state, pairs)
+
+    def neighbour_list_builds(self) -> int | None:
+        """Builds of the contacts' neighbour list since this simulation was made or restored
+        (gravity_every > 1; None otherwise: no list is kept)."""
+        return self.engine.path.list_builds()
 
     def candidate_overflows(self) -> int:
         """Particles whose contact candidates overflowed their list at the last force evaluation."""

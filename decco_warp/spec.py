@@ -7,7 +7,8 @@ A specification has four tables, every key optional (defaults below):
     [piles]      target, projectile          (pile files, or builtin:target / builtin:projectile)
     [collision]  eta | speed, eta_potential, theta_deg, gap, target_spin, target_spin_axis, projectile_spin,
                  projectile_spin_axis, orientation_seed
-    [params]     k_in, restitution, mu_k, mu_r, dt, G, rolling_friction, gravity, theta_open, max_compression
+    [params]     k_in, restitution, mu_k, mu_r, dt, G, rolling_friction, gravity, theta_open, gravity_every,
+                 max_compression
 
 Every problem is a :class:`SpecError` naming the table, the key and what is allowed.
 The resolved form has every default filled in, ``steps`` rather than
@@ -15,7 +16,9 @@ The resolved form has every default filled in, ``steps`` rather than
 ``spec.toml`` repeats the run exactly.  ``k_in = "auto"`` (and ``dt = "auto"``,
 which it implies unless dt is given) depend on the collision: they stay "auto",
 with ``duration`` kept, until :func:`settle_auto` fills them in from the set-up
-(decco_warp/plan.py does, once per run).
+(decco_warp/plan.py does, once per run).  With ``gravity_every = K`` > 1 every step count (steps,
+output_every, checkpoint_every) is a whole number of outer steps, a multiple of K (:func:`check_clock`);
+a duration becomes steps rounded up to one.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ from typing import Any, Callable
 
 from .collision import ETA_POTENTIALS, SPIN_AXES, spin_axis
 from .engine import LAYOUT_CHOICES, PRECISIONS
-from .params import GRAVITY_CHOICES, ROLLING_FRICTION_FORMS, Params, choose_gravity
+from .params import GRAVITY_CHOICES, ROLLING_FRICTION_FORMS, Params, auto_gravity_every, choose_gravity
 from .stability import DEFAULT_MAX_COMPRESSION, choose_stiffness, choose_time_step
 
 if sys.version_info >= (3, 11):
@@ -50,6 +53,8 @@ class Key:
     allowed: str
     auto: bool = False
     """Whether the string "auto" is accepted (chosen from the set-up at run time)."""
+    auto_value: Callable[[], Any] | None = None
+    """What "auto" stands for whatever the set-up, resolved with the specification (ValueError: not yet)."""
 
 
 def _positive(v):
@@ -126,6 +131,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "rolling_friction": Key(str, "couple", lambda v: v in ROLLING_FRICTION_FORMS, " or ".join(ROLLING_FRICTION_FORMS)),
         "gravity": Key(str, _PARAMS_DEFAULT.gravity, lambda v: v in GRAVITY_CHOICES, " or ".join(GRAVITY_CHOICES)),
         "theta_open": Key(float, _PARAMS_DEFAULT.theta_open, lambda v: 0 < v < 2, "in (0, 2) (tree opening angle)"),
+        "gravity_every": Key(
+            int, _PARAMS_DEFAULT.gravity_every, _positive, "an integer >= 1 (steps of dt per gravity evaluation)", auto_value=auto_gravity_every
+        ),
         "max_compression": Key(
             float, DEFAULT_MAX_COMPRESSION, lambda v: 0 < v <= 1, "in (0, 1] (deepest overlap for k_in = \"auto\", fraction of the smallest radius)"
         ),
@@ -185,7 +193,7 @@ def resolve_spec(raw: dict | None = None, overrides: dict | None = None) -> dict
     if "steps" in run and "duration" in run:
         raise SpecError("[run] give steps or duration, not both")
     if "duration" in run and params["dt"] != AUTO:
-        run["steps"] = steps_of(run.pop("duration"), params["dt"])
+        run["steps"] = steps_of(run.pop("duration"), params["dt"], params["gravity_every"])
     if "duration" not in run:
         run.setdefault("steps", 50_000)
     if "eta" in collision and "speed" in collision:
@@ -196,15 +204,29 @@ def resolve_spec(raw: dict | None = None, overrides: dict | None = None) -> dict
         Params(**{key: value for key, value in params_values(spec).items() if value != AUTO})
     except ValueError as error:
         raise SpecError(f"[params] {error}") from None
+    check_clock(spec)
     return spec
+
+
+def check_clock(spec: dict) -> None:
+    """Refuse (SpecError, naming them) step counts that are not whole outer steps of gravity_every."""
+    every, run = spec["params"]["gravity_every"], spec["run"]
+    bad = [f"{key} = {run[key]}" for key in ("steps", "output_every", "checkpoint_every") if key in run and run[key] % every]
+    if bad:
+        raise SpecError(
+            f"[run] {', '.join(bad)}: with [params] gravity_every = {every}, steps, output_every and checkpoint_every "
+            f"must be multiples of {every} (whole outer steps)"
+        )
 
 
 #: The value of a key chosen from the collision set-up at run time.
 AUTO = "auto"
 
 
-def steps_of(duration: float, dt: float) -> int:
-    return max(1, math.ceil(duration / dt - 1e-9))
+def steps_of(duration: float, dt: float, every: int = 1) -> int:
+    """The steps of dt that cover ``duration``, rounded up to whole outer steps of ``every``."""
+    steps = max(1, math.ceil(duration / dt - 1e-9))
+    return every * math.ceil(steps / every)
 
 
 def settle_auto(spec: dict, state, device: str = "cpu") -> tuple[dict, list[str]]:
@@ -231,8 +253,9 @@ def settle_auto(spec: dict, state, device: str = "cpu") -> tuple[dict, list[str]
         notes.append(f'dt = "auto": {params["dt"]:.3g} s, eq. 17 with the required margin for k_in = {params["k_in"]:.3g} dyne/cm')
     if "duration" in run:
         duration = run.pop("duration")
-        run["steps"] = steps_of(duration, params["dt"])
+        run["steps"] = steps_of(duration, params["dt"], params["gravity_every"])
         notes.append(f"duration {duration:g} s: {run['steps']} steps of {params['dt']:.3g} s")
+    check_clock(spec)
     return spec, notes
 
 
@@ -246,6 +269,11 @@ def _checked(table: str, key: str, value, rule: Key):
     where = f"[{table}] {key} = {value!r}"
     if rule.auto and value == AUTO:
         return value
+    if rule.auto_value is not None and value == AUTO:
+        try:
+            return rule.auto_value()
+        except ValueError as error:
+            raise SpecError(f"{where}: {error}") from None
     if rule.kind is bool:
         ok = isinstance(value, bool)
     elif rule.kind is int:

@@ -1,6 +1,6 @@
 """Packed bodies: what the tiled sweeps of every layout read, and the pieces they share.
 
-The sweeps of the fused (:mod:`.fused`), split (:mod:`.split`) and Newton (:mod:`.newton`) layouts
+The sweeps of the fused (:mod:`.fused`) and Newton (:mod:`.newton`) layouts
 spend their time on gravity between every pair, so they read each particle as one packed vector,
 refreshed before each sweep by ``PACK_KERNELS[precision]``, and do the arithmetic of a pair in the
 run's precision:
@@ -13,7 +13,7 @@ sweep's sums are float32.
 ``"float64"``: everything in double.
 
 Also here: each sweep's per-i bound (``near_bound``) that spares most pairs the candidate test, and
-the tiled blocks of the fused and split layouts (``unpack_block``).  The pack kernels are the only
+the tiled blocks of the fused layout (``unpack_block``).  The pack kernels are the only
 kernels of this module, so a CPU run compiles it once, whatever the layout.
 """
 

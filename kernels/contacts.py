@@ -6,12 +6,13 @@ contact is then evaluated here, in float64 from the state arrays, with the pair 
 :mod:`.pair`: positions are ~1e7 cm and overlaps ~1e2 cm.  Contacts are few, so this code is kept
 out of the hot loops.
 
-``contact_pass`` (one thread per particle) lives here rather than with the split layout's sweep
-because it serves any candidate list whatever its order: the split sweep's (noted with atomics, in
-any order) and the tree path's hash grid (:mod:`.tree` ``grid_candidates``).  It walks each list in
-increasing j, so its sums (and the ledger's channels) do not depend on scheduling, and the tree
-path's observables walk the lists the same way (``candidates_walk``, ``next_candidate``).  The
-Newton layout's gather lists its candidates already sorted; its own contact pass, a warp per
+Candidate lists are kept in increasing j as they are noted (``note_candidate``): the tree path's
+hash grid (:mod:`.tree` ``grid_candidates``) and the neighbour list of gravity on its own clock
+(:mod:`.neighbours`).  ``contact_pass`` (one thread per particle) walks a list in order, so its
+sums (and the ledger's channels) do not depend on scheduling, nor, since a listed pair that does
+not touch adds an exact zero, on which superset of the touching pairs the list holds; the
+observables walk the lists the same way (``candidates_walk``, ``candidate_at``).  The Newton
+layout's gather lists its candidates in increasing j too; its own contact pass, a warp per
 particle, is in :mod:`.newton`.
 """
 
@@ -187,10 +188,30 @@ CANDIDATES = 64
 
 
 @wp.func
+def note_candidate(candidates: wp.array2d(dtype=wp.int32), i: int, noted: int, j: int) -> int:
+    """Note j among i's ``noted`` candidates, kept in increasing j (a list is short: an insertion),
+    once; returns the count noted.  Past the list's width it only counts (an overflow: the list
+    is walked no more)."""
+    if noted >= candidates.shape[1]:
+        return noted + 1
+    s = noted
+    while s > 0:  # where j goes
+        if candidates[i, s - 1] <= j:
+            break
+        s -= 1
+    if s > 0:
+        if candidates[i, s - 1] == j:  # met again
+            return noted
+    for k in range(noted, s, -1):
+        candidates[i, k] = candidates[i, k - 1]
+    candidates[i, s] = wp.int32(j)
+    return noted + 1
+
+
+@wp.func
 def candidates_walk(i: int, ranges: wp.array(dtype=wp.vec2i), candidate_count: wp.array(dtype=wp.int32), candidates: wp.array2d(dtype=wp.int32)):
-    """How i's candidates are walked: (listed, how many steps).  Listed: its noted candidates in
-    increasing j (see :func:`next_candidate`), so that sums over them do not depend on the order
-    they were noted in; after an overflow of the list, every j of its system."""
+    """How i's candidates are walked: (listed, how many steps).  Listed: its noted candidates, in
+    increasing j; after an overflow of the list, every j of its system, also in increasing j."""
     noted = candidate_count[i]
     if noted <= candidates.shape[1]:
         return True, noted
@@ -198,25 +219,20 @@ def candidates_walk(i: int, ranges: wp.array(dtype=wp.vec2i), candidate_count: w
 
 
 @wp.func
-def next_candidate(i: int, listed: bool, candidates: wp.array2d(dtype=wp.int32), walk: int, previous: int) -> int:
-    """The candidate after ``previous`` (start from the system's first particle - 1): the smallest
-    noted j above it (a selection pass over the row: no per-thread copy of the list), or simply
-    the next j of the system after an overflow."""
-    if not listed:
-        return previous + 1
-    best = int(2147483647)
-    for s in range(walk):
-        j = candidates[i, s]
-        if j > previous and j < best:
-            best = j
-    return best
+def candidate_at(i: int, listed: bool, ranges: wp.array(dtype=wp.vec2i), candidates: wp.array2d(dtype=wp.int32), s: int) -> int:
+    """The candidate of step s of i's walk (:func:`candidates_walk`)."""
+    if listed:
+        return int(candidates[i, s])
+    return int(ranges[i][0]) + s
 
 
 @functools.cache
-def contact_pass(rolling: str = "couple"):
-    """Build the contact pass of the split layout and the tree path, one thread per particle: its
-    noted candidates sorted by j, each evaluated in float64 and added to ``force_inout``;
-    ``torque_out`` and the ledger's ``channels_out`` (when it has rows) are written whole."""
+def contact_pass(rolling: str = "couple", accumulate: bool = True):
+    """Build the contact pass over candidate lists, one thread per particle: its candidates in
+    increasing j, each evaluated in float64 (zero unless they touch).  With ``accumulate`` (the tree
+    path) the contact force is added to ``force_inout`` (gravity's); without (gravity on its own
+    clock) it is written there alone.  ``torque_out`` and the ledger's ``channels_out`` (when it has
+    rows) are written whole."""
     add_contact = contact_sum_function(rolling)
 
     @wp.kernel(module="unique", enable_backward=False)
@@ -240,10 +256,13 @@ def contact_pass(rolling: str = "couple"):
         i = wp.tid()
         listed, walk = candidates_walk(i, ranges, candidate_count, candidates)
         total = ContactSum()
-        j = ranges[i][0] - 1
-        for _ in range(walk):  # the list, or every j after an overflow (each pair checked in float64)
-            j = next_candidate(i, listed, candidates, walk, j)
+        for s in range(walk):  # the list, or every j after an overflow (each pair checked in float64)
+            j = candidate_at(i, listed, ranges, candidates, s)
             total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out, total)
-        force_inout[i] = force_inout[i] + write_contacts(total, i, torque_out, channels_out)
+        contacts = write_contacts(total, i, torque_out, channels_out)
+        if wp.static(accumulate):
+            force_inout[i] = force_inout[i] + contacts
+        else:
+            force_inout[i] = contacts
 
     return contact_pass_kernel

@@ -11,10 +11,8 @@ particle's force and torque: no atomics, and the motion does not depend on sched
 ledger's contact channels, float64, get a reduction of their own per particle, so the ledger does
 not either.
 
-Two options tune it to a GPU: ``max_registers`` caps the registers per thread, so that the rarely
-run float64 contact code spills rather than the sweep losing occupancy; ``prefetch`` loads each
-tile of j one tile ahead, so that the load is in flight while the tile before is swept (latency
-hidden at low occupancy); it changes no bit of the result.
+``max_registers`` tunes it to a GPU: it caps the registers per thread, so that the rarely run
+float64 contact code spills rather than the sweep losing occupancy.
 """
 
 import functools
@@ -37,7 +35,6 @@ def pair_forces_tiled(
     rolling: str = "couple",
     ledger: bool = False,
     max_registers: int = 0,
-    prefetch: bool = False,
 ):
     """Build the tiled all-pairs kernel for a layout; launch with ``wp.launch_tiled``.
 
@@ -48,7 +45,6 @@ def pair_forces_tiled(
     again after the sweep, so any number of contacts is handled.  ``max_registers``
     (CUDA, 0 = the compiler's choice) caps registers per thread: the float64
     contact code, which runs rarely, then spills instead of the sweep losing occupancy.
-    ``prefetch`` loads each tile of j one tile ahead.
     """
     real, _, Body, inverse_sqrt, radius_at, g_mass_at, candidate = sweep_of(precision)
     contact_channels = contact_function(rolling)
@@ -101,19 +97,10 @@ def pair_forces_tiled(
         fields = Fields()
         slots = Slots()
         candidates = Counts()
-        # With prefetch each tile of j is loaded one tile ahead, so that the load is in flight
-        # while the tile before is swept (latency hidden at low occupancy); past the array a
-        # tile holds zeros, never used.
-        if wp.static(prefetch):
-            body_next = wp.untile(wp.tile_load(body_in, shape=wp.static(T), offset=j_first, storage="register"))
         for start in range(j_first, j_end, wp.static(T)):
             # One j per thread (counted from the system's first, so that a system's sums do not
             # depend on where it sits among others); elements past its end are skipped.
-            if wp.static(prefetch):
-                body_j = body_next
-                body_next = wp.untile(wp.tile_load(body_in, shape=wp.static(T), offset=start + wp.static(T), storage="register"))
-            else:
-                body_j = wp.untile(wp.tile_load(body_in, shape=wp.static(T), offset=start, storage="register"))
+            body_j = wp.untile(wp.tile_load(body_in, shape=wp.static(T), offset=start, storage="register"))
             j = start + lane
             if j < j_end:
                 for p in range(wp.static(P)):

@@ -148,3 +148,107 @@ def kick_drift(
 
 #: ``kick_drift`` per precision (the type of its packed bodies).
 KICK_DRIFT = body_overloads(kick_drift)
+
+
+# --- Gravity on its own clock (docs/model.md): impulse multiple time stepping ---------------------
+#
+# One outer step of K steps of dt: a gravity half kick of K dt / 2 with the gravity at the current
+# positions, K kick-drift-kick steps with the contact forces alone, gravity at the new positions,
+# and the second gravity half kick.  ``Engine.advance`` shares launches as above: the contact half
+# kick closing a step, the gravity half kicks closing an outer step and opening the next, and the
+# next contact half kick and drift are one ``kick_drift_inner`` (per particle, the same expressions
+# in the same order as the launches of ``Engine.step``).
+
+
+@wp.func
+def gravity_half_kick(
+    i: int,
+    half_dt: wp.float64,
+    mass_in: wp.array(dtype=wp.float64),
+    gravity_in: wp.array(dtype=wp.vec3d),
+    velocity_inout: wp.array(dtype=wp.vec3d),
+    work_inout: wp.array(dtype=wp.vec4d),
+):
+    """v += g/m half_dt for particle i (gravity exerts no torque on a sphere), its kinetic energy
+    change booked to gravity's work (``half_kick_work`` without contact channels: all of it gravity's)."""
+    gravity = gravity_in[i]
+    velocity_old = velocity_inout[i]
+    velocity = velocity_old + (half_dt / mass_in[i]) * gravity
+    velocity_inout[i] = velocity
+    if work_inout.shape[0] > 0:
+        none = wp.vec3d()
+        work_inout[i] = work_inout[i] + half_kick_work(gravity, none, none, none, none, none, velocity_old, velocity, none, none, half_dt)
+
+
+@wp.kernel
+def kick_outer(
+    # Model:
+    dt: wp.float64,
+    outer_dt: wp.float64,  # K dt
+    mass_in: wp.array(dtype=wp.float64),
+    inertia_in: wp.array(dtype=wp.float64),
+    # Data in:
+    force_in: wp.array(dtype=wp.vec3d),  # the contact force
+    torque_in: wp.array(dtype=wp.vec3d),
+    channels_in: wp.array2d(dtype=wp.vec3d),
+    gravity_in: wp.array(dtype=wp.vec3d),
+    close_step: bool,  # first the last contact half kick of the inner step before
+    # Data in/out:
+    velocity_inout: wp.array(dtype=wp.vec3d),
+    omega_inout: wp.array(dtype=wp.vec3d),
+    work_inout: wp.array(dtype=wp.vec4d),
+):
+    """A gravity half kick of K dt / 2; with ``close_step`` first ``kick`` (which closes an outer step)."""
+    i = wp.tid()
+    if close_step:
+        half_kick(i, wp.float64(0.5) * dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout)
+    gravity_half_kick(i, wp.float64(0.5) * outer_dt, mass_in, gravity_in, velocity_inout, work_inout)
+
+
+@wp.kernel
+def kick_drift_inner(
+    # Model:
+    dt: wp.float64,
+    outer_dt: wp.float64,  # K dt
+    G: wp.float64,
+    radius_in: wp.array(dtype=wp.float64),
+    mass_in: wp.array(dtype=wp.float64),
+    inertia_in: wp.array(dtype=wp.float64),
+    # Data in:
+    force_in: wp.array(dtype=wp.vec3d),  # the contact force
+    torque_in: wp.array(dtype=wp.vec3d),
+    channels_in: wp.array2d(dtype=wp.vec3d),  # (N, 4) with the ledger, else empty
+    gravity_in: wp.array(dtype=wp.vec3d),
+    close_step: bool,  # first the last contact half kick of the step before
+    gravity_kicks: int,  # then gravity half kicks: 1 opens an outer step, 2 also closes the one before
+    reference_in: wp.array(dtype=wp.vec3d),  # the positions of the neighbour list's build
+    half_skin: wp.float64,
+    # Data in/out:
+    position_inout: wp.array(dtype=wp.vec3d),
+    velocity_inout: wp.array(dtype=wp.vec3d),
+    omega_inout: wp.array(dtype=wp.vec3d),
+    work_inout: wp.array(dtype=wp.vec4d),
+    # Out:
+    stale_out: wp.array(dtype=wp.int32),  # [0] = 1 when a particle is now past skin / 2 from its build position
+    body_out: wp.array(dtype=Any),  # the gravity sweep's packed bodies (the last inner step), or empty
+):
+    """A contact half kick, then a full drift, as ``kick_drift``; before them the kicks it closes and
+    opens, after them the neighbour list's displacement check (kernels/neighbours.py)."""
+    i = wp.tid()
+    half_dt = wp.float64(0.5) * dt
+    if close_step:
+        half_kick(i, half_dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout)
+    for _ in range(gravity_kicks):
+        gravity_half_kick(i, wp.float64(0.5) * outer_dt, mass_in, gravity_in, velocity_inout, work_inout)
+    velocity = half_kick(i, half_dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout)
+    position = position_inout[i] + dt * velocity
+    position_inout[i] = position
+    moved = position - reference_in[i]
+    if wp.dot(moved, moved) > half_skin * half_skin:
+        stale_out[0] = 1  # every writer writes 1: no race on the value
+    if body_out.shape[0] > 0:
+        pack_body(G, radius_in[i], mass_in[i], position, body_out, i)
+
+
+#: ``kick_drift_inner`` per precision (the type of its packed bodies).
+KICK_DRIFT_INNER = body_overloads(kick_drift_inner)

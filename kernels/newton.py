@@ -133,9 +133,9 @@ def field_from_lane(field: wp.vec3d, source: int) -> wp.vec3d:
 
 
 @functools.cache
-def pair_gravity_newton(particles_per_lane: int, precision: str = "mixed", max_registers: int = 0):
+def pair_gravity_newton(particles_per_lane: int, precision: str = "mixed", max_registers: int = 0, listing: bool = True):
     """Build the Newton-layout sweep: gravity of each pair computed once and given to both sides,
-    and each pair's contact candidacy noted for both.
+    and (with ``listing``) each pair's contact candidacy noted for both.
 
     One block is one warp (``wp.block_dim()`` lanes: 32 on a GPU, 1 on the CPU) and meets two tiles
     of ``lanes * particles_per_lane`` particles (at most NEWTON_TILE_MAX), i and j (``TilePair``).
@@ -145,7 +145,8 @@ def pair_gravity_newton(particles_per_lane: int, precision: str = "mixed", max_r
     depend on scheduling).  Per particle and per tile of the other side, the sweep writes its field
     sum and its contact candidates in that tile (as the bits of a word) to its column of the tile
     pair's row of ``field_out`` and ``near_out``: no atomics, no waits in the hot loop, each row
-    written whole by one warp.  :func:`gather_newton` adds them up.
+    written whole by one warp.  :func:`gather_newton` adds them up.  Without ``listing`` (gravity on
+    its own clock, whose contacts come from a neighbour list) no bit is noted nor ``near_out`` written.
     """
     real, vec_real, Body, inverse_sqrt, radius_at, g_mass_at, candidate = sweep_of(precision)
     K = particles_per_lane
@@ -189,7 +190,8 @@ def pair_gravity_newton(particles_per_lane: int, precision: str = "mixed", max_r
         for k in range(wp.static(K)):
             bodies_i[k] = tile_body(body_in, i_first + k * lanes + lane, i_end)
             bodies_j[k] = tile_body(body_in, j_first + k * lanes + lane, j_end)
-            near[k] = near_bound(bodies_i[k][radius_at], max_radius, candidate)
+            if wp.static(listing):
+                near[k] = near_bound(bodies_i[k][radius_at], max_radius, candidate)
         fields_i = Fields()
         fields_j = Fields()  # the sums of the j particles this lane holds, moving with them
         near_i = Bits()
@@ -212,23 +214,27 @@ def pair_gravity_newton(particles_per_lane: int, precision: str = "mixed", max_r
                         inv_d3 = inv_d * inv_d * inv_d
                         fields_i[a] = fields_i[a] + (bodies_j[b][g_mass_at] * inv_d3) * r
                         fields_j[b] = fields_j[b] - (bodies_i[a][g_mass_at] * inv_d3) * r
-                        if d2 < near[a]:  # within R_i + R_max: rare
-                            if is_candidate(d2, bodies_i[a][radius_at], bodies_j[b][radius_at], candidate):
-                                near_i[a] = near_i[a] | j_bits[b]
-                                near_j[b] = near_j[b] | i_bits[a]
+                        if wp.static(listing):
+                            if d2 < near[a]:  # within R_i + R_max: rare
+                                if is_candidate(d2, bodies_i[a][radius_at], bodies_j[b][radius_at], candidate):
+                                    near_i[a] = near_i[a] | j_bits[b]
+                                    near_j[b] = near_j[b] | i_bits[a]
             for b in range(wp.static(K)):
                 bodies_j[b] = body_from_lane(bodies_j[b], source)
                 fields_j[b] = field_from_lane(fields_j[b], source)
-                near_j[b] = lane_value_u64(near_j[b], source)
+                if wp.static(listing):
+                    near_j[b] = lane_value_u64(near_j[b], source)
 
         # After a full turn every lane holds its own j particles again.  On the diagonal the i side
         # has met every pair from both ends.
         for k in range(wp.static(K)):
             field_out[row_i, k * lanes + lane] = fields_i[k]
-            near_out[row_i, k * lanes + lane] = near_i[k]
+            if wp.static(listing):
+                near_out[row_i, k * lanes + lane] = near_i[k]
             if row_j >= 0:
                 field_out[row_j, k * lanes + lane] = fields_j[k]
-                near_out[row_j, k * lanes + lane] = near_j[k]
+                if wp.static(listing):
+                    near_out[row_j, k * lanes + lane] = near_j[k]
 
     return pair_gravity_newton_kernel
 
@@ -238,12 +244,12 @@ GATHER_AHEAD = 8
 
 
 @functools.cache
-def gather_newton(precision: str = "mixed"):
+def gather_newton(precision: str = "mixed", listing: bool = True):
     """Build the kernel that gives each particle what the Newton sweep found for it, one thread per
     particle (launch with ``dim=N``): its gravity (its field sums from every tile of its system, added
-    in float64 in the tiles' order) and its contact candidates, listed in increasing j (the bits of
-    each tile's word, tile after tile), with their count.  The threads of a warp read neighbouring
-    columns of each row: whole lines of memory."""
+    in float64 in the tiles' order) and, with ``listing``, its contact candidates, listed in
+    increasing j (the bits of each tile's word, tile after tile), with their count.  The threads of
+    a warp read neighbouring columns of each row: whole lines of memory."""
     real, vec_real = real_types(precision)
     Fields = wp.types.matrix(shape=(GATHER_AHEAD, 3), dtype=real)
     Words = wp.types.vector(length=GATHER_AHEAD, dtype=wp.uint64)
@@ -274,17 +280,20 @@ def gather_newton(precision: str = "mixed"):
             for k in range(wp.static(GATHER_AHEAD)):
                 if start + k < tiles:
                     fields[k] = field_in[row + start + k, column]
-                    words[k] = near_in[row + start + k, column]
+                    if wp.static(listing):
+                        words[k] = near_in[row + start + k, column]
             for k in range(wp.static(GATHER_AHEAD)):
                 field += wp.vec3d(fields[k])
-                bits = words[k]
-                while bits != wp.uint64(0):
-                    if noted < candidates.shape[1]:
-                        candidates[i, noted] = first + (start + k) * size + lowest_bit(bits)
-                    bits = bits & (bits - wp.uint64(1))
-                    noted += 1
+                if wp.static(listing):
+                    bits = words[k]
+                    while bits != wp.uint64(0):
+                        if noted < candidates.shape[1]:
+                            candidates[i, noted] = first + (start + k) * size + lowest_bit(bits)
+                        bits = bits & (bits - wp.uint64(1))
+                        noted += 1
         force_out[i] = -mass_in[i] * field
-        candidate_count[i] = noted
+        if wp.static(listing):
+            candidate_count[i] = noted
 
     return gather_newton_kernel
 

@@ -11,7 +11,7 @@ import functools
 
 import warp as wp
 
-from .contacts import candidates_walk, next_candidate
+from .contacts import candidate_at, candidates_walk
 from .pair import ContactModel, in_contact, normal_force_magnitude, overlap, spring_constant
 
 wp.set_module_options({"enable_backward": False})
@@ -206,9 +206,8 @@ def candidate_observables(
     i = wp.tid()
     listed, walk = candidates_walk(i, ranges, candidate_count, candidates)
     total = no_contacts()
-    j = ranges[i][0] - 1
-    for _ in range(walk):
-        j = next_candidate(i, listed, candidates, walk, j)
+    for s in range(walk):
+        j = candidate_at(i, listed, ranges, candidates, s)
         r_ij = position_in[i] - position_in[j]
         d2 = wp.dot(r_ij, r_ij)
         if d2 > wp.float64(0.0):

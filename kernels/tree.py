@@ -38,6 +38,7 @@ from typing import Any
 
 import warp as wp
 
+from .contacts import note_candidate
 from .pair import inverse_sqrt_exact, inverse_sqrt_fast
 
 wp.set_module_options({"enable_backward": False})
@@ -553,9 +554,7 @@ def grid_candidates(
         if j != i:
             touch = wp.float32((radius_in[i] + radius_in[j]) * margin)
             if wp.length_sq(points[j] - points[i]) < touch * touch:
-                if noted < candidates.shape[1]:
-                    candidates[i, noted] = wp.int32(j)
-                noted += 1
+                noted = note_candidate(candidates, i, noted, j)
     candidate_count[i] = wp.int32(noted)
 
 

@@ -130,3 +130,23 @@ def test_bench_times_steps_with_their_kicks_unfused_beside_the_default(tmp_path)
     assert "kicks unfused" in unfused["layout"] and "kicks unfused" not in fused["layout"]
     assert fused["layout"] == unfused["layout"].replace(", kicks unfused", "")  # the same layout otherwise
     assert fused["step_seconds"] > 0 and unfused["step_seconds"] > 0
+
+
+def test_bench_times_gravity_on_its_own_clock_beside_the_k1_step(tmp_path):
+    """``--gravity-every 1,5``: a row at K = 5 (gravity every 5 steps, contacts from a neighbour
+    list) beside the default K = 1 row of the same call, with its ratio to it and the list's builds
+    per step; a bad list is refused with one line."""
+    out = tmp_path / "bench.json"
+    result = cli("bench", "--device", "cpu", "--n", "200", "--seconds", "0.02", "--steps", "3", "--system", "piles",
+                 "--gravity-every", "1,5", "--json", str(out))  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    every_step, clocked = json.loads(out.read_text())["rows"]
+    assert (every_step["gravity_every"], clocked["gravity_every"]) == (1, 5)
+    assert every_step["list_builds_per_step"] is None and 0 <= clocked["list_builds_per_step"] <= 1
+    assert np.isclose(clocked["versus_every_step"], every_step["step_seconds"] / clocked["step_seconds"])
+    assert np.isclose(clocked["step_pairs_per_s"], 200**2 / clocked["step_seconds"])
+    assert "gravity every 5 steps (each pair once), neighbour-list contacts" in clocked["layout"] and "list builds a step" in result.stdout
+    for bad in ("0", "5,x"):
+        result = cli("bench", "--device", "cpu", "--gravity-every", bad)
+        assert result.returncode == 2 and "--gravity-every must list integers >= 1" in result.stderr
+        assert len(result.stderr.strip().splitlines()) == 1

@@ -13,9 +13,24 @@ from decco_warp.run import builtin_pile
 
 
 def _array_bytes(holder) -> int:
-    """Bytes of the Warp arrays an object holds as its attributes."""
-    arrays = {id(a): a for a in (getattr(holder, name, None) for name in dir(holder) if not name.startswith("__"))
-              if isinstance(a, wp.array)}  # fmt: skip
+    """Bytes of the Warp arrays an object holds, as its attributes or through the objects and
+    Warp structs it holds (the engine's force path, its gravity tree and the tree's nodes)."""
+    arrays, seen = {}, set()
+
+    def visit(thing):
+        if id(thing) in seen:
+            return
+        seen.add(id(thing))
+        for name in dir(thing):
+            if name.startswith("__"):
+                continue
+            value = getattr(thing, name, None)
+            if isinstance(value, wp.array):
+                arrays[id(value)] = value
+            elif any(kind.__module__.startswith("decco_warp") for kind in type(value).__mro__):
+                visit(value)
+
+    visit(holder)
     return sum(a.capacity for a in arrays.values())
 
 
@@ -24,7 +39,7 @@ def test_the_memory_estimate_bounds_the_engines_arrays(gravity):
     pile = dw.load_pile(builtin_pile("target"))
     sim = dw.Simulation(pile, dw.Params(gravity=gravity), device="cpu", ledger=True)
     engine = sim.engine
-    held = _array_bytes(engine) + (_array_bytes(engine.tree) + _array_bytes(engine.tree.nodes) if engine.tree is not None else 0)
+    held = _array_bytes(engine)
     device_part = engines.memory_estimate(pile.n, gravity) - engines.FIXED_BYTES - pile.n * engines.HOST_BYTES_PER_PARTICLE
     # An upper estimate (the largest layout), but not a loose one: within a factor of 3.
     assert held <= device_part <= 3 * held, (held, device_part)

@@ -14,7 +14,7 @@ SCRIPT = textwrap.dedent(
     """
     import tempfile, warp as wp
     import decco_warp
-    from decco_warp.kernels import bodies, contacts, fused, integrate, newton, observables, reference, split, tree
+    from decco_warp.kernels import bodies, contacts, fused, integrate, neighbours, newton, observables, reference, tree
 
     kernels = []
     for precision in bodies.PRECISIONS:
@@ -22,12 +22,12 @@ SCRIPT = textwrap.dedent(
             kernels += [(fused.pair_forces_tiled(128, 4, 4, precision, "couple", ledger, 128), 128),
                         (fused.pair_forces_tiled(64, 4, 4, precision, "paper", ledger, 128), 64),
                         (reference.pair_forces_reference(precision, "couple"), 256)]
-        kernels.append((split.pair_gravity_tiled(128, 4, precision, 0), 128))
-        kernels.append((split.pair_gravity_tiled(128, 4, precision, 0, True), 128))
-        kernels.append((fused.pair_forces_tiled(128, 4, 4, precision, "couple", True, 128, True), 128))
         kernels += [(newton.pair_gravity_newton(2, precision), 32), (newton.gather_newton(precision), 256)]
-    kernels += [(contacts.contact_pass(rolling), 256) for rolling in ("couple", "paper")]
+        # Gravity on its own clock: the sweep and gather without candidates.
+        kernels += [(newton.pair_gravity_newton(2, precision, 0, False), 32), (newton.gather_newton(precision, False), 256)]
+    kernels += [(contacts.contact_pass(rolling, accumulate), 256) for rolling in ("couple", "paper") for accumulate in (True, False)]
     kernels += [(newton.contact_pass_ordered(rolling, 32), 32) for rolling in ("couple", "paper")]
+    kernels += [(neighbours.build_neighbour_list, 256)]  # (integrate's module holds kick_outer and kick_drift_inner)
     kernels += [(bodies.pack_bodies, 256), (integrate.kick_drift, 256), (observables.pair_observables, 256), (observables.pair_observables_tiled(128), 128),
                 (observables.candidate_observables, 256), (tree.tree_gravity("mixed"), 256), (tree.tree_gravity("float64"), 256), (tree.tree_potential, 256),
                 (tree.walk_records("mixed"), 256), (tree.walk_records("float64"), 256)]

@@ -14,9 +14,9 @@ ENGINES = [
     (device, name, options)
     for device in DEVICES
     for name, options in (
-        [("default", {}), ("contact pass", {"layout": dw.Layout(1, 3, contact_pass=True)}), ("reference", {"force_kernel": "reference"})]
+        [("default", {}), ("newton", {"layout": dw.Layout(1, 3, newton=True)}), ("reference", {"force_kernel": "reference"})]
         if device == "cpu"
-        else [("default", {}), ("128x4 contact pass", {"layout": dw.Layout(128, 4, contact_pass=True)}), ("32x3", {"layout": dw.Layout(32, 3, 2)})]
+        else [("default", {}), ("128x4", {"layout": dw.Layout(128, 4, 4)}), ("32x3", {"layout": dw.Layout(32, 3, 2)})]
     )
 ]
 
@@ -94,7 +94,7 @@ def test_members_of_another_layout_or_precision_are_refused():
 
     one, two = _systems()[:2]
     base = dw.Simulation(one, dw.Params(), device="cpu", allow_unstable=True, ledger=True)
-    for options in ({"layout": dw.Layout(1, 3, contact_pass=True)}, {"precision": "float64"}):
+    for options in ({"layout": dw.Layout(1, 3, newton=True)}, {"precision": "float64"}):
         other = dw.Simulation(two, dw.Params(), device="cpu", allow_unstable=True, ledger=True, **options)
         with pytest.raises(ValueError, match="share their force layout and precision"):
             Ensemble([base, other])

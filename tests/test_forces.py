@@ -61,9 +61,6 @@ def test_default_precision_forces_match_oracle(scene, device):
 LAYOUTS = [
     ("cpu", dw.Layout(block_dim=1, particles_per_block=3, contact_slots=1)),
     ("cpu", dw.Layout(block_dim=1, particles_per_block=4, contact_slots=16)),
-    ("cpu", dw.Layout(block_dim=1, particles_per_block=3, contact_pass=True)),
-    ("cpu", dw.Layout(block_dim=1, particles_per_block=3, contact_slots=1, prefetch=True)),
-    ("cpu", dw.Layout(block_dim=1, particles_per_block=3, contact_pass=True, prefetch=True)),
     ("cpu", dw.Layout(block_dim=1, particles_per_block=3, newton=True)),
     ("cpu", dw.Layout(block_dim=1, particles_per_block=1, newton=True)),
 ] + [
@@ -72,8 +69,6 @@ LAYOUTS = [
     if device.startswith("cuda")
     for layout in (
         dw.Layout(128, 4, 4), dw.Layout(32, 3, 1), dw.Layout(64, 1, 2),
-        dw.Layout(128, 4, contact_pass=True), dw.Layout(32, 3, contact_pass=True),
-        dw.Layout(32, 3, 1, prefetch=True), dw.Layout(32, 3, contact_pass=True, prefetch=True),
         dw.Layout(32, 64, newton=True), dw.Layout(32, 32, newton=True),
     )  # fmt: skip
 ]
@@ -81,8 +76,8 @@ LAYOUTS = [
 
 def _layout_id(case):
     device, layout = case
-    contacts = "newton" if layout.newton else "contact-pass" if layout.contact_pass else f"{layout.contact_slots}slots"
-    return f"{device}-{layout.block_dim}x{layout.particles_per_block}-{contacts}" + ("-prefetch" if layout.prefetch else "")
+    contacts = "newton" if layout.newton else f"{layout.contact_slots}slots"
+    return f"{device}-{layout.block_dim}x{layout.particles_per_block}-{contacts}"
 
 
 @pytest.mark.parametrize("case", LAYOUTS, ids=_layout_id)
@@ -141,7 +136,7 @@ def test_pair_forces_are_exactly_opposite(device):
         assert np.array_equal(force[0], -force[1])
 
 
-@pytest.mark.parametrize("case", [c for c in LAYOUTS if c[1].contact_pass or c[1].newton], ids=_layout_id)
+@pytest.mark.parametrize("case", [c for c in LAYOUTS if c[1].newton], ids=_layout_id)
 def test_contact_pass_handles_more_candidates_than_its_list_holds(case):
     """A 22.5 km sphere touched by more small ones than the list holds (they overlap each other
     too): the contact pass looks at every j for it; forces still equal the plain loop's, and the
@@ -245,7 +240,7 @@ def _contact_counts(state, margin):
     return (distance < reach).sum(axis=1)
 
 
-@pytest.mark.parametrize("gravity", ["all-pairs", "tree", "newton"])
+@pytest.mark.parametrize("gravity", ["tree", "newton"])
 def test_a_squeezed_pile_notes_its_contacts_and_no_list_overflows(gravity, device):
     """The shipped target pile squeezed by 6 %: overlaps to ~0.25 of a radius, and its large grains
     touch ~30 small ones (a list of 24 overflowed here, and a merged pile stepped 10x slower).
@@ -253,9 +248,8 @@ def test_a_squeezed_pile_notes_its_contacts_and_no_list_overflows(gravity, devic
     pile = dw.load_pile(builtin_pile("target"))
     centre = pile.positions.mean(axis=0)
     state = dw.State.from_arrays(centre + 0.94 * (pile.positions - centre), pile.velocities, pile.omegas, pile.radii, pile.masses)
-    layout = dw.Layout(128, 4, contact_pass=True) if device.startswith("cuda") else dw.Layout(1, 3, contact_pass=True)
-    if gravity == "newton":  # each pair met once, noted for both particles
-        layout = dw.Layout(32, 64, newton=True) if device.startswith("cuda") else dw.Layout(1, 4, newton=True)
+    # The Newton layout meets each pair once and notes it for both particles.
+    layout = dw.Layout(32, 64, newton=True) if device.startswith("cuda") else dw.Layout(1, 4, newton=True)
     engine = Engine(state, dw.Params(gravity="all-pairs" if gravity == "newton" else gravity), device, layout=layout)
     engine.eval_forces()
     noted = engine.candidate_count.numpy()
@@ -263,28 +257,6 @@ def test_a_squeezed_pile_notes_its_contacts_and_no_list_overflows(gravity, devic
     assert contacts.max() > 24  # the case that overflowed
     assert (noted >= contacts).all() and (noted <= _contact_counts(state, 1.0002)).all()
     assert engine.candidate_overflows() == 0
-
-
-@pytest.mark.parametrize("contact_pass", [False, True])
-def test_loading_j_a_tile_ahead_changes_no_bit(contact_pass, device):
-    """Prefetch changes when each j is loaded, not what is summed nor in which order: positions,
-    spins and the ledger's work over a few steps are the same to the last bit on the CPU and, with
-    contacts in their own pass, on CUDA. The fused CUDA kernel with prefetch is compiled anew and
-    may contract its multiply-adds differently (measured on an H100: 6e-12 relative after 3 steps),
-    so there only round-off is allowed."""
-    state = overlapping_cloud(700, seed=11)
-    width = 64 if device.startswith("cuda") else 1
-    runs = []
-    for prefetch in (False, True):
-        layout = dw.Layout(width, 3, 2, contact_pass=contact_pass, prefetch=prefetch)
-        sim = dw.Simulation(state, dw.Params(), device=device, layout=layout, ledger=True, allow_unstable=True)
-        sim.step(3)
-        runs.append((sim.state.positions, sim.state.omegas, sim.work()))
-    for got, want in zip(*runs):
-        if device.startswith("cuda") and not contact_pass:
-            np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-10 * np.abs(want).max())
-        else:
-            np.testing.assert_array_equal(got, want)
 
 
 CPU_BLOCK_LAYOUTS = """
@@ -300,8 +272,7 @@ state = overlapping_cloud(400, seed=3)
 params = dw.Params()
 for precision, tolerance in (("float64", 1e-12), ("mixed", 1e-5)):
     want = dw.compute_forces(state, params, device="cpu", precision="float64", force_kernel="reference")
-    for layout in (dw.Layout(32, 3, 2), dw.Layout(32, 3, 1, prefetch=True), dw.Layout(32, 3, contact_pass=True),
-                   dw.Layout(16, 4, contact_pass=True, prefetch=True), dw.Layout(1, 4, newton=True)):
+    for layout in (dw.Layout(32, 3, 2), dw.Layout(16, 4, 1), dw.Layout(1, 4, newton=True)):
         got = dw.compute_forces(state, params, device="cpu", precision=precision, layout=layout)
         for g, w in zip(got, want):
             assert np.abs(g - w).max() <= tolerance * np.abs(w).max(), (precision, layout)
@@ -321,9 +292,8 @@ print("SAME")
 
 
 def test_gpu_layouts_run_lane_by_lane_on_the_cpu_equal_the_reference_kernel(tmp_path):
-    """The GPU's layouts (blocks of 16 and 32 lanes striding over j, the slots' overflow, the split
-    contact pass, the Newton layout's contact pass of 32 lanes a particle, prefetch, the block
-    reductions) run with Warp's CPU blocks in a fresh interpreter:
+    """The GPU's layouts (blocks of 16 and 32 lanes striding over j, the slots' overflow, the Newton
+    layout's contact pass of 32 lanes a particle, the block reductions) run with Warp's CPU blocks in a fresh interpreter:
     forces and torques equal the plain kernel's (float64 to round-off; mixed within 1e-5), and so
     do the ledger's channels of the fused layout (float64 in both)."""
     import subprocess

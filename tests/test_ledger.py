@@ -105,15 +105,16 @@ def test_snapshot_restart_is_bit_identical(device):
 
 
 @pytest.mark.parametrize("precision", ["mixed", "float64"])
-def test_contact_pass_layout_keeps_the_books_and_matches_the_default_layout(precision, device):
-    """The split layout (gravity sweep, then contacts per particle) closes the ledger over 300
+def test_the_other_layout_keeps_the_books_and_matches_the_default_layout(precision, device):
+    """The layout a device does not take by default (the Newton layout on the CPU: each pair's
+    gravity once, then contacts per particle; the fused layout on CUDA) closes the ledger over 300
     steps, and over 20 its motion equals the default layout's to the round-off of its sums (the
-    default sums contacts in float32 in mixed precision; a contact clump amplifies differences later)."""
+    fused layout sums contacts in float32 in mixed precision; a contact clump amplifies differences later)."""
     clump = contact_cluster(120, seed=5, overlap_range=(1.0, 1e3), speed=20.0, spin=1e-5)
     params = dw.Params()
-    block_dim = 64 if device.startswith("cuda") else 1
+    other = dw.Layout(128, 4, 4) if device.startswith("cuda") else dw.Layout(1, 4, newton=True)
     early = []
-    for layout in (None, dw.Layout(block_dim=block_dim, particles_per_block=4, contact_pass=True)):
+    for layout in (None, other):
         sim = dw.Simulation(clump, params, device=device, precision=precision, layout=layout, ledger=True)
         e0 = sim.energy_start["total_energy"]
         sim.step(20)

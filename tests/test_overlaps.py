@@ -147,7 +147,7 @@ def test_deep_overlaps_are_warned_about_and_the_run_goes_on(fast_run):
 
 ENGINES = {
     "tiled": {},
-    "contact pass": {"layout": dw.Layout(block_dim=1, particles_per_block=3, contact_pass=True)},
+    "newton": {"layout": dw.Layout(block_dim=1, particles_per_block=3, newton=True)},
     "reference": {"force_kernel": "reference"},
     "tree": {"gravity": "tree"},
 }

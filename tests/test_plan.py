@@ -114,20 +114,20 @@ def test_a_resumed_run_is_planned_from_its_folder_without_resolving_again(tmp_pa
 
 def test_check_prints_the_plan_and_writes_nothing(tmp_path):
     result = cli(
-        "simulate", "--check", "--device", "cpu", "--steps", "300", "--output-every", "30", "--layout", "split",
+        "simulate", "--check", "--device", "cpu", "--steps", "300", "--output-every", "30", "--layout", "newton",
         "--out", str(tmp_path),
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()
     assert lines[0].startswith("collision: 450 particles (300 target + 150 projectile)")
-    assert "parameters: k_in 1e+18 dyne/cm, dt 0.04 s, 300 steps (12 s), force layout split" in lines
+    assert "parameters: k_in 1e+18 dyne/cm, dt 0.04 s, 300 steps (12 s), force layout newton" in lines
     target, projectile = builtin_pile("target"), builtin_pile("projectile")
     assert (
         f"piles: target {target.resolve()} (sha256 {_sha256(target)[:12]}), "
         f"projectile {projectile.resolve()} (sha256 {_sha256(projectile)[:12]})"
     ) in lines
-    split = dw.Layout(block_dim=1, particles_per_block=4, contact_slots=16, contact_pass=True)
-    assert f"device: cpu, precision mixed, force layout {split.describe()}" in lines
+    newton = dw.Layout(block_dim=1, particles_per_block=4, newton=True)
+    assert f"device: cpu, precision mixed, force layout {newton.describe()}" in lines
     assert f"outputs: {tmp_path / 'default'}, a frame every 30 steps, a checkpoint every 10000 steps" in lines
     assert any(line.startswith("physics: restitution 0.9, mu_k 0.3") and "gravity all-pairs" in line for line in lines)
     assert lines[-1].startswith("verdict: would run")

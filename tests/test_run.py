@@ -127,7 +127,7 @@ def test_stopped_run_resumes_bit_identically(tmp_path):
 
 
 def test_a_run_in_another_force_layout_keeps_it_through_resume_and_differs_at_round_off(tmp_path):
-    """[run] layout = "split+prefetch": recorded in spec.toml and run.log, kept by resume (stopped and
+    """[run] layout = "newton" (each pair once; the fused layout is the CPU's default): recorded in spec.toml and run.log, kept by resume (stopped and
     resumed equals straight through, bit for bit), and the motion equals the default layout's to
     round-off, amplified by the contacts (the order of float operations changes, not the physics)."""
     import tomllib
@@ -135,21 +135,19 @@ def test_a_run_in_another_force_layout_keeps_it_through_resume_and_differs_at_ro
     from decco_warp.engine import layout_for
 
     assert layout_for("auto", 500, "cpu") is None
-    chosen = layout_for("split+prefetch", 500, "cuda:0")
-    assert chosen.contact_pass and chosen.prefetch and chosen.max_registers == 0 and not chosen.newton
     # On CUDA the default is the Newton layout; "newton" names it on the CPU too.
     assert layout_for("newton", 500, "cpu").newton and layout_for("newton", 500, "cuda:0").newton
-    straight = start_run(_spec(tmp_path, "straight", layout="split+prefetch"))
-    start_run(_spec(tmp_path, "parts", layout="split+prefetch", steps=300))
+    straight = start_run(_spec(tmp_path, "straight", layout="newton"))
+    start_run(_spec(tmp_path, "parts", layout="newton", steps=300))
     resume_run(tmp_path / "parts", steps=600)
     assert_same_run(_frames(straight.run_dir), _frames(tmp_path / "parts"))
-    assert tomllib.loads((tmp_path / "parts" / "spec.toml").read_text())["run"]["layout"] == "split+prefetch"
-    assert "force layout split+prefetch" in (tmp_path / "parts" / "run.log").read_text()
+    assert tomllib.loads((tmp_path / "parts" / "spec.toml").read_text())["run"]["layout"] == "newton"
+    assert "force layout newton" in (tmp_path / "parts" / "run.log").read_text()
     from decco_warp.run import prepare_resume
 
     resumed = prepare_resume(tmp_path / "parts", steps=700, device="cpu")
     resumed.lock.release()
-    assert resumed.sim.engine.layout.contact_pass and resumed.sim.engine.layout.prefetch
+    assert resumed.sim.engine.layout.newton
     default = start_run(_spec(tmp_path, "default"))
     a, b = _frames(straight.run_dir)["particles"], _frames(default.run_dir)["particles"]
     # Float32 sums in another order differ by ~1e-7 of a force; 600 steps of a crowded contact

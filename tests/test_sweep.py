@@ -234,7 +234,7 @@ def test_ensemble_auto_packs_small_runs_on_a_gpu_only_and_alike_in_size(tmp_path
     alone = simulate_batch([{**r, "run": {**r["run"], "out": str(tmp_path / "b")}} for r in pair], max_particles=10)
     assert [row["ensemble"] for row in together] == [2, 2] and [row["ensemble"] for row in alone] == [1, 1]
     # Runs of another force layout or precision never go together.
-    mixed = [{**r, "run": {**r["run"], "out": str(tmp_path / "c"), **extra}} for r, extra in zip(pair, ({"layout": "split"}, {}))]
+    mixed = [{**r, "run": {**r["run"], "out": str(tmp_path / "c"), **extra}} for r, extra in zip(pair, ({"layout": "newton"}, {}))]
     assert [row["ensemble"] for row in simulate_batch(mixed)] == [1, 1]
     assert all(row["status"] == "ok" for row in together + alone)
 

@@ -1,0 +1,489 @@
+"""Force paths: each way of computing the forces of a step is one object that owns its scratch
+arrays and its launches, and :func:`path_name` chooses one by name, in one place.
+
+    path = FORCE_PATHS[path_name(force_kernel, params, layout)](engine)   # as Engine does:
+                                   # "reference", "fused", "newton", "tree" or "respa"
+    engine.pack_bodies()           # first (into path.body, empty where the path reads none)
+    path.evaluate()                # engine.force, torque, channels, deepest_contact at the current state
+    path.observables(outputs)      # a frame's per-particle observables
+    path.candidate_overflows()     # particles whose candidate list overflowed at the last evaluation
+
+The engine (engine.py) holds the particles' arrays and the integrator; a path reads and writes
+them and keeps only what its own kernels need.  With gravity_tree.py's GravityTree, these are
+the only objects beside the engine that launch kernels.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .gravity_tree import GravityTree
+from .kernels import observables as observable_kernels
+from .kernels.bodies import BODY_TYPES
+from .kernels.contacts import CANDIDATES, contact_pass
+from .kernels.fused import pair_forces_tiled
+from .kernels.neighbours import GRID_CELLS, REACH_MARGIN, build_neighbour_list, cell_keys, cell_ranges
+from .kernels.newton import GatherRows, TilePair, contact_pass_ordered, gather_newton, pair_gravity_newton
+from .kernels.reference import pair_forces_reference
+
+#: Threads per particle of the observables kernel on a GPU.
+OBSERVABLES_BLOCK = 128
+#: Lanes per particle of the Newton layout's contact pass on a GPU (one on the CPU): its
+#: candidates, at most kernels/contacts.py CANDIDATES, two a lane.
+CONTACT_BLOCK = 32
+
+
+def tiled_blocks(starts: np.ndarray, ends: np.ndarray, per_block: int) -> np.ndarray:
+    """Per block of a tiled launch: (first row, end of its rows, first and end of its system)."""
+    rows = [
+        (first, min(first + per_block, end), start, end)
+        for start, end in zip(starts, ends)
+        for first in range(int(start), int(end), per_block)
+    ]
+    return np.array(rows, dtype=np.int32).reshape(-1, 4)
+
+
+def newton_tiles(starts: np.ndarray, ends: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """The Newton layout's tile pairs (kernels/newton.py ``TilePair``), each particle's rows
+    (``GatherRows``) and the number of rows.  A system's particles are cut into tiles of ``size``;
+    its tile pairs (a, b), a <= b, each meet once; row a * n + b (after the rows of the systems
+    before) holds what tile a gets from tile b."""
+    tiles, gather, rows = [], [], 0
+    for start, end in zip(starts.tolist(), ends.tolist()):
+        firsts = np.arange(start, end, size)
+        n = len(firsts)
+        a, b = np.triu_indices(n)
+        tile_ends = np.minimum(firsts + size, end)
+        tiles.append(np.stack([firsts[a], tile_ends[a], firsts[b], tile_ends[b], rows + a * n + b, np.where(a < b, rows + b * n + a, -1)], axis=1))
+        index = np.arange(start, end)
+        tile = (index - start) // size
+        gather.append(np.stack([rows + tile * n, np.full_like(index, n), index - firsts[tile], np.full_like(index, start)], axis=1))
+        rows += n * n
+    return np.concatenate(tiles).astype(np.int32), np.concatenate(gather).astype(np.int32), rows
+
+
+def _on_cuda(device: str) -> bool:
+    return device.startswith("cuda")
+
+
+def _candidate_arrays(count: int, device: str) -> tuple[wp.array, wp.array]:
+    """Per particle: how many contact candidates it met, and the first CANDIDATES of them."""
+    return wp.zeros(count, dtype=wp.int32, device=device), wp.zeros((count, CANDIDATES), dtype=wp.int32, device=device)
+
+
+def _bodies(engine, count: int) -> wp.array:
+    """Packed bodies (kernels/bodies.py) for an all-pairs sweep, refreshed before each (count 0: none)."""
+    return wp.zeros(count, dtype=BODY_TYPES[engine.precision], device=engine.device)
+
+
+class ForcePath:
+    """What every force path gives the engine; a path that lists contact candidates fills
+    ``candidate_count`` and ``candidates``, one that sweeps all pairs reads ``body`` (else they
+    are empty)."""
+
+    name = ""
+    graph_conditionals = False
+    """Whether its launches hold a loop or branch decided on the device (wp.capture_while,
+    wp.capture_if): a CUDA graph of them needs conditional nodes (driver and toolkit 12.4+)."""
+
+    def __init__(self, engine):
+        self.engine = engine
+        self.candidate_count, self.candidates = _candidate_arrays(0, engine.device)
+        self.body = _bodies(engine, 0)
+
+    def evaluate(self) -> None:
+        """engine.force, torque, channels (with the ledger) and deepest_contact at the current state."""
+        raise NotImplementedError
+
+    def outputs(self) -> list:
+        e = self.engine
+        return [e.force, e.torque, e.channels, e.deepest_contact]
+
+    def total_force(self) -> np.ndarray:
+        """The force on every particle at the last evaluation [dyne], a host copy."""
+        return self.engine.force.numpy().copy()
+
+    def list_builds(self) -> int | None:
+        """Builds of a neighbour list since the engine began (None: the path keeps none)."""
+        return None
+
+    def observables(self, outputs: dict) -> None:
+        """Per particle, into ``outputs`` (engine.PAIR_OBSERVABLES): over every pair of its system,
+        a block of threads per particle on a GPU (N threads alone would leave most of it idle)."""
+        e = self.engine
+        block_dim = OBSERVABLES_BLOCK if _on_cuda(e.device) else 1
+        wp.launch_tiled(
+            observable_kernels.pair_observables_tiled(block_dim),
+            dim=[e.count],
+            inputs=[e.model, e.ranges, e.radius, e.mass, e.position, e.velocity],
+            outputs=list(outputs.values()),
+            block_dim=block_dim,
+            device=e.device,
+        )
+
+    def candidate_overflows(self, first: int = 0, end: int | None = None) -> int:
+        """Particles (of rows [first, end)) whose contact candidates overflowed their list at the last
+        evaluation: each costs a walk over its whole system."""
+        if self.candidates.shape[0] == 0:
+            return 0
+        return int((self.candidate_count.numpy()[first:end] > self.candidates.shape[1]).sum())
+
+    def restored(self) -> None:
+        """Called after the engine's arrays were loaded from a snapshot."""
+
+
+class ReferenceForces(ForcePath):
+    """One thread per particle, a plain loop over every j of its system (kernels/reference.py): the
+    tests' yardstick, the bench's baseline and diagnostics' all-pairs engine (it never builds a tree)."""
+
+    name = "reference"
+
+    def __init__(self, engine):
+        super().__init__(engine)
+        self.kernel = pair_forces_reference(engine.precision, engine.params.rolling_friction)
+
+    def evaluate(self) -> None:
+        e = self.engine
+        wp.launch(self.kernel, dim=e.count, inputs=[e.model, e.ranges, *e.pair_state()], outputs=self.outputs(), device=e.device)
+
+
+def _check_cpu_blocks(engine, newton: bool) -> None:
+    # (Warp's CPU blocks, wp.config.enable_cpu_blocks, run every lane: tests use them to check the
+    # GPU layouts' reductions on a CPU; the Newton layout's lane shuffles exist on a GPU only.)
+    if not _on_cuda(engine.device) and engine.layout.block_dim != 1 and (newton or not wp.config.enable_cpu_blocks):
+        raise ValueError("on the CPU a layout's block_dim must be 1 (Warp runs one thread per block)")
+
+
+class FusedForces(ForcePath):
+    """The fused layout (kernels/fused.py): gravity of every ordered pair and the contacts in one
+    tiled kernel; blocks of ``layout.particles_per_block`` rows, never straddling two systems."""
+
+    name = "fused"
+
+    def __init__(self, engine):
+        super().__init__(engine)
+        _check_cpu_blocks(engine, newton=False)
+        self.body = _bodies(engine, engine.count)
+        layout = engine.layout
+        self.blocks = wp.array(tiled_blocks(engine.starts, engine.ends, layout.particles_per_block), dtype=wp.vec4i, device=engine.device)
+        self.kernel = pair_forces_tiled(
+            layout.block_dim,
+            layout.particles_per_block,
+            layout.contact_slots,
+            engine.precision,
+            engine.params.rolling_friction,
+            engine.ledger,
+            layout.max_registers,
+        )
+
+    def evaluate(self) -> None:
+        e = self.engine
+        wp.launch_tiled(
+            self.kernel,
+            dim=[self.blocks.shape[0]],
+            block_dim=e.layout.block_dim,
+            inputs=[e.model, self.blocks, *e.pair_state(), self.body, e.sweep_max_radius],
+            outputs=self.outputs(),
+            device=e.device,
+        )
+
+
+class NewtonGravity:
+    """Each pair's gravity once (kernels/newton.py): the sweep over a system's tile pairs of the packed
+    ``body``, then the gather of each particle's rows; given candidate arrays, with its contact
+    candidates listed in increasing j."""
+
+    def __init__(self, engine, layout, body: wp.array, candidate_count: wp.array | None = None, candidates: wp.array | None = None):
+        if _on_cuda(engine.device) and layout.block_dim != 32:
+            raise ValueError(f"a Newton layout's block is one warp: block_dim must be 32 on CUDA; got {layout.block_dim}")
+        self.engine, self.layout, self.body = engine, layout, body
+        listing = candidates is not None
+        if not listing:  # nothing listed, nothing noted: empty arrays in the kernels' signatures
+            candidate_count, candidates = _candidate_arrays(0, engine.device)
+        self.candidate_count, self.candidates = candidate_count, candidates
+        # Per tile pair and side, per particle of the tile: the sweep's field sum and candidate bits.
+        tiles, gather, rows = newton_tiles(engine.starts, engine.ends, layout.particles_per_block)
+        device = engine.device
+        self.tiles = wp.array(tiles, dtype=TilePair, device=device)
+        self.gather = wp.array(gather, dtype=GatherRows, device=device)
+        vector = wp.vec3f if engine.precision == "mixed" else wp.vec3d
+        self.tile_field = wp.zeros((rows, layout.particles_per_block), dtype=vector, device=device)
+        self.tile_near = wp.zeros((rows if listing else 0, layout.particles_per_block), dtype=wp.uint64, device=device)
+        self.sweep = pair_gravity_newton(layout.particles_per_block // layout.block_dim, engine.precision, layout.max_registers, listing)
+        self.gather_kernel = gather_newton(engine.precision, listing)
+
+    def evaluate(self, force_out: wp.array) -> None:
+        """``force_out`` = gravity on every particle (the bodies packed), and its candidates listed."""
+        e = self.engine
+        wp.launch_tiled(
+            self.sweep,
+            dim=[self.tiles.shape[0]],
+            block_dim=self.layout.block_dim,
+            inputs=[self.tiles, self.body, e.sweep_max_radius],
+            outputs=[self.tile_field, self.tile_near],
+            device=e.device,
+        )
+        wp.launch(
+            self.gather_kernel,
+            dim=e.count,
+            inputs=[self.gather, e.mass, self.tile_field, self.tile_near],
+            outputs=[force_out, self.candidate_count, self.candidates],
+            device=e.device,
+        )
+
+
+class NewtonForces(ForcePath):
+    """The Newton layout: :class:`NewtonGravity`, then the contacts of the listed candidates, a
+    warp per particle (kernels/newton.py ``contact_pass_ordered``; with Warp's CPU blocks on, the
+    CPU runs those lanes too: tests check the lanes' reduction so)."""
+
+    name = "newton"
+
+    def __init__(self, engine):
+        super().__init__(engine)
+        _check_cpu_blocks(engine, newton=True)
+        self.candidate_count, self.candidates = _candidate_arrays(engine.count, engine.device)
+        self.body = _bodies(engine, engine.count)
+        self.gravity = NewtonGravity(engine, engine.layout, self.body, self.candidate_count, self.candidates)
+        self.contact_block = CONTACT_BLOCK if _on_cuda(engine.device) or wp.config.enable_cpu_blocks else 1
+        # The gather lists each particle's candidates in increasing j: lanes can share them out.
+        self.contact_kernel = contact_pass_ordered(engine.params.rolling_friction, self.contact_block)
+
+    def evaluate(self) -> None:
+        e = self.engine
+        self.gravity.evaluate(e.force)
+        wp.launch_tiled(
+            self.contact_kernel,
+            dim=[e.count],
+            block_dim=self.contact_block,
+            inputs=[e.model, e.ranges, e.radius, *e.contact_state(), self.candidate_count, self.candidates],
+            outputs=self.outputs(),
+            device=e.device,
+        )
+
+
+class TreeGravity:
+    """Gravity from a radix tree (gravity_tree.py), built from the positions at every evaluation; one
+    system at a time."""
+
+    def __init__(self, engine):
+        if len(engine.systems) > 1:
+            raise ValueError('the tree path steps one system at a time; an ensemble needs gravity = "all-pairs"')
+        self.engine = engine
+        self.tree = GravityTree(engine.count, engine.device, engine.precision)
+
+    def evaluate(self, force_out: wp.array) -> None:
+        """``force_out`` = gravity on every particle."""
+        e = self.engine
+        self.tree.build(e.position, e.mass)
+        self.tree.gravity(e.params.G, e.params.theta_open, e.mass, force_out)
+
+    def potential(self, potential_out: wp.array) -> None:
+        """``potential_out`` = half of each particle's gravitational energy, from the same walk."""
+        e = self.engine
+        self.tree.build(e.position, e.mass)
+        self.tree.potential(e.params.G, e.params.theta_open, e.mass, potential_out)
+
+
+def _contact_pass(path) -> None:
+    """A path's contact pass (kernels/contacts.py ``contact_pass``) over its candidate lists."""
+    e = path.engine
+    wp.launch(
+        path.contact_kernel,
+        dim=e.count,
+        inputs=[e.model, e.ranges, e.radius, *e.contact_state(), path.candidate_count, path.candidates],
+        outputs=path.outputs(),
+        device=e.device,
+    )
+
+
+def _candidate_observables(engine, contacts: list, candidate_count: wp.array, candidates: wp.array) -> None:
+    """The contact observables of a frame from each particle's candidate list (a superset of its contacts)."""
+    e = engine
+    wp.launch(
+        observable_kernels.candidate_observables,
+        dim=e.count,
+        inputs=[e.model, e.ranges, e.radius, e.position, e.velocity, candidate_count, candidates],
+        outputs=contacts,
+        device=e.device,
+    )
+
+
+class TreeForces(ForcePath):
+    """The tree path: :class:`TreeGravity`, contacts from a hash grid's candidates, one thread per
+    particle in increasing j (kernels/tree.py, kernels/contacts.py ``contact_pass``).  Frames too
+    cost O(N log N): the potential from the tree, the contact observables from the grid's candidates."""
+
+    name = "tree"
+    graph_conditionals = True  # the moments' levels: wp.capture_while
+
+    def __init__(self, engine):
+        super().__init__(engine)
+        self.gravity = TreeGravity(engine)
+        self.candidate_count, self.candidates = _candidate_arrays(engine.count, engine.device)
+        self.contact_kernel = contact_pass(engine.params.rolling_friction)  # added to gravity's force
+
+    def _candidates(self) -> None:
+        """Each particle's contact candidates from the hash grid (the tree built)."""
+        e = self.engine
+        self.gravity.tree.contact_candidates(e.position, e.radius, e.max_radius, self.candidate_count, self.candidates)
+
+    def evaluate(self) -> None:
+        self.gravity.evaluate(self.engine.force)
+        self._candidates()
+        _contact_pass(self)
+
+    def observables(self, outputs: dict) -> None:
+        potential, *contacts = outputs.values()
+        self.gravity.potential(potential)
+        self._candidates()
+        _candidate_observables(self.engine, contacts, self.candidate_count, self.candidates)
+
+
+#: The neighbour list's skin, as a fraction of the smallest radius: 0.2 (1.5 km at the paper's
+#: 7.5 km spheres).  A wider skin rebuilds the list less often but lists more pairs that do not
+#: touch, each evaluated every step: on the shipped settled pile the lists hold 1.29 times the
+#: contacts at 0.2 (1.20 at 0.1, 1.51 at 0.5), and a list lasts until a particle has travelled
+#: skin / 2 (0.75 km: ~10 steps of dt = 0.04 s at ~2 km/s, the paper's fastest particles; a settled
+#: pile far longer).  To be tuned against the bench's rebuilds and step time on a GPU.
+SKIN_FRACTION = 0.2
+
+
+class NeighbourList:
+    """Each particle's neighbours within R_i + R_j + skin, in increasing j (kernels/neighbours.py),
+    in the candidate arrays; rebuilt on the device once any particle has moved skin / 2 since the
+    last build (``stale``, set by the inner drift: kernels/integrate.py ``kick_drift_inner``).  The
+    grid's cell tables take 8 bytes per cell, GRID_CELLS^3 cells per system (2 MiB)."""
+
+    def __init__(self, engine, min_radius: float):
+        device, count = engine.device, engine.count
+        self.engine = engine
+        self.skin = SKIN_FRACTION * min_radius
+        """[cm]"""
+        self.candidate_count, self.candidates = _candidate_arrays(count, device)
+        self.reference = wp.zeros(count, dtype=wp.vec3d, device=device)
+        """The positions of the last build."""
+        self.stale = wp.zeros(1, dtype=wp.int32, device=device)
+        """[0] = 1 once a particle has moved past skin / 2 since the last build."""
+        self.builds = wp.zeros(1, dtype=wp.int64, device=device)
+        """[0]: builds since the engine began."""
+        # The grid: a cell as wide as the farthest reach, 2 R_max + skin; its keys hold each particle's
+        # system, so that the systems of an ensemble never meet.
+        self.system = wp.array(np.repeat(np.arange(len(engine.systems)), engine.systems).astype(np.int32), device=device)
+        self.cell_width = (2.0 * engine.max_radius + self.skin) * REACH_MARGIN
+        self.keys = wp.zeros(2 * count, dtype=wp.int32, device=device)  # radix_sort_pairs needs room for 2 N
+        self.order = wp.zeros(2 * count, dtype=wp.int32, device=device)
+        cells = len(engine.systems) * GRID_CELLS**3
+        self.cell_start = wp.zeros(cells, dtype=wp.int32, device=device)
+        self.cell_end = wp.zeros(cells, dtype=wp.int32, device=device)
+
+    def build(self) -> None:
+        """List every particle's neighbours at the current positions."""
+        e = self.engine
+        width = wp.float64(self.cell_width)
+        wp.launch(cell_keys, dim=e.count, inputs=[self.system, width, e.position], outputs=[self.keys, self.order], device=e.device)
+        wp.utils.radix_sort_pairs(self.keys, self.order, e.count)
+        self.cell_start.zero_()
+        self.cell_end.zero_()
+        wp.launch(cell_ranges, dim=e.count, inputs=[self.keys, e.count], outputs=[self.cell_start, self.cell_end], device=e.device)
+        wp.launch(
+            build_neighbour_list,
+            dim=e.count,
+            inputs=[self.system, e.radius, wp.float64(self.skin), width, self.order, self.cell_start, self.cell_end, e.position],
+            outputs=[self.reference, self.candidate_count, self.candidates, self.stale, self.builds],
+            device=e.device,
+        )
+
+    def refresh(self) -> None:
+        """Rebuild the list if it is stale, decided on the device (a conditional graph node on CUDA)."""
+        wp.capture_if(self.stale, self.build)
+
+
+class RespaForces(ForcePath):
+    """Gravity on its own clock (``Params.gravity_every`` K > 1; docs/model.md): gravity every K steps
+    into its own array (the Newton sweep of every pair once, or with ``gravity = "tree"`` the tree),
+    the contacts every step from a neighbour list.  The engine kicks each on its clock
+    (kernels/integrate.py ``kick_outer``, ``kick_drift_inner``)."""
+
+    name = "respa"
+    graph_conditionals = True  # the neighbour list's rebuild: wp.capture_if
+
+    def __init__(self, engine):
+        from .engine import NEWTON_MAX, newton_layout
+
+        super().__init__(engine)
+        if engine.params.gravity == "tree":
+            self.gravity = TreeGravity(engine)
+        else:
+            largest = int(engine.systems.max())
+            if _on_cuda(engine.device) and largest > NEWTON_MAX:
+                raise ValueError(
+                    f"gravity_every > 1 sums all-pairs gravity with the Newton sweep, which holds systems of up to "
+                    f"{NEWTON_MAX} particles; this one has {largest}: use gravity = \"tree\""
+                )
+            layout = engine.layout if engine.layout.newton else newton_layout(engine.device)
+            self.body = _bodies(engine, engine.count)
+            self.gravity = NewtonGravity(engine, layout, self.body)
+        self.gravity_force = wp.zeros(engine.count, dtype=wp.vec3d, device=engine.device)
+        """Gravity at the positions of the last outer step [dyne]."""
+        self.neighbours = NeighbourList(engine, engine.min_radius)
+        self.candidate_count, self.candidates = self.neighbours.candidate_count, self.neighbours.candidates
+        self.contact_kernel = contact_pass(engine.params.rolling_friction, accumulate=False)
+
+    def evaluate(self) -> None:
+        """Gravity and the contacts at the current state, the neighbour list built afresh."""
+        self.gravity.evaluate(self.gravity_force)
+        self.neighbours.build()
+        _contact_pass(self)
+
+    def gravity_step(self) -> None:
+        """Gravity at the current positions (the bodies packed by the last inner drift)."""
+        self.gravity.evaluate(self.gravity_force)
+
+    def contacts(self) -> None:
+        """The contacts of an inner step, at the positions after its drift: the list first rebuilt if stale."""
+        self.neighbours.refresh()
+        _contact_pass(self)
+
+    def restored(self) -> None:
+        """Gravity at the restored positions (what the uninterrupted run holds, bit for bit: the same
+        kernels on the same positions) and the list built afresh; the contact force is the snapshot's."""
+        self.engine.pack_bodies()
+        self.gravity.evaluate(self.gravity_force)
+        self.neighbours.build()
+
+    def total_force(self) -> np.ndarray:
+        """Gravity plus the contact force [dyne], both at the current positions."""
+        return self.engine.force.numpy() + self.gravity_force.numpy()
+
+    def list_builds(self) -> int:
+        return int(self.neighbours.builds.numpy()[0])
+
+    def observables(self, outputs: dict) -> None:
+        if not isinstance(self.gravity, TreeGravity):
+            super().observables(outputs)
+            return
+        # O(N log N) as the tree path: the potential from the tree, the contacts from the list (which
+        # holds every touching pair: its last check was at the current positions).
+        potential, *contacts = outputs.values()
+        self.gravity.potential(potential)
+        _candidate_observables(self.engine, contacts, self.candidate_count, self.candidates)
+
+
+#: Every force path, by name.
+FORCE_PATHS = {path.name: path for path in (ReferenceForces, FusedForces, NewtonForces, TreeForces, RespaForces)}
+
+
+def path_name(force_kernel: str, params, layout) -> str:
+    """The one switch: the force path of an engine with ``force_kernel`` ("tiled" or "reference"),
+    ``params`` and ``layout``."""
+    if force_kernel == "reference":
+        if params.gravity_every > 1:
+            raise ValueError("the reference kernel evaluates gravity with every force: it steps with gravity_every = 1 only")
+        return "reference"
+    if params.gravity_every > 1:
+        return "respa"
+    if params.gravity == "tree":
+        return "tree"
+    return "newton" if layout.newton else "fused"

@@ -1,0 +1,379 @@
+"""Gravity on its own clock (Params.gravity_every = K > 1, docs/model.md): impulse multiple time
+stepping against a float64 NumPy RESPA step, the neighbour list that feeds the contacts, the energy
+ledger, bit-exact restarts and ensembles."""
+
+import re
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from helpers import assert_fused_steps_equal_one_step_at_a_time
+from oracle import pair_loop_forces
+from scenes import contact_cluster
+
+import decco_warp as dw
+from decco_warp.diagnostics import energy_ledger
+from decco_warp.forces import SKIN_FRACTION
+
+#: One outer step against NumPy, as a fraction of the largest change of each quantity over the
+#: step: float64 to round-off; mixed within float32 gravity's error (measured ~1e-8 in velocity).
+RESPA_FLOAT64_TOLERANCE = 1e-10
+RESPA_MIXED_TOLERANCE = 1e-6
+#: Ledger closure: the books balance to round-off of float64 sums, as with K = 1 (tests/test_ledger.py).
+CLOSURE_TOLERANCE = 1e-10
+
+
+def _oracle_forces(x, v, w, state, params, gravity: bool):
+    """tests/oracle.py's forces, gravity alone (contacts off: k_in = 0) or the contacts alone (G = 0)."""
+    args = (x, v, w, state.radii, state.masses)
+    if gravity:
+        return pair_loop_forces(*args, 0.0, params.restitution, 0.0, 0.0, params.G)[:2]
+    return pair_loop_forces(*args, params.k_in, params.restitution, params.mu_k, params.mu_r, 0.0, rolling=params.rolling_friction)[:2]
+
+
+def _numpy_respa_step(state, params, every):
+    """One outer step in float64 NumPy, written from docs/model.md: a gravity half kick of K dt / 2,
+    K kick-drift-kick steps of the contacts alone (forces at the new positions with the half-step
+    velocities), gravity at the new positions, the second gravity half kick."""
+    x, v, w = state.positions.copy(), state.velocities.copy(), state.omegas.copy()
+    m, inertia, dt = state.masses[:, None], state.inertia[:, None], params.dt
+    contact, couple = _oracle_forces(x, v, w, state, params, gravity=False)
+    v = v + _oracle_forces(x, v, w, state, params, gravity=True)[0] / m * (every * dt / 2)
+    for _ in range(every):
+        v, w = v + contact / m * (dt / 2), w + couple / inertia * (dt / 2)
+        x = x + v * dt
+        contact, couple = _oracle_forces(x, v, w, state, params, gravity=False)
+        v, w = v + contact / m * (dt / 2), w + couple / inertia * (dt / 2)
+    v = v + _oracle_forces(x, v, w, state, params, gravity=True)[0] / m * (every * dt / 2)
+    return x, v, w
+
+
+def _relative_errors(got, want, start):
+    """Per quantity: the largest error as a fraction of the largest change over the step."""
+    return [np.abs(g - w).max() / np.abs(w - s).max() for g, w, s in zip(got, want, start)]
+
+
+@pytest.mark.parametrize(("precision", "tolerance"), [("float64", RESPA_FLOAT64_TOLERANCE), ("mixed", RESPA_MIXED_TOLERANCE)])
+def test_one_outer_step_equals_a_numpy_respa_step(precision, tolerance):
+    """A contact clump whose gravity is as strong as its contacts (~1e20 dyne each): after one outer
+    step of K = 5, positions, velocities and spins equal the NumPy RESPA step's; K plain velocity
+    Verlet steps (gravity every step) differ from it ~1e5 times more in float64."""
+    state = contact_cluster(40, seed=4, overlap_range=(1.0, 1e2), speed=1e3, spin=1e-3)
+    every = 5
+    params = dw.Params(gravity_every=every)
+    contact = _oracle_forces(state.positions, state.velocities, state.omegas, state, params, gravity=False)[0]
+    gravity = _oracle_forces(state.positions, state.velocities, state.omegas, state, params, gravity=True)[0]
+    assert 0.1 < np.abs(gravity).max() / np.abs(contact).max() < 10
+    want = _numpy_respa_step(state, params, every)
+    sim = dw.Simulation(state, params, device="cpu", precision=precision)
+    sim.step(every)
+    after = sim.state
+    start = (state.positions, state.velocities, state.omegas)
+    errors = _relative_errors((after.positions, after.velocities, after.omegas), want, start)
+    assert max(errors) <= tolerance, errors
+    if precision == "float64":
+        verlet = state
+        for _ in range(every):
+            verlet = replace(verlet, **dict(zip(("positions", "velocities", "omegas"), _numpy_respa_step(verlet, params, 1))))
+        apart = _relative_errors((verlet.positions, verlet.velocities, verlet.omegas), want, start)
+        assert min(apart[1:]) > 1e4 * tolerance, apart
+
+
+def _fast_clump(n=80, seed=7):
+    """A contact clump whose particles move ~5e4 cm/s: 2e3 cm a step, past half the skin (7.5e4 cm)
+    in a few tens of steps, so that the neighbour list is rebuilt again and again."""
+    return contact_cluster(n, seed=seed, overlap_range=(1.0, 1e3), speed=5e4, spin=1e-3)
+
+
+def _touching_pairs(positions, radii):
+    r = positions[:, None, :] - positions[None, :, :]
+    distance = np.sqrt((r**2).sum(axis=-1))
+    np.fill_diagonal(distance, np.inf)
+    return distance, radii[:, None] + radii[None, :]
+
+
+def test_the_neighbour_list_holds_every_touching_pair_and_is_rebuilt_past_half_the_skin():
+    """Stepped two steps at a time: every particle stays within skin / 2 of its position at the
+    list's last build (the rebuild rule), each list is in increasing j and is exactly the pairs
+    within R_i + R_j + skin at that build, so it holds every pair that touches now (NumPy, all
+    pairs); the list is rebuilt as the particles travel, and kept while nothing moves far."""
+    state = _fast_clump()
+    sim = dw.Simulation(state, dw.Params(gravity_every=2), device="cpu", allow_unstable=True)
+    neighbours = sim.engine.path.neighbours
+    skin = SKIN_FRACTION * state.radii.min()
+    assert neighbours.skin == skin
+    builds = [sim.neighbour_list_builds()]
+    touched = 0
+    for _ in range(40):
+        sim.step(2)
+        positions = sim.state.positions
+        reference = neighbours.reference.numpy()
+        assert np.linalg.norm(positions - reference, axis=1).max() <= skin / 2
+        counts, lists = sim.engine.candidate_count.numpy(), sim.engine.candidates.numpy()
+        assert counts.max() <= lists.shape[1]
+        at_build, reach = _touching_pairs(reference, state.radii)
+        now, contact = _touching_pairs(positions, state.radii)
+        for i in range(state.n):
+            row = lists[i, : counts[i]]
+            assert np.all(np.diff(row) > 0)
+            near = np.flatnonzero(at_build[i] < reach[i] + skin)
+            # Pairs at the reach to within its margin may fall either way.
+            edge = np.flatnonzero(np.abs(at_build[i] - reach[i] - skin) < 1e-6 * (reach[i] + skin))
+            assert set(near) - set(edge) <= set(row) <= set(near) | set(edge)
+            touching = np.flatnonzero(now[i] < contact[i])
+            assert set(touching) <= set(row)
+            touched += len(touching)
+        builds.append(sim.neighbour_list_builds())
+    travelled = np.linalg.norm(sim.state.positions - state.positions, axis=1).max()
+    assert touched > state.n and travelled > 2 * skin  # contacts all along, and particles far travelled
+    assert builds[0] == 1 and builds[-1] >= travelled / (skin / 2) / 2 and builds[-1] < 80
+    # A clump at rest lists once and keeps its list.
+    slow = dw.Simulation(replace(state, velocities=state.velocities * 1e-4), dw.Params(gravity_every=2, G=0.0), device="cpu", allow_unstable=True)
+    slow.step(40)
+    assert slow.neighbour_list_builds() == 1
+
+
+@pytest.mark.parametrize("precision", ["mixed", "float64"])
+def test_forces_on_two_clocks_are_gravity_plus_the_listed_contacts_even_past_a_full_list(precision):
+    """A 22.5 km sphere touched by more small ones than a list holds: its list overflows (counted,
+    and its whole system walked), and the force at the start (gravity into its own array plus the
+    contacts from the list) equals the plain loop's, as the torque does."""
+    from decco_warp.engine import Engine
+    from decco_warp.kernels.contacts import CANDIDATES
+    from scenes import sphere_mass
+
+    count = CANDIDATES + 6
+    rng = np.random.default_rng(4)
+    direction = rng.normal(size=(count, 3))
+    direction /= np.linalg.norm(direction, axis=1)[:, None]
+    x = np.vstack([[0.0, 0.0, 0.0], direction * (2.25e6 + 0.75e6 - 500.0)]) + 1.5e7
+    radii = np.array([2.25e6] + [0.75e6] * count)
+    state = dw.State.from_arrays(x, rng.normal(size=(count + 1, 3)), rng.normal(size=(count + 1, 3)) * 1e-4, radii, sphere_mass(radii))
+    engine = Engine(state, dw.Params(gravity_every=3), "cpu", precision)
+    engine.eval_forces()
+    assert engine.candidate_overflows() >= 1
+    want = dw.compute_forces(state, dw.Params(), device="cpu", precision="float64", force_kernel="reference")
+    tolerance = 1e-12 if precision == "float64" else 1e-5
+    for got, expected in zip(engine.read_forces(), want):
+        np.testing.assert_allclose(got, expected, rtol=0, atol=tolerance * np.abs(expected).max())
+
+
+def _books(sim):
+    now = sim.diagnostics()
+    ledger = energy_ledger(now, sim.energy_start, sim.work())
+    return ledger, now["total_energy"] + sum(ledger.values())
+
+
+@pytest.mark.parametrize("gravity", ["all-pairs", "tree"])
+@pytest.mark.parametrize("precision", ["mixed", "float64"])
+def test_the_ledger_closes_with_gravity_booked_at_the_outer_kicks(precision, gravity):
+    """K = 10 on a dissipative clump: the books balance to round-off (gravity's work booked at the
+    outer kicks as the exact kinetic-energy change of each, the contact channels at the inner ones),
+    every dissipation channel counts, and gravity did work."""
+    clump = contact_cluster(100, seed=3, overlap_range=(1.0, 1e3), speed=20.0, spin=1e-4)
+    sim = dw.Simulation(clump, dw.Params(gravity_every=10, gravity=gravity), device="cpu", precision=precision, ledger=True)
+    sim.step(1000)
+    ledger, balance = _books(sim)
+    start = sim.energy_start["total_energy"]
+    assert abs(balance - start) <= CLOSURE_TOLERANCE * abs(start)
+    for channel in ("dissipated_sliding", "dissipated_rolling", "dissipated_hysteresis"):
+        assert ledger[channel] > 0, channel
+    assert abs(sim.work()[:, 0]).max() > 0
+
+
+def test_elastic_frictionless_clump_dissipates_nothing_on_two_clocks():
+    """Restitution 1, no friction, K = 5: nothing is dissipated, and what the books call the
+    integration error stays tiny against the kinetic energy exchanged."""
+    clump = contact_cluster(100, seed=3, overlap_range=(1.0, 1e3), speed=20.0)
+    sim = dw.Simulation(clump, dw.Params(restitution=1.0, mu_k=0.0, mu_r=0.0, gravity_every=5), device="cpu", precision="float64", ledger=True)
+    sim.step(1000)
+    ledger, balance = _books(sim)
+    kinetic = sim.diagnostics()["kinetic_translational"]
+    assert abs(balance - sim.energy_start["total_energy"]) <= CLOSURE_TOLERANCE * abs(sim.energy_start["total_energy"])
+    assert ledger["dissipated_sliding"] == 0.0 and ledger["dissipated_rolling"] == 0.0
+    assert abs(ledger["dissipated_hysteresis"]) < 1e-4 * kinetic and abs(ledger["integration_error"]) < 1e-4 * kinetic
+
+
+@pytest.mark.parametrize("precision", ["mixed", "float64"])
+def test_a_restart_from_a_snapshot_is_bit_identical(precision):
+    """Stopped at step 60 and restored (gravity evaluated anew at the restored positions, the
+    neighbour list built afresh: another superset of the contacts than the uninterrupted run's
+    list), then stepped to 150: every array the next step depends on, bit for bit."""
+    clump, params = _fast_clump(), dw.Params(gravity_every=5)
+    straight = dw.Simulation(clump, params, device="cpu", precision=precision, ledger=True, allow_unstable=True)
+    straight.step(150)
+    first = dw.Simulation(clump, params, device="cpu", precision=precision, ledger=True, allow_unstable=True)
+    first.step(60)
+    snap = first.snapshot()
+    second = dw.Simulation.from_snapshot(clump, params, snap, device="cpu", precision=precision)
+    assert second.step_count == 60
+    second.step(90)
+    a, b = straight.snapshot(), second.snapshot()
+    for key in ("positions", "velocities", "omegas", "force", "torque", "channels", "work", "deepest_contact"):
+        assert np.array_equal(a[key], b[key]), key
+    assert straight.time == second.time and second.step_count == 150
+    assert straight.neighbour_list_builds() > 2  # lists were rebuilt, at other steps in the two
+
+
+@pytest.mark.parametrize("precision", ["mixed", "float64"])
+def test_steps_sharing_launches_equal_the_launches_of_an_outer_step(precision):
+    """Engine.advance (the kicks closing and opening outer and inner steps, the drift, the packing
+    and the displacement check in one launch per inner step) equals Engine.step's launches one after
+    another, bit for bit, also over recorded graphs (blocks of 50 steps)."""
+    every = 5
+    state = _fast_clump(40, seed=6)
+
+    def make():
+        return dw.Simulation(state, dw.Params(gravity_every=every), device="cpu", precision=precision, ledger=True, allow_unstable=True)
+
+    assert_fused_steps_equal_one_step_at_a_time(make, pieces=(every, 0, 10 * every + every))
+
+
+def test_an_ensemble_on_two_clocks_moves_each_system_as_alone():
+    """Three clumps centred on the same point (the neighbour list's hash grid groups each system
+    apart) stepped together at K = 4: each moves bit for bit as it would alone."""
+    sizes = (37, 64, 23)
+    states = [_fast_clump(n, seed=seed) for seed, n in enumerate(sizes)]
+    joined = dw.State.from_arrays(*[np.concatenate([getattr(s, name) for s in states])
+                                    for name in ("positions", "velocities", "omegas", "radii", "masses")])  # fmt: skip
+    params = dw.Params(gravity_every=4)
+    ensemble = dw.Simulation(joined, params, device="cpu", systems=sizes, ledger=True, allow_unstable=True)
+    ensemble.step(60)
+    cuts = np.cumsum((0, *sizes))
+    force, torque = ensemble.forces()
+    for k, state in enumerate(states):
+        alone = dw.Simulation(state, params, device="cpu", ledger=True, allow_unstable=True)
+        alone.step(60)
+        part = slice(cuts[k], cuts[k + 1])
+        assert np.array_equal(ensemble.state.positions[part], alone.state.positions)
+        assert np.array_equal(ensemble.state.velocities[part], alone.state.velocities)
+        assert np.array_equal(ensemble.work()[part], alone.work())
+        own_force, own_torque = alone.forces()
+        assert np.array_equal(force[part], own_force) and np.array_equal(torque[part], own_torque)
+
+
+def test_bad_clocks_are_refused_with_one_line():
+    state = contact_cluster(10, seed=1)
+    for bad in (0, -1, 2.5, "x", True, None):
+        with pytest.raises(ValueError, match="gravity_every must be an integer >= 1") as error:
+            dw.Params(gravity_every=bad)
+        assert "\n" not in str(error.value)
+    sim = dw.Simulation(state, dw.Params(gravity_every=5), device="cpu")
+    with pytest.raises(ValueError, match="with gravity_every = 5 the step count must be a multiple of 5.*got 7"):
+        sim.step(7)
+    assert sim.step_count == 0
+    with pytest.raises(ValueError, match="reference kernel .* gravity_every = 1 only"):
+        dw.Simulation(state, dw.Params(gravity_every=5), device="cpu", force_kernel="reference")
+    # Observables of one state do not depend on the clock: diagnostics take any K.
+    clocked, plain = dw.diagnostics(state, dw.Params(gravity_every=5)), dw.diagnostics(state, dw.Params())
+    for key, value in plain.items():
+        assert np.array_equal(clocked[key], value), key
+
+
+# --- runs: the specification, run folders, resume ------------------------------------------------
+
+
+def _spec(tmp_path, name, params=None, **run):
+    from decco_warp import spec as specs
+
+    values = {"name": name, "out": str(tmp_path), "device": "cpu", "steps": 300, "output_every": 100, "checkpoint_every": 100, **run}
+    return specs.resolve_spec({"run": values, "params": {"gravity_every": 5, **(params or {})}})
+
+
+def test_a_run_on_two_clocks_records_its_clock_and_resumes_bit_identically(tmp_path):
+    """The shipped collision at gravity_every = 5: spec.toml and the trajectory's parameters record
+    it, run.log says it, and a run stopped at step 200 and resumed (its neighbour list built
+    afresh, gravity evaluated anew) writes the frames and checkpoint of a run never stopped."""
+    from helpers import assert_same_run
+
+    from decco_warp import spec as specs
+    from decco_warp.io import read_checkpoint
+    from decco_warp.run import prepare_resume, resume_run, start_run
+
+    straight = start_run(_spec(tmp_path, "straight"))
+    start_run(_spec(tmp_path, "parts", steps=200))
+    resume_run(tmp_path / "parts", steps=300)
+    a, b = dw.read_trajectory(straight.run_dir / "trajectory.h5"), dw.read_trajectory(tmp_path / "parts" / "trajectory.h5")
+    assert_same_run(a, b)
+    for key, values in read_checkpoint(straight.run_dir / "checkpoint.h5")[0].items():
+        if isinstance(values, np.ndarray):
+            assert np.array_equal(read_checkpoint(tmp_path / "parts" / "checkpoint.h5")[0][key], values), key
+    assert specs.load_spec_file(tmp_path / "parts" / "spec.toml")["params"]["gravity_every"] == 5
+    assert a["parameters"]["spec"]["params"]["gravity_every"] == 5
+    log = (straight.run_dir / "run.log").read_text()
+    assert "gravity every 5 steps" in log and re.search(r"neighbour list built \d+ times in 300 steps", log)
+    books = sum(a["observables"][k] for k in ("total_energy", "dissipated_sliding", "dissipated_rolling", "dissipated_hysteresis", "integration_error"))
+    np.testing.assert_allclose(books, a["observables"]["total_energy"][0], rtol=CLOSURE_TOLERANCE)
+    with pytest.raises(specs.SpecError, match=r"\[run\] steps = 333: with \[params\] gravity_every = 5"):
+        prepare_resume(tmp_path / "parts", steps=333)
+
+
+@pytest.mark.parametrize(
+    ("params", "run", "message"),
+    [
+        ({"gravity_every": 0}, {}, r"\[params\] gravity_every = 0: must be an integer >= 1"),
+        ({"gravity_every": -1}, {}, r"\[params\] gravity_every = -1: must be an integer >= 1"),
+        ({"gravity_every": 2.5}, {}, r"\[params\] gravity_every = 2.5: must be int an integer >= 1"),
+        ({"gravity_every": "x"}, {}, r"\[params\] gravity_every = 'x': must be int an integer >= 1"),
+        ({"gravity_every": True}, {}, r"\[params\] gravity_every = True: must be int an integer >= 1"),
+        ({"gravity_every": "auto"}, {}, r"\[params\] gravity_every = 'auto': \"auto\" awaits the equivalence table of docs/benchmarks.md"),
+        ({}, {"steps": 302}, r"\[run\] steps = 302: with \[params\] gravity_every = 5, steps, output_every and checkpoint_every must be multiples of 5"),
+        ({}, {"output_every": 7, "checkpoint_every": 12}, r"\[run\] output_every = 7, checkpoint_every = 12: with \[params\] gravity_every = 5"),
+    ],
+)
+def test_a_bad_clock_in_a_specification_is_one_clear_line(tmp_path, params, run, message):
+    from decco_warp import spec as specs
+
+    with pytest.raises(specs.SpecError, match=message) as error:
+        _spec(tmp_path, "bad", params, **run)
+    assert "\n" not in str(error.value)
+
+
+def test_a_duration_becomes_whole_outer_steps():
+    """A duration that is not a whole number of outer steps rounds up to the next one."""
+    from decco_warp import spec as specs
+
+    spec = specs.resolve_spec({"run": {"duration": 10.0}, "params": {"gravity_every": 20, "dt": 0.04}})
+    assert spec["run"]["steps"] == 260  # 250 steps of 0.04 s, rounded up to 13 outer steps of 20
+
+
+def test_the_command_line_takes_the_clock_and_refuses_bad_ones(tmp_path):
+    from helpers import cli
+
+    for option, message in (("0", "[params] gravity_every = 0: must be an integer >= 1"), ("x", '--gravity-every must be an integer or "auto"; got \'x\'')):
+        result = cli("simulate", "--gravity-every", option, "--steps", "10", "--out", str(tmp_path), "--device", "cpu")
+        assert result.returncode == 2 and message in result.stderr and len(result.stderr.strip().splitlines()) == 1, result.stderr
+    result = cli("simulate", "--check", "--gravity-every", "5", "--steps", "100", "--output-every", "50", "--checkpoint-every", "100",
+                 "--out", str(tmp_path), "--device", "cpu")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert "100 steps (4 s), gravity every 5 steps" in result.stdout and "contacts every step from a neighbour list" in result.stdout
+    result = cli("simulate", "--gravity-every", "5", "--steps", "12", "--out", str(tmp_path), "--device", "cpu")
+    assert result.returncode == 2 and "[run] steps = 12: with [params] gravity_every = 5" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_runs_on_two_clocks_stepped_as_an_ensemble_write_what_they_would_alone(tmp_path):
+    """Two runs of the shipped collision at gravity_every = 5 and different eta, stepped together:
+    each run folder holds the frames and checkpoint it holds when run alone, bit for bit."""
+    from helpers import assert_same_run
+
+    from decco_warp import spec as specs
+    from decco_warp.io import read_checkpoint
+    from decco_warp.run import RunResult, execute_ensemble, prepare_start, start_run
+
+    def spec(where, name, eta):
+        run = {"name": name, "out": str(tmp_path / where), "device": "cpu", "steps": 200, "output_every": 100, "checkpoint_every": 100}
+        return specs.resolve_spec({"run": run, "params": {"gravity_every": 5}, "collision": {"eta": eta}})
+
+    runs = (("slow", 0.5), ("fast", 2.0))
+    for name, eta in runs:
+        start_run(spec("alone", name, eta))
+    outcomes = execute_ensemble([prepare_start(spec("together", name, eta)) for name, eta in runs])
+    assert all(isinstance(o, RunResult) for o in outcomes)
+    for name, _ in runs:
+        alone, together = tmp_path / "alone" / name, tmp_path / "together" / name
+        assert_same_run(dw.read_trajectory(alone / "trajectory.h5"), dw.read_trajectory(together / "trajectory.h5"))
+        mine, theirs = read_checkpoint(together / "checkpoint.h5")[0], read_checkpoint(alone / "checkpoint.h5")[0]
+        for key, values in theirs.items():
+            if isinstance(values, np.ndarray):
+                assert np.array_equal(mine[key], values), key
