@@ -1276,4 +1276,4 @@ def piles(
         options = {**PILE_DEFAULTS, **{k: v for k, v in entry.items() if k != "out"}}
         if isinstance(options["radii"], list):
             options["radii"] = ",".join(str(v) for v in options["radii"])
-        pile(out=out, overwrite=True, device=device, **options)  # its errors exit as `decco-warp pile`'s would
+        pile(out=out, overwrite=True, check=False, device=device, **options)  # its errors exit as `decco-warp pile`'s would
