@@ -189,7 +189,7 @@ def test_analysis_keeps_velocities_labels_per_frame_and_units(sweep):
         frames, final = f["frames"], f["final"]
         assert frames["label"].shape == (5, final["positions"].shape[0]) and frames["label"].compression == "gzip"
         np.testing.assert_array_equal(frames["label"][-1], final["label"][()])
-        assert final["velocities"].shape == final["positions"].shape and final["omegas"].shape == final["positions"].shape
+        assert final["velocities"].shape == final["positions"].shape
         assert final["velocities"].attrs["unit"] == "cm s-1" and frames["time"].attrs["unit"] == "s"
         members = final["label"][()] == 0
         composition = np.bincount(final["size_class"][()][members], minlength=frames["largest_composition"].shape[1])
