@@ -72,6 +72,17 @@ def two_spheres(separation, velocity_i, velocity_j=(0, 0, 0), omega_i=(0, 0, 0),
     return dw.State.from_arrays(x, v, w, radii, sphere_mass(radii))
 
 
+def crowded_sphere(count, seed=4):
+    """A large sphere touched by ``count`` small ones all round it (overlaps of 500 cm), random
+    velocities and spins: more contacts on one particle than a candidate list holds."""
+    rng = np.random.default_rng(seed)
+    direction = rng.normal(size=(count, 3))
+    direction /= np.linalg.norm(direction, axis=1)[:, None]
+    x = np.vstack([[0.0, 0.0, 0.0], direction * (2.25e6 + 0.75e6 - 500.0)]) + 1.5e7
+    radii = np.array([2.25e6] + [0.75e6] * count)
+    return dw.State.from_arrays(x, rng.normal(size=(count + 1, 3)), rng.normal(size=(count + 1, 3)) * 1e-4, radii, sphere_mass(radii))
+
+
 def oracle_args(state, params):
     return (
         state.positions,

@@ -142,16 +142,11 @@ def test_contact_pass_handles_more_candidates_than_its_list_holds(case):
     too): the contact pass looks at every j for it; forces still equal the plain loop's, and the
     tree path's contacts (gravity off) too."""
     from decco_warp.kernels.contacts import CANDIDATES
-    from scenes import sphere_mass
+    from scenes import crowded_sphere
 
     device, layout = case
     count = CANDIDATES + 6
-    rng = np.random.default_rng(4)
-    direction = rng.normal(size=(count, 3))
-    direction /= np.linalg.norm(direction, axis=1)[:, None]
-    x = np.vstack([[0.0, 0.0, 0.0], direction * (2.25e6 + 0.75e6 - 500.0)]) + 1.5e7
-    radii = np.array([2.25e6] + [0.75e6] * count)
-    state = dw.State.from_arrays(x, rng.normal(size=(count + 1, 3)), rng.normal(size=(count + 1, 3)) * 1e-4, radii, sphere_mass(radii))
+    state = crowded_sphere(count)
     for params in (dw.Params(), dw.Params(G=0.0, gravity="tree")):
         engine = Engine(state, params, device, "float64", layout=layout)
         engine.eval_forces()

@@ -140,15 +140,10 @@ def test_forces_on_two_clocks_are_gravity_plus_the_listed_contacts_even_past_a_f
     contacts from the list) equals the plain loop's, as the torque does."""
     from decco_warp.engine import Engine
     from decco_warp.kernels.contacts import CANDIDATES
-    from scenes import sphere_mass
+    from scenes import crowded_sphere
 
     count = CANDIDATES + 6
-    rng = np.random.default_rng(4)
-    direction = rng.normal(size=(count, 3))
-    direction /= np.linalg.norm(direction, axis=1)[:, None]
-    x = np.vstack([[0.0, 0.0, 0.0], direction * (2.25e6 + 0.75e6 - 500.0)]) + 1.5e7
-    radii = np.array([2.25e6] + [0.75e6] * count)
-    state = dw.State.from_arrays(x, rng.normal(size=(count + 1, 3)), rng.normal(size=(count + 1, 3)) * 1e-4, radii, sphere_mass(radii))
+    state = crowded_sphere(count)
     engine = Engine(state, dw.Params(gravity_every=3), "cpu", precision)
     engine.eval_forces()
     assert engine.candidate_overflows() >= 1
