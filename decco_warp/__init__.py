@@ -18,7 +18,7 @@ from .analysis import Cluster, find_clusters  # noqa: E402
 from .collision import setup_collision  # noqa: E402
 from .device import DeviceError, resolve_device  # noqa: E402
 from .diagnostics import diagnostics  # noqa: E402
-from .engine import Layout  # noqa: E402
+from .layouts import Layout  # noqa: E402
 from .io import load_pile, read_trajectory, save_pile  # noqa: E402
 from .params import G_CGS, ROLLING_FRICTION_FORMS, Params  # noqa: E402
 from .pile import Formation, form_pile  # noqa: E402

@@ -21,7 +21,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import warp as wp
 
-from .engine import Engine, Layout, choose_layout
+from .engine import Engine
+from .layouts import Layout, choose_layout
 from .params import Params
 from .simulation import Simulation
 from .state import State

@@ -118,7 +118,7 @@ def info(device: Optional[str] = DeviceOption) -> None:
     import warp as wp
 
     from .device import DeviceError, describe_devices, resolve_device
-    from .engine import choose_layout
+    from .layouts import choose_layout
 
     try:
         chosen = resolve_device(device)
@@ -688,7 +688,8 @@ def bench(
     from . import bench as benchmarks
     from .checks import InputError, check_destination
     from .device import DeviceError, resolve_device
-    from .engine import PRECISIONS, Layout
+    from .engine import PRECISIONS
+    from .layouts import Layout
     from .params import GRAVITY_SOLVERS
 
     try:

@@ -10,18 +10,17 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
 
 from .device import resolve_device
 from .forces import FORCE_PATHS, path_name
+from .layouts import Layout, choose_layout
 from .gravity_tree import walk_parts
 from .kernels import integrate, observables
 from .kernels.bodies import BODY_TYPES, PACK_KERNELS, PRECISIONS
 from .kernels.contacts import CANDIDATES, LEDGER_CHANNELS, unpack_depth
-from .kernels.newton import NEWTON_TILE_MAX
 from .kernels.pair import ContactModel
 from .params import Params
 from .state import State
@@ -37,114 +36,6 @@ PAIR_OBSERVABLES = {
     "overlap_depth": wp.float64,
     "overlap_partner": wp.int32,
 }
-
-
-@dataclass(frozen=True)
-class Layout:
-    """How the tiled force kernel maps pairs onto threads.
-
-    A block of ``block_dim`` threads (1 on CPU, where Warp runs one thread per
-    block) owns ``particles_per_block`` particles i and sweeps the j in tiles of
-    ``block_dim``; each j load serves all particles of the block.  Each thread
-    notes up to ``contact_slots`` contact candidates per particle before falling
-    back to a second look.
-    """
-
-    block_dim: int
-    particles_per_block: int
-    contact_slots: int = 4
-    max_registers: int = 0
-    """Cap on registers per thread on CUDA (0: the compiler's choice)."""
-    newton: bool = False
-    """Each pair once (Newton's third law, kernels/newton.py): a block is one
-    warp (``block_dim`` 32 on a GPU, 1 on the CPU) meeting two tiles of ``particles_per_block``
-    particles, gravity given to both sides, then the contacts in their own pass.
-    ``contact_slots`` is unused."""
-    fuse_kicks: bool = True
-    """Steps share launches (:meth:`Engine.advance`): the last half kick of a step, the next one's
-    first half kick and drift and the packing of the bodies for its sweep are one kernel; the same
-    numbers, bit for bit, as the launches of :meth:`Engine.step` (False: those, for comparison)."""
-
-    def __post_init__(self):
-        for name in ("block_dim", "particles_per_block", "contact_slots"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or value < 1:
-                raise ValueError(f"Layout.{name} must be a positive integer; got {value!r}")
-        if not isinstance(self.max_registers, int) or self.max_registers < 0:
-            raise ValueError(f"Layout.max_registers must be an integer >= 0; got {self.max_registers!r}")
-        for name in ("newton", "fuse_kicks"):
-            if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"Layout.{name} must be true or false; got {getattr(self, name)!r}")
-        if self.newton and (self.particles_per_block % self.block_dim or self.particles_per_block > NEWTON_TILE_MAX):
-            raise ValueError(
-                "a Newton layout's particles_per_block must be a multiple of its block_dim (each lane keeps "
-                f"as many particles) and at most {NEWTON_TILE_MAX}; got {self}"
-            )
-
-
-    def describe(self) -> str:
-        """In words, for ``decco-warp bench`` and ``info``."""
-        registers = f", <= {self.max_registers} registers" if self.max_registers else ""
-        kicks = "" if self.fuse_kicks else ", kicks unfused"
-        if self.newton:
-            return f"each pair once: a warp of {self.block_dim} meets tiles of {self.particles_per_block}" + registers + kicks
-        return f"{self.block_dim} threads x {self.particles_per_block} per block, {self.contact_slots} slots" + registers + kicks
-
-
-#: Systems up to this many particles take the Newton layout on CUDA, which keeps a field sum and
-#: a candidate word per particle and tile of 64 (N^2 / 64 x 20 bytes: 5.4 GB at 131 072 particles);
-#: past it all-pairs takes the fused layout, which keeps nothing.
-NEWTON_MAX = 131_072
-
-
-def fused_layout(n: int, device: str) -> Layout:
-    """The fused layout (one kernel: gravity of every ordered pair and the contacts) for ``n``
-    particles on ``device``.
-
-    CUDA (H100, docs/benchmarks.md): 128 threads per block, 4 particles per block sharing each j
-    load; 64 threads below 4096 particles, for more blocks.  A thread meets a given particle's few
-    contacts rarely, so 4 slots suffice.  Registers capped at 128: the rare float64 contact code
-    spills a little and the sweep keeps its occupancy (+20 % at N = 65 536).
-    CPU: the one thread of a block sees every contact of its particles, up to ~15 in a pile.
-    """
-    if device.startswith("cuda"):
-        per_block = 128 if n >= 4096 else 64
-        return Layout(block_dim=per_block, particles_per_block=4, contact_slots=4, max_registers=128)
-    return Layout(block_dim=1, particles_per_block=4, contact_slots=16)
-
-
-def choose_layout(n: int, device: str) -> Layout:
-    """The force-kernel layout for ``n`` particles on ``device`` (measured with ``decco-warp bench --layouts``).
-
-    CUDA (H100, docs/benchmarks.md): each pair once (Newton's third law), a warp meeting two tiles
-    of 64 particles: 1.7x to 2.4x the fused layout's full step from 5 500 to 131 072 particles.  Past
-    ``NEWTON_MAX`` particles, and on the CPU (where it gains only ~20 %), the :func:`fused_layout`.
-    """
-    if device.startswith("cuda") and n <= NEWTON_MAX:
-        return newton_layout(device)
-    return fused_layout(n, device)
-
-
-#: ``[run] layout``: the force kernel's layout for a run.  "auto" is :func:`choose_layout`;
-#: "newton" computes each pair once (the CUDA default up to NEWTON_MAX) on any device, where it
-#: changes the order of float operations, so the motion differs from "auto" at round-off only.
-LAYOUT_CHOICES = ("auto", "newton")
-
-
-def newton_layout(device: str) -> Layout:
-    """The Newton layout (each pair once, kernels/newton.py) on ``device``:
-    a warp meeting tiles of 64 on CUDA, tiles of 4 on the CPU's one lane."""
-    if device.startswith("cuda"):
-        return Layout(block_dim=32, particles_per_block=NEWTON_TILE_MAX, newton=True)
-    return Layout(block_dim=1, particles_per_block=4, newton=True)
-
-
-def layout_for(choice: str, n: int, device: str) -> Layout | None:
-    """The :class:`Layout` a run's ``layout`` choice names for ``n`` particles on ``device``
-    (None for "auto": the engine's own choice)."""
-    if choice not in LAYOUT_CHOICES:
-        raise ValueError(f"layout must be one of {', '.join(LAYOUT_CHOICES)}; got {choice!r}")
-    return None if choice == "auto" else newton_layout(device)
 
 
 def system_sizes(systems: Sequence[int] | None, count: int) -> np.ndarray:

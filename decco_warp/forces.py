@@ -19,6 +19,7 @@ import numpy as np
 import warp as wp
 
 from .gravity_tree import GravityTree
+from .layouts import NEWTON_MAX, newton_layout
 from .kernels import observables as observable_kernels
 from .kernels.bodies import BODY_TYPES
 from .kernels.contacts import CANDIDATES, contact_pass
@@ -410,8 +411,6 @@ class RespaForces(ForcePath):
     graph_conditionals = True  # the neighbour list's rebuild: wp.capture_if
 
     def __init__(self, engine):
-        from .engine import NEWTON_MAX, newton_layout
-
         super().__init__(engine)
         if engine.params.gravity == "tree":
             self.gravity = TreeGravity(engine)

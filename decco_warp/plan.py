@@ -19,7 +19,7 @@ from . import spec as specs
 from .checks import check_particles, deepest_rest_overlap
 from .collision import setup_collision
 from .device import resolve_device
-from .engine import Layout, choose_layout, layout_for
+from .layouts import Layout, choose_layout, layout_for
 from .io import FileFormatError, load_pile
 from .params import Params
 from .stability import CompressionForecast, StabilityReport, check_stability, predict_compression

@@ -10,7 +10,8 @@ import numpy as np
 import warp as wp
 
 from .diagnostics import state_diagnostics
-from .engine import Engine, Layout
+from .engine import Engine
+from .layouts import Layout
 from .params import Params
 from .stability import StabilityError, StabilityReport, check_stability
 from .state import State

@@ -9,7 +9,7 @@ from helpers import cli
 
 import decco_warp as dw
 from decco_warp import spec as specs
-from decco_warp.engine import choose_layout
+from decco_warp.layouts import choose_layout
 from decco_warp.plan import Plan, builtin_pile
 from decco_warp.run import prepare_resume, prepare_start, start_run
 

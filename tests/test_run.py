@@ -132,7 +132,7 @@ def test_a_run_in_another_force_layout_keeps_it_through_resume_and_differs_at_ro
     round-off, amplified by the contacts (the order of float operations changes, not the physics)."""
     import tomllib
 
-    from decco_warp.engine import layout_for
+    from decco_warp.layouts import layout_for
 
     assert layout_for("auto", 500, "cpu") is None
     # On CUDA the default is the Newton layout; "newton" names it on the CPU too.
