@@ -927,6 +927,65 @@ def _run_check(spec: dict) -> str:
             f"{run_cost(plan.state.n, plan.params.gravity, plan.device, plan.steps)}{refused}")  # fmt: skip
 
 
+# --- extract -------------------------------------------------------------------------------
+
+
+@app.command()
+def extract(
+    run_dir: Path = typer.Argument(..., help="An analysed run folder (analysis.h5 and trajectory.h5)."),
+    out: Path = typer.Option(..., "--out", "-o", help="Pile file to write (HDF5), for simulate's --target or --projectile."),
+    fragment: int = typer.Option(0, "--fragment", help="Which cluster of the last analysed frame: 0 the largest, 1 the next, ..."),
+    spin: str = typer.Option("keep", "--spin", help="keep the fragment's rigid spin about its centre, or remove it."),
+    settle: bool = typer.Option(True, "--settle/--no-settle", help="Step the fragment alone until its internal motion dies down."),
+    ke_threshold: float = typer.Option(1e-5, "--ke-threshold", help="Settled when the kinetic energy about the rigid motion is below this x |U|."),
+    max_steps: int = typer.Option(1_000_000, "--max-steps", help="Give up settling after this many steps."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing pile file."),
+    device: Optional[str] = DeviceOption,
+) -> None:
+    """Write a fragment of a finished collision as a pile (centred, settled, its spin kept or removed)
+    that simulate takes as a target or a projectile: the next collision of a hierarchy."""
+    from .checks import InputError, check_destination
+    from .device import DeviceError, resolve_device
+    from .io import FileFormatError, save_pile
+    from .remnant import extract_fragment
+
+    if out.exists() and not overwrite:
+        fail(f"{out} already exists; use --overwrite to replace it")
+    if not run_dir.is_dir():
+        fail(missing(run_dir))
+    bar = _progress_bar("settling", "step", "ratio")
+    try:
+        check_destination(out, "pile file")
+        chosen = resolve_device(device)
+        with bar:
+            task = bar.add_task("fragment", total=None, step="", ratio="")
+
+            def show(step: int, ratio: float) -> None:
+                bar.update(task, step=f"step {step}", ratio=f"internal KE/|U| {ratio:.3g} (settled < {ke_threshold:g})")
+
+            remnant = extract_fragment(run_dir, fragment, spin=spin, settle=settle, ke_threshold=ke_threshold,
+                                       max_steps=max_steps, device=chosen, progress=show)  # fmt: skip
+    except (InputError, DeviceError, FileFormatError, ValueError) as error:
+        fail(str(error))
+    try:
+        save_pile(remnant, out)
+    except OSError as error:
+        write_failed(error, f"{out} is not written (any earlier one is as it was); the run is untouched")
+    import numpy as np
+
+    from .collision import pile_radius
+
+    meta = remnant.metadata
+    radii = np.unique(remnant.radii)
+    counts = np.bincount(np.searchsorted(radii, remnant.radii), minlength=radii.size)
+    classes = ", ".join(f"{int(c)} of radius {r / 1e5:g} km" for c, r in zip(counts, radii))
+    rate = float(np.linalg.norm(meta["spin_vector"]))
+    period = f", a turn in {2 * np.pi / rate / 3600:.3g} h" if rate > 0 else ""
+    settled = f"settled in {meta['settle_steps']} steps" if settle else "not settled (--no-settle)"
+    typer.echo(f"wrote {out}: fragment {fragment} of {run_dir} ({remnant.n} particles: {classes}), mass {remnant.total_mass:.4g} g, "
+               f"radius {pile_radius(remnant) / 1e5:.4g} km, spin {rate:.3g} rad/s{period} ({spin}), {settled}")  # fmt: skip
+
+
 # --- compare -------------------------------------------------------------------------------
 
 

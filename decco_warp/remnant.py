@@ -1,0 +1,125 @@
+"""A fragment of a finished collision as a pile of its own, for the next collision.
+
+The paper's own next step is repeated collisions ("a better approach to building initial cluster
+configurations is by hierarchically colliding smaller clusters"): :func:`extract_fragment` takes a
+cluster of a run's last analysed frame (its members from analysis.h5, its particles from the
+trajectory's last frame), centres it, removes its bulk motion and, if asked, its spin, and lets it
+settle in isolation; ``decco-warp extract`` writes it as a pile file that ``simulate`` takes as a
+target or a projectile.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from .checks import InputError
+from .io import read_trajectory
+from .params import Params
+from .pile import remove_net_motion
+from .simulation import Simulation
+from .state import State
+
+#: How the fragment's spin is treated: kept (its rigid rotation about its centre stays), or removed.
+SPIN_CHOICES = ("keep", "remove")
+#: Settled when the kinetic energy of the motion about the rigid rotation is below this x |U|
+#: (the formation's threshold, docs/model.md "Rubble-pile formation").
+KE_THRESHOLD = 1e-5
+#: Steps between two looks at the fragment's internal kinetic energy while it settles.
+CHECK_EVERY = 250
+
+
+def internal_kinetic_energy(state: State) -> float:
+    """Kinetic energy of the particles' motion relative to the cluster's bulk velocity and rigid spin
+    Omega = I^-1 L: sum 1/2 m |v - V - Omega x r|^2 + 1/2 I |w - Omega|^2 [erg]."""
+    spin = state.spin()
+    r = state.positions - state.centre_of_mass
+    v = state.velocities - state.bulk_velocity - np.cross(spin, r)
+    w = state.omegas - spin
+    return float(0.5 * (state.masses * (v * v).sum(axis=1)).sum() + 0.5 * (state.inertia * (w * w).sum(axis=1)).sum())
+
+
+def fragment_of(run_dir, fragment: int = 0) -> tuple[State, dict]:
+    """The particles of cluster ``fragment`` (0: the largest) at a run's last frame, as its analysis
+    found them, with where they came from."""
+    run_dir = Path(run_dir)
+    analysis, trajectory = run_dir / "analysis.h5", run_dir / "trajectory.h5"
+    if not trajectory.is_file():
+        raise InputError(f"{run_dir} holds no trajectory.h5: the fragment's particles come from its last frame")
+    if not analysis.is_file():
+        raise InputError(f"{run_dir} is not analysed: decco-warp analyze {run_dir} finds its fragments first")
+    with h5py.File(analysis, "r") as f:
+        label, step, masses = f["final/label"][()], int(f["final/step"][()]), f["final/mass"][()]
+    data = read_trajectory(trajectory)
+    if int(data.step[-1]) != step:
+        raise InputError(f"{run_dir}'s analysis ends at step {step} but its trajectory at step {int(data.step[-1])}: analyze it again")
+    if isinstance(fragment, bool) or not isinstance(fragment, (int, np.integer)) or not 0 <= fragment < masses.size:
+        count = f"{masses.size} fragment(s), 0 to {masses.size - 1}" if masses.size else "no fragment of the analysis's minimum size"
+        raise InputError(f"--fragment must be one of the run's {count} at its last frame (0 the largest); got {fragment!r}")
+    members = np.flatnonzero(label == fragment)
+    static = data.static
+    state = State.from_arrays(
+        data.particles["position"][-1][members],
+        data.particles["velocity"][-1][members],
+        data.particles["omega"][-1][members],
+        static["radius"][members],
+        static["mass"][members],
+        size_class=static["species"][members].astype(np.int32),
+    )
+    source = {"run": str(run_dir), "fragment": int(fragment), "step": step, "time": float(data.time[-1]),
+              "mass": float(masses[fragment]), "members": int(members.size)}  # fmt: skip
+    return state, {**source, "params": data.parameters.get("spec", {}).get("params", {})}
+
+
+def extract_fragment(run_dir, fragment: int = 0, spin: str = "keep", settle: bool = True, ke_threshold: float = KE_THRESHOLD,
+                     max_steps: int = 1_000_000, device: str | None = None, progress=None) -> State:  # fmt: skip
+    """Cluster ``fragment`` of a run's last frame as a pile: centred, its bulk motion removed, its
+    rigid spin kept or removed (``spin``), and with ``settle`` stepped alone (the run's own Params)
+    until its internal kinetic energy is below ``ke_threshold`` |U| (at most ``max_steps`` steps;
+    ``progress(step, ratio)`` after each look).  Its metadata says where it came from."""
+    if spin not in SPIN_CHOICES:
+        raise InputError(f"--spin must be one of {', '.join(SPIN_CHOICES)}; got {spin!r}")
+    if not (isinstance(ke_threshold, (int, float)) and ke_threshold > 0) or not (isinstance(max_steps, int) and max_steps >= 0):
+        raise InputError("--ke-threshold must be > 0 and --max-steps >= 0")
+    state, source = fragment_of(run_dir, fragment)
+    params = Params.from_dict({k: v for k, v in source.pop("params").items() if k in Params.__dataclass_fields__})
+    state = _centred(state, spin)
+    steps, ratio = 0, None
+    if settle:
+        sim = Simulation(state, params, device=device, allow_unstable=True)
+        ratio = _internal_ratio(sim)
+        outer = params.gravity_every  # steps go in whole outer steps
+        chunk = max(1, CHECK_EVERY // outer) * outer
+        while ratio >= ke_threshold and sim.step_count + outer <= max_steps:
+            sim.step(min(chunk, (max_steps - sim.step_count) // outer * outer))
+            ratio = _internal_ratio(sim)
+            if progress is not None:
+                progress(sim.step_count, ratio)
+        if ratio >= ke_threshold:
+            raise InputError(
+                f"the fragment did not settle within {max_steps} steps: internal KE/|U| = {ratio:.3g} > {ke_threshold:g}; "
+                "raise --max-steps or --ke-threshold"
+            )
+        steps, state = sim.step_count, _centred(sim.state, spin)
+    state.time, state.step = 0.0, 0
+    potential = Simulation(state, params, device=device, allow_unstable=True).diagnostics()["potential"] if settle else None
+    state.metadata = {"extracted_from": source, "spin": spin, "settle_steps": int(steps), "internal_ke_over_u": ratio,
+                      "spin_vector": state.spin(), "potential": potential}  # fmt: skip
+    return state
+
+
+def _centred(state: State, spin: str) -> State:
+    """Centred, bulk motion removed, and the rigid spin too if ``spin`` is "remove"."""
+    if spin == "remove":
+        return remove_net_motion(state)
+    state = state.copy()
+    state.positions -= state.centre_of_mass
+    state.velocities -= state.bulk_velocity
+    return state
+
+
+def _internal_ratio(sim: Simulation) -> float:
+    state = sim.state
+    return internal_kinetic_energy(state) / abs(sim.diagnostics(state)["potential"])
