@@ -1179,6 +1179,9 @@ def sweep(
         None, "--only", help="Run only the runs whose names match this glob, e.g. '*eta6' (repeatable); complete runs stay in the table."
     ),
     check: bool = typer.Option(False, "--check", help="List the runs and where each stands (complete, resumes, to run), then stop."),
+    resolution: Optional[float] = typer.Option(
+        None, "--resolution", help="Replace [sweep] resolution: R x the particles (piles NAME_xR.h5), k_in and dt x R^(-1/3) unless scale_contacts = false."
+    ),
 ) -> None:
     """Run a grid of collisions with Dask (skipping finished runs), analysing each as it finishes."""
     import signal
@@ -1193,7 +1196,7 @@ def sweep(
     from .sweep import load_sweep, run_state, run_sweep, select_runs, write_record, write_summary
 
     try:
-        settings, runs = load_sweep(spec_file)
+        settings, runs = load_sweep(spec_file, {"resolution": resolution})
         if only:
             runs = select_runs(runs, only)
     except SpecError as error:
@@ -1303,6 +1306,9 @@ PILE_KEYS = {"out": str, "particles": int, "seed": int, "radii": list, "density"
 def piles(
     spec_file: Path = typer.Argument(..., help="TOML with [[pile]] tables: out, particles, seed, and any pile option."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Rebuild piles whose file exists."),
+    resolution: float = typer.Option(
+        1.0, "--resolution", help="Build each pile with R times its particles, radii x R^(-1/3), into NAME_xR.h5 (docs/model.md)."
+    ),
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Build every pile a TOML file lists (the paper's: runs/paper/piles.toml), skipping those already built."""
@@ -1323,6 +1329,13 @@ def piles(
                     raise SpecError(f"[[pile]] {k + 1}: {key} = {value!r} must be {kind.__name__}")
             if "out" not in entry or "particles" not in entry:
                 raise SpecError(f"[[pile]] {k + 1}: out and particles are required")
+        if resolution != 1:
+            from .resolution import pile_entry
+
+            try:
+                entries = [pile_entry(entry, resolution, PILE_DEFAULTS["radii"]) for entry in entries]
+            except ValueError as error:
+                raise SpecError(f"--resolution: {error}") from None
         outs = [Path(entry["out"]) if Path(entry["out"]).is_absolute() else Path.cwd() / entry["out"] for entry in entries]
         for out in outs:  # every destination, before the first pile is built
             if overwrite or not out.exists():

@@ -100,6 +100,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "max_overlap": Key(
             float, None, _positive, "> 0 (fraction of the smaller radius of a pair; a deeper contact stops the run)"
         ),
+        "resolution": Key(
+            float, 1.0, _positive, "> 0: a record of the resolution a sweep scaled this run to (radii, k_in, dt; docs/model.md), changing nothing itself"
+        ),
     },
     "piles": {
         "target": Key(str, "builtin:target", lambda v: bool(v.strip()), "a pile file or builtin:target"),

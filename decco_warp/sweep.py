@@ -13,6 +13,8 @@ A sweep specification is a run specification plus a ``[sweep]`` table:
                                    # 20 000 particles stepped together, larger ones alone; 1 on a CPU)
     realizations = 1               # runs of each grid point: the piles as their files hold them, then
                                    # turned by random rotations (orientation_seed derived from the point)
+    resolution = 1                 # R x the particles of the same bodies: the piles NAME_xR.h5, and unless
+    scale_contacts = true          # false, k_in and dt x R^(-1/3) (the same contact physics; docs/model.md)
     [sweep.pile_alternatives]      # piles that may stand in for a pile in realizations 1, 2, ...: the same
                                    # recipe formed from other seeds; each realization draws its pair from its seed
     "runs/paper/piles/target5000.h5" = ["runs/paper/piles/target5000_s11.h5", "runs/paper/piles/target5000_s12.h5"]
@@ -48,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import resolution as resolutions
 from . import spec as specs
 from ._version import __version__
 
@@ -61,7 +64,10 @@ AUTO_ENSEMBLE = 8
 #: 1.25x at 10 000 (a sweep: 4 runs of 10 000 in 505 s against ~668 s one at a time), 1.14x at
 #: 16 384 and 1.09x at 20 000, as one system fills more of the GPU.  Larger runs go alone.
 ENSEMBLE_MAX_PARTICLES = 20_000
-SWEEP_KEYS = {"name", "out", "min_members", "analyse_every", "keep_trajectory", "ensemble", "realizations", "grid", "pile_alternatives"}
+SWEEP_KEYS = {
+    "name", "out", "min_members", "analyse_every", "keep_trajectory", "ensemble", "realizations", "grid", "pile_alternatives",
+    "resolution", "scale_contacts",
+}  # fmt: skip
 SUMMARY_FIELDS = [
     "run", "status", "reason", "n_particles", "mass_ratio", "theta_deg", "eta", "speed", "spin_kind", "realization", "orientation_seed",
     "target_pile", "projectile_pile",
@@ -80,10 +86,13 @@ TRAJECTORY_FILE = "trajectory.h5"
 CHECKPOINT_FILE = "checkpoint.h5"
 
 
-def load_sweep(path) -> tuple[dict, list[dict]]:
-    """(sweep settings, resolved run specifications) of a sweep file; SpecError names what is wrong."""
+def load_sweep(path, overrides: dict | None = None) -> tuple[dict, list[dict]]:
+    """(sweep settings, resolved run specifications) of a sweep file, its ``[sweep]`` keys replaced by
+    ``overrides`` (the command line's); SpecError names what is wrong."""
     raw = specs.load_spec_file(path)
     sweep = raw.pop("sweep", None)
+    if isinstance(sweep, dict) and overrides:
+        sweep = {**sweep, **{key: value for key, value in overrides.items() if value is not None}}
     if not isinstance(sweep, dict):
         raise specs.SpecError(f"{path} has no [sweep] table")
     unknown = sorted(set(sweep) - SWEEP_KEYS)
@@ -100,6 +109,8 @@ def load_sweep(path) -> tuple[dict, list[dict]]:
         "keep_trajectory": sweep.get("keep_trajectory", True),
         "ensemble": sweep.get("ensemble", "auto"),
         "realizations": sweep.get("realizations", 1),
+        "resolution": sweep.get("resolution", 1),
+        "scale_contacts": sweep.get("scale_contacts", True),
     }
     for key in ("min_members", "analyse_every", "ensemble", "realizations"):
         value = settings[key]
@@ -108,8 +119,13 @@ def load_sweep(path) -> tuple[dict, list[dict]]:
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             also = ' or "auto"' if key == "ensemble" else ""
             raise specs.SpecError(f"[sweep] {key} = {value!r}: must be an integer >= 1{also}")
-    if not isinstance(settings["keep_trajectory"], bool):
-        raise specs.SpecError(f"[sweep] keep_trajectory = {settings['keep_trajectory']!r}: must be true or false")
+    for key in ("keep_trajectory", "scale_contacts"):
+        if not isinstance(settings[key], bool):
+            raise specs.SpecError(f"[sweep] {key} = {settings[key]!r}: must be true or false")
+    try:
+        resolutions.length_factor(settings["resolution"])
+    except ValueError as error:
+        raise specs.SpecError(f"[sweep] {error}") from None
     grid = sweep.get("grid", {})
     if not isinstance(grid, dict) or not grid:
         raise specs.SpecError("[sweep.grid] must list at least one \"table.key\" = [values]")
@@ -140,6 +156,9 @@ def load_sweep(path) -> tuple[dict, list[dict]]:
                 labels.append(f"{key}{_slug(value)}")
         run.setdefault("run", {})
         run["run"]["out"] = str(Path(settings["out"]) / name)
+        if settings["resolution"] != 1:
+            run = _at_resolution(run, settings)
+            labels.append(f"x{settings['resolution']:g}")
         for k in range(settings["realizations"]):
             runs.append(specs.resolve_spec(realization(run, "_".join(labels), k, alternatives)))
     names = [r["run"]["name"] for r in runs]
@@ -169,6 +188,23 @@ def realization(point: dict, name: str, k: int, alternatives: dict[str, list[str
                 original = resolved["piles"][which]
                 choices = [original, *alternatives.get(original, [])]
                 run.setdefault("piles", {})[which] = choices[int(draw.integers(len(choices)))]
+    return run
+
+
+def _at_resolution(run: dict, settings: dict) -> dict:
+    """A grid point at the sweep's resolution (decco_warp/resolution.py); its piles must exist."""
+    defaults = specs.resolve_spec({})
+    try:
+        run = resolutions.scaled_run(run, settings["resolution"], settings["scale_contacts"], defaults)
+    except ValueError as error:
+        raise specs.SpecError(f"[sweep] resolution: {error}") from None
+    for which in ("target", "projectile"):
+        path = run["piles"][which]
+        if not Path(path).expanduser().is_file():
+            raise specs.SpecError(
+                f"[sweep] resolution = {settings['resolution']:g}: pile file {path} does not exist; build the piles at that "
+                f"resolution first (decco-warp piles PILES.toml --resolution {settings['resolution']:g})"
+            )
     return run
 
 
