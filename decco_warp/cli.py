@@ -566,7 +566,7 @@ def _check(spec: dict) -> None:
         fail(str(error))
     for line in [*plan.lines(), *plan.choices()]:
         typer.echo(line)
-    typer.echo(f"cost: {run_cost(plan.state.n, plan.params.gravity, plan.device, plan.steps)}")
+    typer.echo(f"cost: {run_cost(plan.state.n, plan.params.gravity, plan.device, plan.steps, plan.params.gravity_every)}")
     if plan.run_dir.exists():
         typer.echo(f"note: run folder {plan.run_dir} exists (resume continues it, --overwrite replaces it)")
     if not plan.stability.stable and not plan.allow_unstable:
@@ -924,7 +924,7 @@ def _run_check(spec: dict) -> str:
     refused = "" if stability.stable or plan.allow_unstable else f"; REFUSED: {'; '.join(stability.problems())}"
     return (f"eta {plan.state.metadata['eta']:.3g}, margins: stiffness {stability.stiffness_margin:.3g} (>= 1), time step "
             f"{stability.time_step_margin:.3g} (>= 10); predicted deepest overlap {plan.forecast.fraction:.2g}; "
-            f"{run_cost(plan.state.n, plan.params.gravity, plan.device, plan.steps)}{refused}")  # fmt: skip
+            f"{run_cost(plan.state.n, plan.params.gravity, plan.device, plan.steps, plan.params.gravity_every)}{refused}")  # fmt: skip
 
 
 # --- extract -------------------------------------------------------------------------------
