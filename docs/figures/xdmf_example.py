@@ -1,5 +1,5 @@
-"""Render one frame of a run through its trajectory.xdmf, as ParaView would read it (README: "Opening a run
-in ParaView or VisIt"): VTK's XDMF reader, spheres of the particles' radii coloured by stress (largest
+"""Render one frame of a run through its trajectory.xdmf, as ParaView would read it (docs/running.md: "Opening a
+run in ParaView or VisIt"): VTK's XDMF reader, spheres of the particles' radii coloured by stress (largest
 overlap), drawn offscreen.  Needs `pip install vtk`.
 
     python docs/figures/xdmf_example.py runs/out/default/trajectory.xdmf --time 400 --stress-max 2e4 --out docs/figures/xdmf-example.png
