@@ -843,6 +843,7 @@ def analyze(
             check_destination(path / "summary.csv", "cross-run table")
     except InputError as error:
         fail(str(error))
+    end_time = _planned_end(runs) if len(runs) > 1 else None  # the same time axis for every run of the set
 
     def analyse(run_dir: Path, task) -> tuple[dict, bool]:
         """One analysis of a run, and whether the run was still being written."""
@@ -859,7 +860,7 @@ def analyze(
                 progress=lambda done, total: bar.update(task, total=total, completed=done, frames=f"{done}/{total} frames"),
                 device=device,
             )
-            draw_run(analysis, run_dir)
+            draw_run(analysis, run_dir, end_time)
         finally:
             if writer is not None:
                 writer.release()
@@ -1055,6 +1056,21 @@ def _outcome(summary: dict) -> str:
     if "settled" in summary:
         text += ", settled" if summary["settled"] else f", NOT SETTLED ({summary['settled_note']})"
     return text
+
+
+def _planned_end(runs: list[Path]) -> float | None:
+    """The latest simulated time [s] the runs' own spec.toml files plan to reach (None if none reads)."""
+    from .spec import SpecError, load_spec_file, resolve_spec
+
+    ends = []
+    for run_dir in runs:
+        try:
+            spec = resolve_spec(load_spec_file(run_dir / "spec.toml"))
+        except SpecError:
+            continue  # analysed all the same; its figures keep their own scale
+        if isinstance(spec["params"]["dt"], float) and "steps" in spec["run"]:
+            ends.append(spec["run"]["steps"] * spec["params"]["dt"])
+    return max(ends) if ends else None
 
 
 def _running(run_dir: Path) -> bool:

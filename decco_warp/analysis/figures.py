@@ -158,11 +158,16 @@ RUN_FIGURES = {
 }
 
 
-def draw_run(analysis: dict, run_dir: Path) -> list[Path]:
-    """Every figure of RUN_FIGURES for one analysed run, into ``run_dir``/figures."""
+def draw_run(analysis: dict, run_dir: Path, end_time: float | None = None) -> list[Path]:
+    """Every figure of RUN_FIGURES for one analysed run, into ``run_dir``/figures; with ``end_time``
+    [s] the time axes run from 0 to it (the same scale for every run of a set)."""
     paths = []
     for name, plot in RUN_FIGURES.items():
-        paths += save(plot(analysis), Path(run_dir) / "figures", name)
+        fig = plot(analysis)
+        if end_time is not None and name != "clusters":
+            for ax in fig.axes:
+                ax.set_xlim(0.0, end_time / HOUR)
+        paths += save(fig, Path(run_dir) / "figures", name)
     return paths
 
 
