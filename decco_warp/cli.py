@@ -981,10 +981,10 @@ def extract(
     counts = np.bincount(np.searchsorted(radii, remnant.radii), minlength=radii.size)
     classes = ", ".join(f"{int(c)} of radius {r / 1e5:g} km" for c, r in zip(counts, radii))
     rate = float(np.linalg.norm(meta["spin_vector"]))
-    period = f", a turn in {2 * np.pi / rate / 3600:.3g} h" if rate > 0 else ""
+    turning = "its spin removed" if spin == "remove" else f"spinning at {rate:.3g} rad/s (a turn in {2 * np.pi / rate / 3600:.3g} h)" if rate > 0 else "not spinning"
     settled = f"settled in {meta['settle_steps']} steps" if settle else "not settled (--no-settle)"
     typer.echo(f"wrote {out}: fragment {fragment} of {run_dir} ({remnant.n} particles: {classes}), mass {remnant.total_mass:.4g} g, "
-               f"radius {pile_radius(remnant) / 1e5:.4g} km, spin {rate:.3g} rad/s{period} ({spin}), {settled}")  # fmt: skip
+               f"radius {pile_radius(remnant) / 1e5:.4g} km, {turning}, {settled}")  # fmt: skip
 
 
 # --- compare -------------------------------------------------------------------------------
