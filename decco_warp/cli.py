@@ -439,9 +439,10 @@ def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: in
 
 def _report(result) -> None:
     run_dir = result.run_dir
+    # The run's totals and this session's costs apart: after a resume they are not the same steps.
     typer.echo(
-        f"done: {result.steps} steps, {result.time:.6g} s simulated, {result.wall_seconds:.1f} s wall, "
-        f"{result.stepping_seconds:.1f} s of it stepping ({result.steps_this_session} steps this session)"
+        f"done: the run is at step {result.steps} ({result.time:.6g} s simulated); this session stepped "
+        f"{result.steps_this_session} steps in {result.wall_seconds:.1f} s wall, {result.stepping_seconds:.1f} s of it stepping"
     )
     typer.echo(f"outputs in {run_dir}/: spec.toml, trajectory.h5 (H5MD), trajectory.xdmf (for ParaView, VisIt), checkpoint.h5, run.log")
     typer.echo(f"inspect: h5ls -r {run_dir}/trajectory.h5   |   python: decco_warp.io.read_trajectory('{run_dir}/trajectory.h5')")
