@@ -169,17 +169,17 @@ def test_realizations_draw_their_piles_from_the_alternatives_with_their_seed(tmp
         for path in piles[which]:
             shutil.copy(builtin_pile(which), path)
     table = "".join(f'"{files[0]}" = {files[1:]!r}\n'.replace("'", '"') for files in piles.values())
-    text = SWEEP.format(out=tmp_path, k=12, etas="[0.5, 1.0]") + "[sweep.pile_alternatives]\n" + table
+    text = SWEEP.format(out=tmp_path, k=40, etas="[0.5, 1.0]") + "[sweep.pile_alternatives]\n" + table
     text += f'[piles]\ntarget = "{piles["target"][0]}"\nprojectile = "{piles["projectile"][0]}"\n'
     path = tmp_path / "s.toml"
     path.write_text(text)
     _, runs = load_sweep(path)
     first = {r["run"]["name"]: (r["piles"]["target"], r["piles"]["projectile"]) for r in runs}
     assert first["eta0.5"] == (piles["target"][0], piles["projectile"][0])
-    drawn = [first[f"eta0.5_r{k}"] for k in range(1, 12)]
+    drawn = [first[f"eta0.5_r{k}"] for k in range(1, 40)]  # all three of each drawn (a miss: 3 x (2/3)^39 ~ 5e-7)
     assert {t for t, _ in drawn} == set(piles["target"]) and {p for _, p in drawn} == set(piles["projectile"])
     assert load_sweep(path)[1] == runs  # the same draw every time
-    for written, instead in (("realizations = 12", "realizations = 1"), (f'"{piles["target"][2]}"]', f'"{tmp_path}/nowhere.h5"]')):
+    for written, instead in (("realizations = 40", "realizations = 1"), (f'"{piles["target"][2]}"]', f'"{tmp_path}/nowhere.h5"]')):
         path.write_text(text.replace(written, instead))
         with pytest.raises(specs.SpecError, match="pile_alternatives"):
             load_sweep(path)
