@@ -99,6 +99,14 @@ class State:
         """Velocity of the centre of mass [cm/s], (3,)."""
         return (self.masses[:, None] * self.velocities).sum(axis=0) / self.total_mass
 
+    def inertia_tensor(self) -> np.ndarray:
+        """Moment of inertia tensor about the centre of mass [g cm^2], (3, 3): the particles' orbital
+        part plus their own moments of inertia."""
+        x = self.positions - self.centre_of_mass
+        m = self.masses
+        r2 = (x * x).sum(axis=1)
+        return ((m * r2).sum() + self.inertia.sum()) * np.eye(3) - np.einsum("i,ij,ik->jk", m, x, x)
+
     def spin(self) -> np.ndarray:
         """Rigid-body angular velocity about the centre of mass [rad/s], (3,): I^-1 L.
 
@@ -106,13 +114,10 @@ class State:
         """
         x = self.positions - self.centre_of_mass
         v = self.velocities - self.bulk_velocity
-        m = self.masses
-        angular_momentum = (m[:, None] * np.cross(x, v)).sum(axis=0) + (self.inertia[:, None] * self.omegas).sum(axis=0)
-        r2 = (x * x).sum(axis=1)
-        tensor = ((m * r2).sum() + self.inertia.sum()) * np.eye(3) - np.einsum("i,ij,ik->jk", m, x, x)
+        angular_momentum = (self.masses[:, None] * np.cross(x, v)).sum(axis=0) + (self.inertia[:, None] * self.omegas).sum(axis=0)
         if self.n == 1:
             return self.omegas[0].copy()
-        return np.linalg.solve(tensor, angular_momentum)
+        return np.linalg.solve(self.inertia_tensor(), angular_momentum)
 
     def copy(self) -> "State":
         arrays = ("positions", "velocities", "omegas", "radii", "masses", "pile_id", "size_class")

@@ -13,7 +13,7 @@ import h5py
 import numpy as np
 
 from ..diagnostics import energy_scale, ledger_closure
-from ..io import json_ready, json_text, read_trajectory, write_atomic
+from ..io import OBSERVABLE_UNITS, json_ready, json_text, read_trajectory, write_atomic
 from ..params import G_CGS
 from ..state import State
 from . import scaling
@@ -174,11 +174,7 @@ def ellipsoid_axes(part: State) -> np.ndarray:
     """Semi-axes a >= b >= c [cm] of the uniform ellipsoid with a cluster's mass and inertia tensor
     about its centre of mass (the grains' own spins' inertia included): from the principal moments
     I1 <= I2 <= I3, a^2 = 5 (I2 + I3 - I1) / (2 M) and so on."""
-    x = part.positions - part.centre_of_mass
-    m = part.masses
-    r2 = (x * x).sum(axis=1)
-    tensor = ((m * r2).sum() + part.inertia.sum()) * np.eye(3) - np.einsum("i,ij,ik->jk", m, x, x)
-    i1, i2, i3 = np.linalg.eigvalsh(tensor)
+    i1, i2, i3 = np.linalg.eigvalsh(part.inertia_tensor())
     scale = 5.0 / (2.0 * part.total_mass)
     return np.sqrt(np.maximum(scale * np.array([i2 + i3 - i1, i1 + i3 - i2, i1 + i2 - i3]), 0.0))
 
@@ -276,8 +272,9 @@ def _padded(rows: list[np.ndarray]) -> np.ndarray:
     return out
 
 
-def _analyse_frames(data: dict, frames: list[int], target_mass: float, min_members: int, G, device, progress=None) -> tuple[dict, dict]:
-    """The /frames series of the trajectory ``data``'s frames ``frames`` (and the last one's full result)."""
+def _analyse_frames(data: dict, frames: list[int], target_mass: float, min_members: int, G, device, progress=None) -> tuple[dict, dict, dict]:
+    """The /frames series and the /catalogue of the trajectory ``data``'s frames ``frames``, and the
+    last frame's full result (:func:`analyse_snapshot`)."""
     series: dict[str, list] = {name: [] for name in FRAME_SERIES}
     n_clusters, cluster_masses = [], []
     catalogue: dict[str, list] = {name: [] for name in CATALOGUE_UNITS}
@@ -296,8 +293,8 @@ def _analyse_frames(data: dict, frames: list[int], target_mass: float, min_membe
     arrays.update(clusters=np.array(n_clusters), cluster_mass=_padded(cluster_masses))
     classes = int(data["static"]["species"].max()) + 1
     empty = {"com": (0, 3), "velocity": (0, 3), "omega": (0, 3), "semi_axes": (0, 3), "composition": (0, classes)}
-    result = dict(result or {}, catalogue={name: np.array(values) if values else np.zeros(empty.get(name, (0,))) for name, values in catalogue.items()})
-    return arrays, result
+    catalogue = {name: np.array(values) if values else np.zeros(empty.get(name, (0,))) for name, values in catalogue.items()}
+    return arrays, catalogue, result
 
 
 def late_verdict(run_dir, min_members: int = 50, device: str | None = None) -> dict:
@@ -306,7 +303,7 @@ def late_verdict(run_dir, min_members: int = 50, device: str | None = None) -> d
     data = read_trajectory(Path(run_dir) / "trajectory.h5")
     target_mass = float(data["static"]["mass"][data["static"]["pile_id"] == 0].sum())
     G = data["parameters"].get("spec", {}).get("params", {}).get("G")
-    frames, _ = _analyse_frames(data, late_window(data["time"]).tolist(), target_mass, min_members, G, device)
+    frames, _, _ = _analyse_frames(data, late_window(data["time"]).tolist(), target_mass, min_members, G, device)
     late = late_statistics(frames, target_mass, start=float(data["time"][0]))
     return {"steps": int(data["step"][-1]), "time": float(data["time"][-1]), **late}
 
@@ -326,7 +323,7 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
     if frames[-1] != len(data["step"]) - 1:
         frames.append(len(data["step"]) - 1)
 
-    series, final = _analyse_frames(data, frames, target_mass, min_members, G, device, progress)
+    series, catalogue, final = _analyse_frames(data, frames, target_mass, min_members, G, device, progress)
 
     obs = data["observables"]
     # Trajectories written before decco-warp 0.2 have no deepest_overlap series.
@@ -338,7 +335,7 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
     classes = int(static["species"].max()) + 1
     analysis = {
         "frames": series,
-        "catalogue": final.pop("catalogue"),
+        "catalogue": catalogue,
         "conservation": {
             "time": data["time"],
             "momentum_drift": np.linalg.norm(obs["momentum"] - obs["momentum"][0], axis=1) / p_scale,
@@ -468,7 +465,7 @@ ANALYSIS_UNITS = {
     "composition": "particles per size class",
     "free_composition": "particles per size class, in no cluster",
     "cluster_mass": "g (each frame's clusters, largest first; 0: none)",
-    **{name: "erg" for name in ENERGY_SERIES},
+    **{name: OBSERVABLE_UNITS[name] for name in ENERGY_SERIES},
 }
 
 
@@ -521,7 +518,7 @@ def read_catalogue(path) -> dict[str, np.ndarray]:
     return columns
 
 
-def refresh_summary(run_dir, collision: dict, params: dict, predicted_overlap=None, piles: dict | None = None) -> dict:
+def refresh_summary(run_dir, collision: dict, params: dict, piles: dict | None = None) -> dict:
     """A run's summary recomputed from its analysis.h5 alone (no trajectory: a run kept without one)
     and its set-up's ``collision`` metadata (set up again from its spec.toml: ``plan_start``), with
     every column of today's :func:`summarise`; analysis.h5 is rewritten (compressed, with units) and
@@ -538,7 +535,7 @@ def refresh_summary(run_dir, collision: dict, params: dict, predicted_overlap=No
         params=params,
         n_particles=int(old["n_particles"]),
         target_mass=float(old["target_mass"]),
-        predicted_overlap=old.get("predicted_overlap", predicted_overlap),
+        predicted_overlap=old.get("predicted_overlap"),
         min_members=int(old["min_members"]),
         every=int(old["analyse_every"]),
         piles=piles,
