@@ -248,7 +248,7 @@ def pile(
 
         typer.echo(f"pile: {particles} particles of radii {', '.join(f'{r / 1e5:g}' for r in size_radii)} km (equal mass per size class), "
                    f"density {density:g} g/cm^3, seed {seed}, {gravity} gravity on {chosen}")  # fmt: skip
-        typer.echo(f"cost: {formation_cost(particles, size_radii, density, fill, dt, gravity, chosen)}; gives up at {max_steps} steps")
+        typer.echo(f"cost: {formation_cost(particles, density, fill, dt, gravity, chosen)}; gives up at {max_steps} steps")
         typer.echo(f"verdict: would form {out}" + (" (replacing it)" if out.exists() else ""))
         return
     if note:
@@ -309,17 +309,21 @@ def pile(
         fail(*failed)
     from .collision import pile_radius
 
-    import numpy as np
-
     meta = formed.metadata
-    radii = np.unique(formed.radii)  # one per size class, smallest first
-    classes = ", ".join(f"{int(c)} of radius {r / 1e5:g} km" for c, r in zip(meta["size_counts"], radii))
     typer.echo(
-        f"wrote {out}: {formed.n} particles ({classes}), "
+        f"wrote {out}: {formed.n} particles ({_size_classes(formed)}), "
         f"mass {formed.total_mass:.4g} g, radius {pile_radius(formed) / 1e5:.4g} km, U {meta['potential']:.4g} erg; "
         f"{meta['formation_steps']} steps ({meta['formation_time']:.4g} s simulated) in "
         f"{meta['formation_wall_seconds']:.1f} s (this session: {timing[0]})"
     )
+
+
+def _size_classes(pile) -> str:
+    """A pile's size classes in words, smallest first: '385 of radius 7.5 km, 48 of radius 15 km, ...'."""
+    import numpy as np
+
+    radii, counts = np.unique(pile.radii, return_counts=True)
+    return ", ".join(f"{int(c)} of radius {r / 1e5:g} km" for c, r in zip(counts, radii))
 
 
 # --- simulate, resume ----------------------------------------------------------------------
@@ -978,13 +982,10 @@ def extract(
     from .collision import pile_radius
 
     meta = remnant.metadata
-    radii = np.unique(remnant.radii)
-    counts = np.bincount(np.searchsorted(radii, remnant.radii), minlength=radii.size)
-    classes = ", ".join(f"{int(c)} of radius {r / 1e5:g} km" for c, r in zip(counts, radii))
     rate = float(np.linalg.norm(meta["spin_vector"]))
     turning = "its spin removed" if spin == "remove" else f"spinning at {rate:.3g} rad/s (a turn in {2 * np.pi / rate / 3600:.3g} h)" if rate > 0 else "not spinning"
     settled = f"settled in {meta['settle_steps']} steps" if settle else "not settled (--no-settle)"
-    typer.echo(f"wrote {out}: fragment {fragment} of {run_dir} ({remnant.n} particles: {classes}), mass {remnant.total_mass:.4g} g, "
+    typer.echo(f"wrote {out}: fragment {fragment} of {run_dir} ({remnant.n} particles: {_size_classes(remnant)}), mass {remnant.total_mass:.4g} g, "
                f"radius {pile_radius(remnant) / 1e5:.4g} km, {turning}, {settled}")  # fmt: skip
 
 

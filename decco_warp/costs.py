@@ -60,19 +60,19 @@ def run_cost(n: int, gravity: str, device: str, steps: int, gravity_every: int =
     return line
 
 
-def formation_steps(n: int, radii, density: float, fill: float, dt: float) -> tuple[int, int]:
-    """The range of steps a pile of ``n`` particles (equal mass per size class of ``radii`` [cm],
-    ``density`` [g/cm^3]) takes to settle from a seeding sphere filled to ``fill``: FORMATION_FREE_FALLS
-    free-fall times sqrt(3 pi / (32 G rho_seed)) of that sphere's mean density."""
+def formation_steps(density: float, fill: float, dt: float) -> tuple[int, int]:
+    """The range of steps of ``dt`` [s] a pile of grains of ``density`` [g/cm^3] takes to settle from a
+    seeding sphere filled to ``fill``: FORMATION_FREE_FALLS free-fall times sqrt(3 pi / (32 G rho_seed))
+    of that sphere's mean density (whatever the particle count and radii)."""
     rho = fill * density
     free_fall = math.sqrt(3.0 * math.pi / (32.0 * G_CGS * rho))
     low, high = FORMATION_FREE_FALLS
     return int(low * free_fall / dt), int(high * free_fall / dt)
 
 
-def formation_cost(n: int, radii, density: float, fill: float, dt: float, gravity: str, device: str) -> str:
+def formation_cost(n: int, density: float, fill: float, dt: float, gravity: str, device: str) -> str:
     """One line: the steps and wall time a formation of ``n`` particles is likely to take on ``device``."""
-    low, high = formation_steps(n, radii, density, fill, dt)
+    low, high = formation_steps(density, fill, dt)
     step = step_seconds(n, gravity, device)
     return (f"settling takes {low} to {high} steps ({FORMATION_FREE_FALLS[0]:g} to {FORMATION_FREE_FALLS[1]:g} free-fall times of the seeding sphere): about "
             f"{duration(step * low)} to {duration(step * high)} on {device} ({1e3 * step:.3g} ms a step)")  # fmt: skip

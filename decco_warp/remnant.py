@@ -16,6 +16,7 @@ import h5py
 import numpy as np
 
 from .checks import InputError
+from .diagnostics import diagnostics
 from .io import read_trajectory
 from .params import Params
 from .pile import remove_net_motion
@@ -104,7 +105,8 @@ def extract_fragment(run_dir, fragment: int = 0, spin: str = "keep", settle: boo
             )
         steps, state = sim.step_count, _centred(sim.state, spin)
     state.time, state.step = 0.0, 0
-    potential = Simulation(state, params, device=device, allow_unstable=True).diagnostics()["potential"] if settle else None
+    # On the settling's own engine: its particles are these, only translated, so U is the same.
+    potential = sim.diagnostics(state)["potential"] if settle else diagnostics(state, params, device)["potential"]
     state.metadata = {"extracted_from": source, "spin": spin, "settle_steps": int(steps), "internal_ke_over_u": ratio,
                       "spin_vector": state.spin(), "potential": potential}  # fmt: skip
     return state

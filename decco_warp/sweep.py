@@ -199,13 +199,15 @@ def _at_resolution(run: dict, settings: dict) -> dict:
     except ValueError as error:
         raise specs.SpecError(f"[sweep] resolution: {error}") from None
     for which in ("target", "projectile"):
-        path = run["piles"][which]
-        if not Path(path).expanduser().is_file():
-            raise specs.SpecError(
-                f"[sweep] resolution = {settings['resolution']:g}: pile file {path} does not exist; build the piles at that "
-                f"resolution first (decco-warp piles PILES.toml --resolution {settings['resolution']:g})"
-            )
+        _require_pile(run["piles"][which], f"[sweep] resolution = {settings['resolution']:g}:",
+                      f"build the piles at that resolution first (decco-warp piles PILES.toml --resolution {settings['resolution']:g})")  # fmt: skip
     return run
+
+
+def _require_pile(path: str, where: str, remedy: str) -> None:
+    """Refuse (SpecError, naming ``where`` and the ``remedy``) a pile file that is not there yet."""
+    if not path.startswith("builtin:") and not Path(path).expanduser().is_file():
+        raise specs.SpecError(f"{where} pile file {path} does not exist; {remedy}")
 
 
 def _pile_alternatives(table, realizations: int) -> dict[str, list[str]]:
@@ -220,8 +222,7 @@ def _pile_alternatives(table, realizations: int) -> dict[str, list[str]]:
         if not isinstance(others, list) or not others or not all(isinstance(o, str) and o.strip() for o in others):
             raise specs.SpecError(f"[sweep.pile_alternatives] {pile!r} must be a non-empty list of pile files")
         for path in (pile, *others):
-            if not path.startswith("builtin:") and not Path(path).expanduser().is_file():
-                raise specs.SpecError(f"[sweep.pile_alternatives] pile file {path} does not exist; build it first (decco-warp piles)")
+            _require_pile(path, "[sweep.pile_alternatives]", "build it first (decco-warp piles)")
         checked[pile] = list(others)
     return checked
 
