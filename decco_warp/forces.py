@@ -25,7 +25,7 @@ from .kernels.bodies import BODY_TYPES
 from .kernels.contacts import CANDIDATES, contact_pass
 from .kernels.fused import pair_forces_tiled
 from .kernels.neighbours import GRID_CELLS, REACH_MARGIN, build_neighbour_list, cell_keys, cell_ranges
-from .kernels.newton import GatherRows, TilePair, contact_pass_ordered, gather_newton, pair_gravity_newton
+from .kernels.newton import GatherRows, TilePair, gather_newton, pair_gravity_newton
 from .kernels.reference import pair_forces_reference
 
 #: Threads per particle of the observables kernel on a GPU.
@@ -76,6 +76,35 @@ def _candidate_arrays(count: int, device: str) -> tuple[wp.array, wp.array]:
 def _bodies(engine, count: int) -> wp.array:
     """Packed bodies (kernels/bodies.py) for an all-pairs sweep, refreshed before each (count 0: none)."""
     return wp.zeros(count, dtype=BODY_TYPES[engine.precision], device=engine.device)
+
+
+class ContactPass:
+    """The contacts of listed candidates (lists in increasing j), a block of CONTACT_BLOCK lanes per
+    particle on a GPU (kernels/contacts.py ``contact_pass``: one thread per particle would
+    leave most of the GPU idle, a few warps per SM at paper sizes); one lane on the CPU, or every
+    lane with Warp's CPU blocks on (tests check the lanes' reduction so).  With ``accumulate``
+    the contact force is added to gravity's in engine.force, else written there alone."""
+
+    def __init__(self, engine, accumulate: bool):
+        self.engine = engine
+        self.block = CONTACT_BLOCK if _on_cuda(engine.device) or wp.config.enable_cpu_blocks else 1
+        self.kernel = contact_pass(engine.params.rolling_friction, self.block, accumulate)
+
+    def launch(self, candidate_count: wp.array, candidates: wp.array, outputs: list) -> None:
+        e = self.engine
+        wp.launch_tiled(
+            self.kernel,
+            dim=[e.count],
+            block_dim=self.block,
+            inputs=[e.model, e.ranges, e.radius, *e.contact_state(), candidate_count, candidates],
+            outputs=outputs,
+            device=e.device,
+        )
+
+
+def _contact_pass(path) -> None:
+    """A path's contact pass (:class:`ContactPass`) over its candidate lists."""
+    path.contact_pass.launch(path.candidate_count, path.candidates, path.outputs())
 
 
 class ForcePath:
@@ -236,7 +265,7 @@ class NewtonGravity:
 
 class NewtonForces(ForcePath):
     """The Newton layout: :class:`NewtonGravity`, then the contacts of the listed candidates, a
-    warp per particle (kernels/newton.py ``contact_pass_ordered``; with Warp's CPU blocks on, the
+    warp per particle (kernels/contacts.py ``contact_pass``; with Warp's CPU blocks on, the
     CPU runs those lanes too: tests check the lanes' reduction so)."""
 
     name = "newton"
@@ -247,21 +276,12 @@ class NewtonForces(ForcePath):
         self.candidate_count, self.candidates = _candidate_arrays(engine.count, engine.device)
         self.body = _bodies(engine, engine.count)
         self.gravity = NewtonGravity(engine, engine.layout, self.body, self.candidate_count, self.candidates)
-        self.contact_block = CONTACT_BLOCK if _on_cuda(engine.device) or wp.config.enable_cpu_blocks else 1
         # The gather lists each particle's candidates in increasing j: lanes can share them out.
-        self.contact_kernel = contact_pass_ordered(engine.params.rolling_friction, self.contact_block)
+        self.contact_pass = ContactPass(engine, accumulate=True)
 
     def evaluate(self) -> None:
-        e = self.engine
-        self.gravity.evaluate(e.force)
-        wp.launch_tiled(
-            self.contact_kernel,
-            dim=[e.count],
-            block_dim=self.contact_block,
-            inputs=[e.model, e.ranges, e.radius, *e.contact_state(), self.candidate_count, self.candidates],
-            outputs=self.outputs(),
-            device=e.device,
-        )
+        self.gravity.evaluate(self.engine.force)
+        _contact_pass(self)
 
 
 class TreeGravity:
@@ -287,18 +307,6 @@ class TreeGravity:
         self.tree.potential(e.params.G, e.params.theta_open, e.mass, potential_out)
 
 
-def _contact_pass(path) -> None:
-    """A path's contact pass (kernels/contacts.py ``contact_pass``) over its candidate lists."""
-    e = path.engine
-    wp.launch(
-        path.contact_kernel,
-        dim=e.count,
-        inputs=[e.model, e.ranges, e.radius, *e.contact_state(), path.candidate_count, path.candidates],
-        outputs=path.outputs(),
-        device=e.device,
-    )
-
-
 def _candidate_observables(engine, contacts: list, candidate_count: wp.array, candidates: wp.array) -> None:
     """The contact observables of a frame from each particle's candidate list (a superset of its contacts)."""
     e = engine
@@ -313,7 +321,7 @@ def _candidate_observables(engine, contacts: list, candidate_count: wp.array, ca
 
 class TreeForces(ForcePath):
     """The tree path: :class:`TreeGravity`, contacts from a hash grid's candidates, one thread per
-    particle in increasing j (kernels/tree.py, kernels/contacts.py ``contact_pass``).  Frames too
+    particle in increasing j (kernels/tree.py, :class:`ContactPass`).  Frames too
     cost O(N log N): the potential from the tree, the contact observables from the grid's candidates."""
 
     name = "tree"
@@ -323,7 +331,7 @@ class TreeForces(ForcePath):
         super().__init__(engine)
         self.gravity = TreeGravity(engine)
         self.candidate_count, self.candidates = _candidate_arrays(engine.count, engine.device)
-        self.contact_kernel = contact_pass(engine.params.rolling_friction)  # added to gravity's force
+        self.contact_pass = ContactPass(engine, accumulate=True)  # added to gravity's force
 
     def _candidates(self) -> None:
         """Each particle's contact candidates from the hash grid (the tree built)."""
@@ -428,7 +436,7 @@ class RespaForces(ForcePath):
         """Gravity at the positions of the last outer step [dyne]."""
         self.neighbours = NeighbourList(engine, engine.min_radius)
         self.candidate_count, self.candidates = self.neighbours.candidate_count, self.neighbours.candidates
-        self.contact_kernel = contact_pass(engine.params.rolling_friction, accumulate=False)
+        self.contact_pass = ContactPass(engine, accumulate=False)
 
     def evaluate(self) -> None:
         """Gravity and the contacts at the current state, the neighbour list built afresh."""

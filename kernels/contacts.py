@@ -8,12 +8,11 @@ out of the hot loops.
 
 Candidate lists are kept in increasing j as they are noted (``note_candidate``): the tree path's
 hash grid (:mod:`.tree` ``grid_candidates``) and the neighbour list of gravity on its own clock
-(:mod:`.neighbours`).  ``contact_pass`` (one thread per particle) walks a list in order, so its
-sums (and the ledger's channels) do not depend on scheduling, nor, since a listed pair that does
-not touch adds an exact zero, on which superset of the touching pairs the list holds; the
-observables walk the lists the same way (``candidates_walk``, ``candidate_at``).  The Newton
-layout's gather lists its candidates in increasing j too; its own contact pass, a warp per
-particle, is in :mod:`.newton`.
+(:mod:`.neighbours`), and the Newton layout's gather (:mod:`.newton`).  ``contact_pass`` (a warp
+per particle on a GPU, one lane on the CPU) walks a list in order and reduces its lanes in a fixed
+order, so its sums (and the ledger's channels) do not depend on scheduling, nor, since a listed
+pair that does not touch adds an exact zero, on which superset of the touching pairs the list
+holds; the observables walk the lists the same way (``candidates_walk``, ``candidate_at``).
 """
 
 import functools
@@ -177,7 +176,7 @@ def contact_sum_of(rows: ContactRows) -> ContactSum:
     return total
 
 
-# --- Candidate lists and the one-thread contact pass -------------------------------------------
+# --- Candidate lists and the contact pass -------------------------------------------
 
 #: Contact candidates a particle may note for the contact pass (the list's width; kernels read it
 #: from the array).  A large grain of a settled pile touches up to ~27 small ones, ~33 when the
@@ -227,12 +226,16 @@ def candidate_at(i: int, listed: bool, ranges: wp.array(dtype=wp.vec2i), candida
 
 
 @functools.cache
-def contact_pass(rolling: str = "couple", accumulate: bool = True):
-    """Build the contact pass over candidate lists, one thread per particle: its candidates in
-    increasing j, each evaluated in float64 (zero unless they touch).  With ``accumulate`` (the tree
-    path) the contact force is added to ``force_inout`` (gravity's); without (gravity on its own
-    clock) it is written there alone.  ``torque_out`` and the ledger's ``channels_out`` (when it has
-    rows) are written whole."""
+def contact_pass(rolling: str = "couple", block_dim: int = 1, accumulate: bool = True):
+    """Build the contact pass over candidate lists kept in increasing j: a block of ``block_dim``
+    lanes per particle (32 on a GPU, 1 on the CPU; launch with ``wp.launch_tiled(dim=[N])``), each
+    lane evaluating every ``block_dim``-th candidate in float64 and adding them in list order, the
+    lanes then reduced in a fixed order, so that the sum does not depend on scheduling (one lane:
+    in increasing j).  After an overflow of the list, lane 0 looks at every j of the system in
+    turn.  Writes ``torque_out`` and the ledger's ``channels_out`` (when it has rows) whole; with
+    ``accumulate`` adds the contact force to ``force_inout`` (gravity's), without (gravity on its
+    own clock) writes it there alone."""
+    contact_channels = contact_function(rolling)
     add_contact = contact_sum_function(rolling)
 
     @wp.kernel(module="unique", enable_backward=False)
@@ -253,16 +256,24 @@ def contact_pass(rolling: str = "couple", accumulate: bool = True):
         channels_out: wp.array2d(dtype=wp.vec3d),
         deepest_out: wp.array(dtype=wp.int64),
     ):
-        i = wp.tid()
-        listed, walk = candidates_walk(i, ranges, candidate_count, candidates)
-        total = ContactSum()
-        for s in range(walk):  # the list, or every j after an overflow (each pair checked in float64)
-            j = candidate_at(i, listed, ranges, candidates, s)
-            total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out, total)
-        contacts = write_contacts(total, i, torque_out, channels_out)
-        if wp.static(accumulate):
-            force_inout[i] = force_inout[i] + contacts
-        else:
-            force_inout[i] = contacts
+        i, lane = wp.tid()
+        noted = candidate_count[i]
+        listed = noted <= candidates.shape[1]
+        mine = ContactRows()
+        for slot in range(lane, wp.where(listed, noted, 0), wp.block_dim()):
+            spring, sliding, sliding_torque, rolling_force, rolling_torque = contact_channels(
+                model, i, candidates[i, slot], radius_in, position_in, velocity_in, omega_in, deepest_out
+            )
+            mine += wp.matrix_from_rows(spring, sliding, sliding_torque, rolling_force, rolling_torque)
+        total = contact_sum_of(wp.tile_sum(wp.tile(mine, preserve_type=True))[0])
+        if lane == 0:
+            if not listed:  # every j of the system, each checked in float64
+                for j in range(ranges[i][0], ranges[i][1]):
+                    total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out, total)
+            contacts = write_contacts(total, i, torque_out, channels_out)
+            if wp.static(accumulate):
+                force_inout[i] = force_inout[i] + contacts
+            else:
+                force_inout[i] = contacts
 
     return contact_pass_kernel

@@ -11,8 +11,8 @@ computed once and given to both particles, in three launches with no atomics.
    and side, a row of field sums and 64-bit candidate words.
 2. ``gather_newton``, one thread per particle: adds its rows in float64 in tile order and lists its
    candidates in increasing j from the words.
-3. ``contact_pass_ordered``: the contacts in float64 (:mod:`.contacts`), a warp per particle, each
-   lane taking every 32nd candidate in list order and the lanes reduced in a fixed order.
+3. the contacts of the listed candidates in float64 (:mod:`.contacts` ``contact_pass``, a warp
+   per particle, as every path that lists candidates).
 
 Every sum has a fixed order, so the motion is bit-reproducible on a GPU, and the same source runs on
 the CPU (tiles of 4, one lane), where it equals the plain loop.  Half the pairs and no atomics give
@@ -26,7 +26,6 @@ import functools
 import warp as wp
 
 from .bodies import BodyDouble, BodyMixed, is_candidate, near_bound, real_types, separation, sweep_of
-from .contacts import ContactRows, contact_function, contact_sum_function, contact_sum_of, write_contacts
 from .pair import ContactModel
 
 wp.set_module_options({"enable_backward": False})
@@ -296,56 +295,3 @@ def gather_newton(precision: str = "mixed", listing: bool = True):
             candidate_count[i] = noted
 
     return gather_newton_kernel
-
-
-# --- The contacts: a warp per particle ----------------------------------------------------------
-
-
-@functools.cache
-def contact_pass_ordered(rolling: str = "couple", block_dim: int = 1):
-    """Build the contact pass for candidate lists that come in increasing j (the Newton layout's):
-    a block of ``block_dim`` lanes per particle (32 on a GPU, 1 on the CPU; launch with
-    ``wp.launch_tiled(dim=[N])``), each lane evaluating every ``block_dim``-th candidate in float64
-    and adding them in list order, the lanes then reduced in a fixed order, so that the sum does not
-    depend on scheduling (on the CPU: in increasing j, as :func:`.contacts.contact_pass`).  After an
-    overflow of the list, lane 0 looks at every j of the system in turn.  Writes ``torque_out`` and
-    the ledger's ``channels_out`` (when it has rows) whole and adds the contact force to
-    ``force_inout``."""
-    contact_channels = contact_function(rolling)
-    add_contact = contact_sum_function(rolling)
-
-    @wp.kernel(module="unique", enable_backward=False)
-    def contact_pass_ordered_kernel(
-        # Model:
-        model: ContactModel,
-        ranges: wp.array(dtype=wp.vec2i),  # per particle: its system's particles, [first, end)
-        radius_in: wp.array(dtype=wp.float64),
-        # State in:
-        position_in: wp.array(dtype=wp.vec3d),
-        velocity_in: wp.array(dtype=wp.vec3d),
-        omega_in: wp.array(dtype=wp.vec3d),
-        candidate_count: wp.array(dtype=wp.int32),
-        candidates: wp.array2d(dtype=wp.int32),
-        # Out:
-        force_inout: wp.array(dtype=wp.vec3d),
-        torque_out: wp.array(dtype=wp.vec3d),
-        channels_out: wp.array2d(dtype=wp.vec3d),
-        deepest_out: wp.array(dtype=wp.int64),
-    ):
-        i, lane = wp.tid()
-        noted = candidate_count[i]
-        listed = noted <= candidates.shape[1]
-        mine = ContactRows()
-        for slot in range(lane, wp.where(listed, noted, 0), wp.block_dim()):
-            spring, sliding, sliding_torque, rolling_force, rolling_torque = contact_channels(
-                model, i, candidates[i, slot], radius_in, position_in, velocity_in, omega_in, deepest_out
-            )
-            mine += wp.matrix_from_rows(spring, sliding, sliding_torque, rolling_force, rolling_torque)
-        total = contact_sum_of(wp.tile_sum(wp.tile(mine, preserve_type=True))[0])
-        if lane == 0:
-            if not listed:  # every j of the system, each checked in float64
-                for j in range(ranges[i][0], ranges[i][1]):
-                    total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out, total)
-            force_inout[i] = force_inout[i] + write_contacts(total, i, torque_out, channels_out)
-
-    return contact_pass_ordered_kernel

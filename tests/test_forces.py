@@ -256,6 +256,7 @@ def test_a_squeezed_pile_notes_its_contacts_and_no_list_overflows(gravity, devic
 
 CPU_BLOCK_LAYOUTS = """
 import sys
+from dataclasses import replace
 import numpy as np, warp as wp
 wp.config.enable_cpu_blocks = True  # the CPU runs every lane of a block, as a GPU does
 wp.config.kernel_cache_dir = sys.argv[1]
@@ -271,6 +272,16 @@ for precision, tolerance in (("float64", 1e-12), ("mixed", 1e-5)):
         got = dw.compute_forces(state, params, device="cpu", precision=precision, layout=layout)
         for g, w in zip(got, want):
             assert np.abs(g - w).max() <= tolerance * np.abs(w).max(), (precision, layout)
+    # Gravity on its own clock: the contact pass's 32 lanes over the neighbour list.
+    got = dw.compute_forces(state, replace(params, gravity_every=5), device="cpu", precision=precision)
+    for g, w in zip(got, want):
+        assert np.abs(g - w).max() <= tolerance * np.abs(w).max(), (precision, "gravity_every")
+# The tree path's contacts (32 lanes over the hash grid's lists), without gravity: the tree's is approximate.
+no_gravity = replace(params, G=0.0)
+want = dw.compute_forces(state, no_gravity, device="cpu", precision="float64", force_kernel="reference")
+got = dw.compute_forces(state, replace(no_gravity, gravity="tree"), device="cpu", precision="float64")
+for g, w in zip(got, want):
+    assert np.abs(g - w).max() <= 1e-12 * np.abs(w).max(), "tree"
 # The ledger's channels (float64 in either precision), summed over a block's lanes by the fused
 # layout's own reduction: lanes past 32 (two warps on a GPU), four particles a block, slots overflowing.
 def channels(precision, **options):
@@ -288,7 +299,7 @@ print("SAME")
 
 def test_gpu_layouts_run_lane_by_lane_on_the_cpu_equal_the_reference_kernel(tmp_path):
     """The GPU's layouts (blocks of 16 and 32 lanes striding over j, the slots' overflow, the Newton
-    layout's contact pass of 32 lanes a particle, the block reductions) run with Warp's CPU blocks in a fresh interpreter:
+    layout's, the neighbour list's and the tree's contact pass of 32 lanes a particle, the block reductions) run with Warp's CPU blocks in a fresh interpreter:
     forces and torques equal the plain kernel's (float64 to round-off; mixed within 1e-5), and so
     do the ledger's channels of the fused layout (float64 in both)."""
     import subprocess
