@@ -24,7 +24,7 @@ import warp as wp
 from .engine import Engine
 from .layouts import Layout, choose_layout
 from .params import Params
-from .simulation import Simulation
+from .simulation import Simulation, graph_steps
 from .state import State
 
 #: Arithmetic per pair used for the device limit (gravity ~20 flops), as in the issue tracker.
@@ -188,7 +188,9 @@ def bench_size(
     """One row: the force evaluation and the full step at ``n`` (pairs/s counts N^2 pairs; a tree row
     gives none, only its times and particles/s), beside the one-thread-per-particle kernel.
     With ``systems`` > 1, that many systems of ``n`` stepped together, and pairs/s counts them all.
-    With ``gravity_every`` K > 1 a call is ``steps`` rounded up to whole outer steps, and the row
+    A call is ``steps`` rounded up to whole recorded graphs (simulation.graph_steps: 50 steps, or
+    whole outer steps of K), as a run steps: steps left over are launched one by one, and at K > 1
+    each of those reads the list's stale flag on the host.  With ``gravity_every`` K > 1 the row
     counts the neighbour list's builds per step."""
     state = bench_system(system, n, systems)
     sizes = [n] * systems
@@ -198,7 +200,8 @@ def bench_size(
     force_seconds = _seconds_per_call(tiled.eval_forces, device, budget)
     # The full step as runs take it: with the energy ledger.
     sim = Simulation(state, params, device=device, precision=precision, layout=layout, allow_unstable=True, ledger=True, systems=sizes)
-    steps = gravity_every * math.ceil(steps / gravity_every)
+    block = graph_steps(gravity_every)
+    steps = block * math.ceil(steps / block)
     first_step, first_builds = sim.step_count, sim.neighbour_list_builds()
     step_seconds = _seconds_per_call(lambda: sim.step(steps), device, budget) / steps
     builds = None if first_builds is None else (sim.neighbour_list_builds() - first_builds) / (sim.step_count - first_step)

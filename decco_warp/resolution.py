@@ -15,6 +15,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from .params import auto_gravity_every
+
 
 def length_factor(resolution: float) -> float:
     """f = R^(-1/3): how a length (a radius) scales at resolution R."""
@@ -58,7 +60,8 @@ def scaled_run(run: dict, resolution: float, scale_contacts: bool, defaults: dic
             value = params.get(key, defaults["params"][key])
             if value != "auto":
                 params[key] = float(value) * f
-        outer = int(params.get("gravity_every", defaults["params"].get("gravity_every", 1)))
+        outer = params.get("gravity_every", defaults["params"].get("gravity_every", 1))
+        outer = auto_gravity_every() if outer == "auto" else int(outer)
         table = run.setdefault("run", {})
         for key in ("steps", "output_every", "checkpoint_every"):
             if key == "steps" and "duration" in table:

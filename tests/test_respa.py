@@ -2,6 +2,7 @@
 stepping against a float64 NumPy RESPA step, the neighbour list that feeds the contacts, the energy
 ledger, bit-exact restarts and ensembles."""
 
+import math
 import re
 from dataclasses import replace
 
@@ -80,9 +81,10 @@ def test_one_outer_step_equals_a_numpy_respa_step(precision, tolerance):
 
 
 def _fast_clump(n=80, seed=7):
-    """A contact clump whose particles move ~5e4 cm/s: 2e3 cm a step, past half the skin (7.5e4 cm)
-    in a few tens of steps, so that the neighbour list is rebuilt again and again."""
-    return contact_cluster(n, seed=seed, overlap_range=(1.0, 1e3), speed=5e4, spin=1e-3)
+    """A contact clump whose particles move fast against the skin (of the paper's smallest radius,
+    7.5e5 cm): ~1/3 of it a second, 1/75 a step (dt = 0.04 s), past half the skin in a few tens of
+    steps, so that the neighbour list is rebuilt again and again."""
+    return contact_cluster(n, seed=seed, overlap_range=(1.0, 1e3), speed=SKIN_FRACTION * 7.5e5 / 3, spin=1e-3)
 
 
 def _touching_pairs(positions, radii):
@@ -272,6 +274,7 @@ def _spec(tmp_path, name, params=None, **run):
     from decco_warp import spec as specs
 
     values = {"name": name, "out": str(tmp_path), "device": "cpu", "steps": 300, "output_every": 100, "checkpoint_every": 100, **run}
+    values = {key: value for key, value in values.items() if value is not None}  # None: not given
     return specs.resolve_spec({"run": values, "params": {"gravity_every": 5, **(params or {})}})
 
 
@@ -311,7 +314,6 @@ def test_a_run_on_two_clocks_records_its_clock_and_resumes_bit_identically(tmp_p
         ({"gravity_every": 2.5}, {}, r"\[params\] gravity_every = 2.5: must be int an integer >= 1"),
         ({"gravity_every": "x"}, {}, r"\[params\] gravity_every = 'x': must be int an integer >= 1"),
         ({"gravity_every": True}, {}, r"\[params\] gravity_every = True: must be int an integer >= 1"),
-        ({"gravity_every": "auto"}, {}, r"\[params\] gravity_every = 'auto': \"auto\" awaits the equivalence table of docs/benchmarks.md"),
         ({}, {"steps": 302}, r"\[run\] steps = 302: with \[params\] gravity_every = 5, steps, output_every and checkpoint_every must be multiples of 5"),
         ({}, {"output_every": 7, "checkpoint_every": 12}, r"\[run\] output_every = 7, checkpoint_every = 12: with \[params\] gravity_every = 5"),
     ],
@@ -322,6 +324,18 @@ def test_a_bad_clock_in_a_specification_is_one_clear_line(tmp_path, params, run,
     with pytest.raises(specs.SpecError, match=message) as error:
         _spec(tmp_path, "bad", params, **run)
     assert "\n" not in str(error.value)
+
+
+def test_auto_gravity_every_is_the_k_of_the_equivalence_table_and_the_spec_records_it(tmp_path):
+    """gravity_every = "auto" resolves to GRAVITY_EVERY_AUTO (an integer > 1: the table of
+    docs/benchmarks.md supports K up to 50), the resolved spec holding the number, and a duration
+    becomes whole outer steps of it."""
+    from decco_warp.params import GRAVITY_EVERY_AUTO
+
+    spec = _spec(tmp_path, "auto", {"gravity_every": "auto"}, steps=None, duration=1.0, output_every=GRAVITY_EVERY_AUTO, checkpoint_every=GRAVITY_EVERY_AUTO)
+    assert isinstance(GRAVITY_EVERY_AUTO, int) and 1 < GRAVITY_EVERY_AUTO <= 50
+    assert spec["params"]["gravity_every"] == GRAVITY_EVERY_AUTO
+    assert spec["run"]["steps"] == GRAVITY_EVERY_AUTO * math.ceil(1.0 / 0.04 / GRAVITY_EVERY_AUTO)
 
 
 def test_a_duration_becomes_whole_outer_steps():
