@@ -159,10 +159,13 @@ RUN_FIGURES = {
 
 
 def draw_run(analysis: dict, run_dir: Path, end_time: float | None = None) -> list[Path]:
-    """Every figure of RUN_FIGURES for one analysed run, into ``run_dir``/figures; with ``end_time``
+    """Every figure of RUN_FIGURES for one analysed run (the clusters only where the final positions
+    are kept), into ``run_dir``/figures; with ``end_time``
     [s] the time axes run from 0 to it (the same scale for every run of a set)."""
     paths = []
     for name, plot in RUN_FIGURES.items():
+        if name == "clusters" and "positions" not in analysis.get("final", {}):
+            continue  # a lean analysis.h5 (runs/results/lean.py) keeps no final positions
         fig = plot(analysis)
         if end_time is not None and name != "clusters":
             for ax in fig.axes:

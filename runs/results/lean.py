@@ -1,0 +1,60 @@
+"""Make committed run folders lean: each analysis.h5 without its per-particle arrays of the final
+frame's motion and the per-frame cluster labels, the largest datasets of a run (~0.7 of its ~0.8 MB
+at 10 000 particles), so that whole campaigns fit runs/results' 40 MB.
+
+    python runs/results/lean.py runs/results/gravity_every runs/results/resolution   # folders of runs
+
+Dropped: ``final/positions``, ``final/velocities`` and ``frames/label``.  Kept: every series, the
+fragment catalogue, the final frame's labels, radii and masses (``decco-warp extract`` and the
+figures read them), the summaries.  The dropped arrays come back from the run's trajectory
+(``decco-warp analyze`` of a rerun).  A file is rewritten through a temporary copy, renamed into
+place only when whole; files without the datasets are left as they are.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import h5py
+
+DROPPED = ("final/positions", "final/velocities", "frames/label")
+
+
+def lean(path: Path) -> bool:
+    """Rewrite ``path`` without DROPPED; False if it held none of them."""
+    with h5py.File(path, "r") as source:
+        if not any(name in source for name in DROPPED):
+            return False
+        part = path.with_name(path.name + ".lean")
+        with h5py.File(part, "w") as target:
+            for key, value in source.attrs.items():
+                target.attrs[key] = value
+
+            def copy(name, item):
+                if name in DROPPED:
+                    return
+                if isinstance(item, h5py.Group):
+                    group = target.require_group(name)
+                    group.attrs.update(item.attrs)
+                else:
+                    source.copy(item, target[item.parent.name], name=name.rsplit("/", 1)[-1])
+
+            source.visititems(copy)
+    os.replace(part, path)
+    return True
+
+
+def main(folders: list[str]) -> None:
+    if not folders:
+        sys.exit(__doc__)
+    for folder in folders:
+        for path in sorted(Path(folder).glob("**/analysis.h5")):
+            before = path.stat().st_size
+            if lean(path):
+                print(f"{path}: {before / 1e3:.0f} -> {path.stat().st_size / 1e3:.0f} kB")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
