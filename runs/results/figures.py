@@ -207,6 +207,51 @@ def overlaps():
     return fig
 
 
+LADDER_ETAS = (3.0, 6.0, 9.0)
+
+
+def ladder_points() -> list[dict]:
+    """The resolution ladder's runs (1/4 head-on): particles, eta, m_lf/m_t and whether it is a
+    settled analysed value (False: not settled, or the last checkpoint's alone, x4/final_frame.csv)."""
+    points = []
+    for run in runs("resolution") + runs("fig3", 0.25):
+        s = run["summary"]
+        if s["theta_deg"] == 0.0 and round(s["eta"], 6) in LADDER_ETAS:
+            points.append({"n": s["n_particles"], "eta": round(s["eta"], 6), "value": s["largest_mass_ratio"], "firm": s.get("settled") is not False})
+    final = RESULTS / "resolution" / "x4" / "final_frame.csv"
+    if final.exists():
+        import csv
+
+        for row in csv.DictReader(final.open()):
+            points.append({"n": int(row["n_particles"]), "eta": float(row["eta"]), "value": float(row["largest_mass_ratio_final"]), "firm": False})
+    return points
+
+
+def resolution():
+    """m_lf/m_t of the 1/4 head-on collision against the particle count, per eta: every run (hollow:
+    not settled, or the last frame alone), the mean of each rung with its spread (one standard deviation)."""
+    points = ladder_points()
+    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    for k, eta in enumerate(LADDER_ETAS):
+        colour = f"C{k}"
+        mine = [p for p in points if p["eta"] == eta]
+        for p in mine:
+            ax.plot(p["n"], p["value"], "o", color=colour, alpha=0.5, markersize=4, markerfacecolor=colour if p["firm"] else "none")
+        counts = sorted({p["n"] for p in mine})
+        means = [np.mean([p["value"] for p in mine if p["n"] == n]) for n in counts]
+        spreads = [np.std([p["value"] for p in mine if p["n"] == n], ddof=1) if sum(p["n"] == n for p in mine) > 1 else 0.0 for n in counts]
+        ax.errorbar(counts, means, yerr=spreads, color=colour, marker="s", capsize=3, label=f"eta = {eta:g}")
+    ax.set_xscale("log")
+    counts = sorted({p["n"] for p in points})
+    ax.set_xticks(counts, [f"{n:,}".replace(",", " ") for n in counts])
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax.set_xlabel("particles (target + projectile)")
+    ax.set_ylabel("m_lf / m_t")
+    ax.set_title("1/4 head-on: the same bodies at 1/4, 1 and 4 times the paper's particles\n(k_in and dt x N^(-1/3))", fontsize=9)
+    ax.legend(fontsize=8)
+    return fig
+
+
 def run_figures() -> None:
     """Each committed run's own figures into its figures/, each experiment's cross-run ones into its figures/."""
     for folder in sorted(p for p in RESULTS.iterdir() if p.is_dir()):
@@ -228,6 +273,7 @@ def main() -> None:
         ("validation-stress-shares", stress_shares()),
         ("validation-conservation", conservation()),
         ("validation-overlaps", overlaps()),
+        ("validation-resolution", resolution()),
     ]:
         path = save(fig, OUT, name)[0]
         path.with_suffix(".pdf").unlink()
