@@ -181,16 +181,23 @@ def _alone(x: np.ndarray, v: np.ndarray, m: np.ndarray, radii: np.ndarray, conta
     n = m.size
     alone = contacts.getnnz(axis=1) == 0
     near = NEAR_RADII * float(radii.max())
-    pairs = cKDTree(x).query_pairs(r=near, output_type="ndarray")
-    if pairs.size:
-        i, j = pairs[:, 0], pairs[:, 1]
-        reach = ((v[i] - v[j]) ** 2).sum(axis=1) * np.linalg.norm(x[i] - x[j], axis=1)
+    # Only the particles touching nobody are looked at: in a compact remnant every particle has
+    # thousands within NEAR_RADII (1e8 pairs at 25 000 particles), and none of them can be alone.
+    seeds = np.flatnonzero(alone)
+    if seeds.size:
+        around = cKDTree(x).query_ball_point(x[seeds], r=near)
+        s = np.repeat(seeds, [len(a) for a in around])
+        j = np.concatenate([np.asarray(a, dtype=np.int64) for a in around])
+        s, j = s[j != s], j[j != s]
+        reach = ((v[j] - v[s]) ** 2).sum(axis=1) * np.linalg.norm(x[j] - x[s], axis=1)
         binds = np.zeros(n, dtype=bool)
-        binds[i[reach < 2.0 * G * m[i]]] = True
-        binds[j[reach < 2.0 * G * m[j]]] = True
+        binds[s[reach < 2.0 * G * m[s]]] = True
         alone &= ~binds
     slow = math.sqrt(2.0 * G * float(m.max()) / near)
-    alone &= cKDTree(v).query_ball_point(v, r=slow, return_length=True) <= 1  # (itself)
+    # Another particle within ``slow`` in velocity space (itself is the nearest, at 0): the second
+    # nearest, found or not, rather than counting every particle of a co-moving remnant.
+    second, _ = cKDTree(v).query(v, k=2, distance_upper_bound=np.nextafter(slow, np.inf))
+    alone &= ~np.isfinite(second[:, 1])
     return alone
 
 
