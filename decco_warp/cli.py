@@ -45,7 +45,7 @@ def missing(path: Path, what: str = "run folder") -> str:
 
 def write_failed(error: OSError, kept: str) -> None:
     """Exit 5 with one line: the write that failed (``error``), and what is kept."""
-    from .io import describe_write_error
+    from .durable import describe_write_error
 
     fail(f"{describe_write_error(error)}; {kept}", EXIT_OUTPUT)
 
@@ -56,8 +56,8 @@ def _end(code: int, abandoned_before: int = 0) -> None:
     what it wrote before stays readable."""
     import sys
 
-    io = sys.modules.get("decco_warp.io")
-    if io is not None and len(io.ABANDONED) > abandoned_before:
+    durable = sys.modules.get("decco_warp.durable")
+    if durable is not None and len(durable.ABANDONED) > abandoned_before:
         import os
 
         sys.stdout.flush()
@@ -70,14 +70,14 @@ def main_entry() -> None:
     """The console script: typer's app, with usage errors as one line (exit code 2) instead of a panel."""
     import sys
 
-    io = sys.modules.get("decco_warp.io")
-    before = len(io.ABANDONED) if io is not None else 0
+    durable = sys.modules.get("decco_warp.durable")
+    before = len(durable.ABANDONED) if durable is not None else 0
     try:
         code = app(standalone_mode=False)
     except typer.Exit as done:
         _end(done.exit_code, before)
     except OSError as error:  # a write that no command caught (each names what it keeps): still one line
-        from .io import WRITE_ERRNOS, describe_write_error
+        from .durable import WRITE_ERRNOS, describe_write_error
 
         if error.errno not in WRITE_ERRNOS:
             raise
@@ -785,7 +785,7 @@ def bench(
                 f"{fraction} {baseline_text}  {row.layout}"
             )
     if json_out is not None:
-        from .io import json_text, write_atomic
+        from .durable import json_text, write_atomic
 
         table = {"device": chosen, "device_name": d.name, "warp": wp.config.version, "precision": precision,
                  "limit_pairs_per_s": limit, "limit": how, "rows": [benchmarks.as_dict(r) for r in rows]}  # fmt: skip
@@ -821,7 +821,8 @@ def analyze(
     from .analysis.runs import analyse_run
     from .checks import InputError, check_destination
     from .device import DeviceError, resolve_device
-    from .io import FileFormatError, json_text, write_atomic
+    from .durable import json_text, write_atomic
+    from .io import FileFormatError
     from .lock import AnalysisLock, RunFolderBusy, RunFolderLock, ensure_not_analysed
 
     if min_members < 1 or every < 1 or not poll > 0:
@@ -1038,7 +1039,7 @@ def compare(
     for line in result.lines():
         typer.echo(line)
     if json_out is not None:
-        from .io import json_text, write_atomic
+        from .durable import json_text, write_atomic
 
         try:
             write_atomic(json_out, json_text(result.as_dict()))
@@ -1107,7 +1108,8 @@ def view(
 ) -> None:
     """Replay a run into rerun: a local viewer, a recording (.rrd), or a viewer elsewhere."""
     from .checks import check_destination
-    from .io import WRITE_ERRNOS, FileFormatError
+    from .durable import WRITE_ERRNOS
+    from .io import FileFormatError
     from .viz import RerunUnavailable, parse_mode, replay
 
     trajectory = path / "trajectory.h5" if path.is_dir() else path
@@ -1148,7 +1150,8 @@ def export(
 ) -> None:
     """Describe a run's trajectory for other programs (the data stays in trajectory.h5)."""
     from .checks import InputError, check_destination
-    from .io import FileFormatError, clear_write_flags
+    from .io import FileFormatError
+    from .repair import clear_write_flags
     from .lock import RunFolderBusy, RunFolderLock
     from .xdmf import XDMF_FILE, write_xdmf
 

@@ -13,6 +13,9 @@ Nothing here imports Warp: these functions read and write NumPy snapshots.
   ``BackgroundFrames`` writes a run's frames on a worker thread while it steps on.
 * A checkpoint is replaced atomically (temporary file, fsync, rename).
 
+Every write goes through decco_warp/durable.py (atomic replacement, the write hook, the room
+check); a trajectory whose writer was killed has its flags reset by decco_warp/repair.py.
+
 Piles and checkpoints are checked as they are read (decco_warp.checks): values that make
 sense in cgs and, for a pile at rest, no two spheres pressed deep into each other.
 """
@@ -22,12 +25,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import gc
-import io as _io
-import json
-import math
 import os
-import tempfile
-import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +35,8 @@ import numpy as np
 
 from ._version import __version__
 from .checks import InputError, check_particles, check_pile
+from .durable import WRITE_ERRNOS, abandon, as_os_error, atomic_h5, check_space, complaints_held, first_line, pause_point, write_point
+from .repair import HDF5_SIGNATURE, clear_write_flags
 from .state import State
 
 PILE_FORMAT = "decco-warp pile"
@@ -86,160 +86,6 @@ def _plain(value):
 
 
 @contextlib.contextmanager
-def atomic_h5(path: Path):
-    """Write an HDF5 file atomically: built in memory, then written whole (see :func:`write_atomic`).
-
-    HDF5 never meets the disk here, so a full disk or an I/O error is one clean OSError and can
-    never leave HDF5's own state broken (which can crash the process when the file is closed)."""
-    buffer = _io.BytesIO()
-    with h5py.File(buffer, "w") as f:
-        yield f
-    write_atomic(path, buffer.getvalue())
-
-
-def json_ready(value):
-    """``value`` with NumPy scalars and arrays as Python numbers and lists, and every NaN or
-    infinity as None: what strict JSON can hold (``null`` for a number that does not exist)."""
-    if isinstance(value, dict):
-        return {str(key): json_ready(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return [json_ready(item) for item in (value.tolist() if isinstance(value, np.ndarray) else value)]
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
-def json_text(value) -> str:
-    """Strict JSON (RFC 8259: no NaN, no Infinity) of ``value``, indented, with a final newline."""
-    return json.dumps(json_ready(value), indent=2, allow_nan=False) + "\n"
-
-
-def write_atomic(path, data: bytes | str, what: str | None = None) -> Path:
-    """Replace ``path`` with ``data`` atomically: a temporary file beside it, fsync, rename.
-
-    A failed write (no space, an I/O error, the folder gone) raises OSError naming the file and
-    leaves the previous file, if any, as it was; the folder is never created here."""
-    path = Path(path)
-    data = data.encode() if isinstance(data, str) else data
-    write_point(what or path.name)
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(handle, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(temporary, 0o666 & ~_umask())  # mkstemp made it private; give it the usual mode
-        os.replace(temporary, path)
-    except BaseException as error:
-        with contextlib.suppress(OSError):
-            os.unlink(temporary)
-        if isinstance(error, OSError) and not error.filename:
-            raise OSError(error.errno, error.strerror, str(path)) from None
-        raise
-    _fsync_directory(path.parent)
-    return path
-
-
-# --- writes: the fault-injection hook, and files whose writer HDF5 gave up on ---------------
-
-_writes = 0
-_writes_lock = threading.Lock()
-#: HDF5 files whose write failed inside HDF5: never closed (closing one can crash), kept from the
-#: garbage collector; a process holding any ends with os._exit once it has said what happened.
-ABANDONED: list = []
-
-
-def write_point(what: str) -> None:
-    """Every write of every command (a frame, a checkpoint, a log line, a figure, a table) passes
-    here first.  Test hooks: DECCO_TEST_WRITES=FILE appends "k what" for the k-th write of the
-    process; DECCO_TEST_FAIL_WRITE="k[:ENOSPC|:EIO]" fails the k-th write as a full disk (or an
-    I/O error) would."""
-    global _writes
-    with _writes_lock:
-        _writes += 1
-        k = _writes
-    journal = os.environ.get("DECCO_TEST_WRITES")
-    if journal:
-        with open(journal, "a", encoding="utf-8") as f:
-            f.write(f"{k} {what}\n")
-    wanted = os.environ.get("DECCO_TEST_FAIL_WRITE")
-    if wanted:
-        index, _, kind = wanted.partition(":")
-        if index.strip() == str(k):
-            code = errno.EIO if kind.strip().upper() == "EIO" else errno.ENOSPC
-            raise outside_hdf5(OSError(code, f"{os.strerror(code)} (DECCO_TEST_FAIL_WRITE)", what))
-
-
-def outside_hdf5(error: OSError) -> OSError:
-    """Mark a write error raised before HDF5 was called (a hook, the room check): HDF5's own state
-    is whole, so the file may still be closed as usual."""
-    error.outside_hdf5 = True
-    return error
-
-
-@contextlib.contextmanager
-def _complaints_held():
-    """Hold what is printed to stderr during an HDF5 write, printed at the end unless ``drop`` is
-    set: a write cut off inside HDF5 makes h5py print a traceback for every id it then fails to
-    free, which the write's own one-line error already says.  (Lines printed meanwhile by other
-    threads, a progress bar, are held with them.)"""
-    import sys
-
-    with _stderr_lock:
-        real, held = sys.stderr, _io.StringIO()
-        held.drop = False
-        sys.stderr = held
-        try:
-            yield held
-        finally:
-            sys.stderr = real
-            if not held.drop:
-                real.write(held.getvalue())
-
-
-_stderr_lock = threading.Lock()
-
-
-def as_os_error(error: BaseException, what) -> OSError:
-    """An HDF5 write error (h5py raises OSError or RuntimeError) as an OSError naming ``what``."""
-    if isinstance(error, OSError) and error.errno:
-        return OSError(error.errno, error.strerror, error.filename or str(what))
-    text = str(error)
-    for code in (errno.ENOSPC, errno.EIO, errno.EDQUOT, errno.EROFS, errno.ENOENT):
-        if f"errno = {code}," in text:
-            return OSError(code, os.strerror(code), str(what))
-    return OSError(errno.EIO, _first_line(error), str(what))
-
-
-def abandon(file) -> None:
-    """Stop using an HDF5 file whose write failed inside HDF5, without closing it."""
-    ABANDONED.append(file)
-
-
-def describe_write_error(error: OSError) -> str:
-    """"No space left on device writing trajectory.h5" from an OSError of a write."""
-    what = f" writing {Path(error.filename).name}" if error.filename else ""
-    return f"{error.strerror or _first_line(error)}{what}"
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-def _fsync_directory(directory: Path) -> None:
-    with contextlib.suppress(OSError):
-        fd = os.open(directory, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-
-
-@contextlib.contextmanager
 def open_h5(path, what: str, mode: str = "r", **options):
     """Open an HDF5 file, turning every way it can fail into a one-line FileFormatError."""
     path = Path(path)
@@ -248,12 +94,12 @@ def open_h5(path, what: str, mode: str = "r", **options):
     try:
         f = h5py.File(path, mode, **options)
     except (OSError, RuntimeError) as error:
-        raise FileFormatError(f"{what} {path} is not a readable HDF5 file ({_first_line(error)})") from None
+        raise FileFormatError(f"{what} {path} is not a readable HDF5 file ({first_line(error)})") from None
     with f:
         try:
             yield f
         except (KeyError, OSError, RuntimeError, TypeError) as error:
-            raise FileFormatError(f"{what} {path} is incomplete or corrupted ({_first_line(error)})") from None
+            raise FileFormatError(f"{what} {path} is incomplete or corrupted ({first_line(error)})") from None
 
 
 @contextlib.contextmanager
@@ -271,11 +117,6 @@ def open_trajectory(path):
             raise
     with open_h5(path, "trajectory", swmr=True, locking=False) as f:
         yield f
-
-
-def _first_line(error: BaseException) -> str:
-    text = str(error).strip().splitlines()
-    return text[0] if text else type(error).__name__
 
 
 # --- piles ----------------------------------------------------------------------
@@ -442,7 +283,7 @@ class Trajectory:
         except OSError as error:
             if error.errno in WRITE_ERRNOS:
                 raise as_os_error(error, path) from None
-            raise FileFormatError(f"trajectory {path} cannot be reopened ({_first_line(error)})") from None
+            raise FileFormatError(f"trajectory {path} cannot be reopened ({first_line(error)})") from None
         trajectory = cls(f, path)
         try:
             for element in trajectory._elements():
@@ -476,7 +317,7 @@ class Trajectory:
             raise OSError(errno.EIO, "an earlier write of this file failed", str(self.path))
         check_space(self.path.parent, sum(np.asarray(v).nbytes for v in (*particles.values(), *observables.values())), self.path)
         failure = None
-        with _complaints_held() as held:
+        with complaints_held() as held:
             try:
                 for group, values in (("particles/all", particles), ("observables", observables)):
                     for name, value in values.items():
@@ -543,23 +384,6 @@ class Trajectory:
             raise as_os_error(error, self.path) from None
 
 
-#: errno values of a write that failed for want of room or of a working disk or folder.
-WRITE_ERRNOS = (errno.ENOSPC, errno.EIO, errno.EDQUOT, errno.EROFS, errno.ENOENT, errno.ESTALE)
-#: Room a frame leaves free for HDF5's own metadata and the file's close [bytes].
-FRAME_HEADROOM = 1 << 20
-
-
-def check_space(folder: Path, frame_bytes: int, path: Path) -> None:
-    """Raise ENOSPC before a frame that the disk has no room for: HDF5 cut off half-way through a
-    frame can be left in a state that crashes at close; a frame refused here never starts."""
-    try:
-        stats = os.statvfs(folder)
-    except OSError as error:  # the folder is gone
-        raise outside_hdf5(OSError(error.errno, error.strerror, str(path))) from None
-    if stats.f_bavail * stats.f_frsize < 2 * frame_bytes + FRAME_HEADROOM:
-        raise outside_hdf5(OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path)))
-
-
 class BackgroundFrames:
     """A trajectory whose frames are written by one worker thread, in order and one at a time, so
     that writing a frame (~6 ms, mostly HDF5's cost per dataset) overlaps the next steps: the
@@ -608,30 +432,6 @@ def _complete_frames(element: h5py.Group, keep_through_step: int) -> int:
     return keep
 
 
-def pause_point(phase: str, step: int) -> None:
-    """Test hooks at the risky moments of a run (phases: step, trajectory-write, checkpoint-write).
-
-    With DECCO_TEST_PAUSE="phase@step" the run stops here so that a test can kill it (or look
-    at it), after creating the file named by DECCO_TEST_PAUSE_MARK, until that file is removed
-    (forever without one); with
-    DECCO_TEST_FAIL="phase@step" the write fails here as on a full disk.
-    """
-    here = f"{phase}@{step}"
-    if os.environ.get("DECCO_TEST_FAIL") == here:
-        raise outside_hdf5(OSError(errno.ENOSPC, "No space left on device (DECCO_TEST_FAIL)"))
-    wanted = os.environ.get("DECCO_TEST_PAUSE")
-    if not wanted or wanted != here:
-        return
-    mark = os.environ.get("DECCO_TEST_PAUSE_MARK")
-    if mark:
-        Path(mark).write_text(wanted)
-    import time
-
-    while not mark or Path(mark).exists():
-        time.sleep(0.1)
-
-
-HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 
 
 def check_complete(path, what: str) -> None:
@@ -734,68 +534,6 @@ def read_frame(path, index: int = 0) -> tuple[dict, dict, dict]:
         observables = {name: group["value"][index] for name, group in f["observables"].items()}
         static = {name: particles[name][()] for name in ("radius", "mass", "species", "pile_id")}
     return frame, observables, static
-
-
-# --- recovering a file whose writer was killed -----------------------------------------
-
-
-def _rotate(x: int, k: int) -> int:
-    return ((x << k) | (x >> (32 - k))) & 0xFFFFFFFF
-
-
-def lookup3(data: bytes, initval: int = 0) -> int:
-    """Bob Jenkins' lookup3 hash (hashlittle), the checksum of HDF5 metadata."""
-    mask = 0xFFFFFFFF
-    length = len(data)
-    a = b = c = (0xDEADBEEF + length + initval) & mask
-    k = 0
-    while length > 12:
-        a = (a + int.from_bytes(data[k : k + 4], "little")) & mask
-        b = (b + int.from_bytes(data[k + 4 : k + 8], "little")) & mask
-        c = (c + int.from_bytes(data[k + 8 : k + 12], "little")) & mask
-        a = (a - c) & mask; a ^= _rotate(c, 4); c = (c + b) & mask  # noqa: E702
-        b = (b - a) & mask; b ^= _rotate(a, 6); a = (a + c) & mask  # noqa: E702
-        c = (c - b) & mask; c ^= _rotate(b, 8); b = (b + a) & mask  # noqa: E702
-        a = (a - c) & mask; a ^= _rotate(c, 16); c = (c + b) & mask  # noqa: E702
-        b = (b - a) & mask; b ^= _rotate(a, 19); a = (a + c) & mask  # noqa: E702
-        c = (c - b) & mask; c ^= _rotate(b, 4); b = (b + a) & mask  # noqa: E702
-        length -= 12
-        k += 12
-    if length == 0:
-        return c
-    tail = data[k:].ljust(12, b"\0")
-    a = (a + int.from_bytes(tail[0:4], "little")) & mask
-    b = (b + int.from_bytes(tail[4:8], "little")) & mask
-    c = (c + int.from_bytes(tail[8:12], "little")) & mask
-    c ^= b; c = (c - _rotate(b, 14)) & mask  # noqa: E702
-    a ^= c; a = (a - _rotate(c, 11)) & mask  # noqa: E702
-    b ^= a; b = (b - _rotate(a, 25)) & mask  # noqa: E702
-    c ^= b; c = (c - _rotate(b, 16)) & mask  # noqa: E702
-    a ^= c; a = (a - _rotate(c, 4)) & mask  # noqa: E702
-    b ^= a; b = (b - _rotate(a, 14)) & mask  # noqa: E702
-    c ^= b; c = (c - _rotate(b, 24)) & mask  # noqa: E702
-    return c
-
-
-def clear_write_flags(path: Path) -> None:
-    """What ``h5clear -s`` does: reset the superblock's "open for writing" flags.
-
-    A file written in SWMR mode stays consistent if its writer is killed, but the
-    writer's flags remain set and HDF5 then refuses to open it for writing.  Only
-    a version 2/3 superblock at offset 0 whose checksum verifies is touched.
-    """
-    with open(path, "r+b") as f:
-        head = f.read(48)
-        if len(head) < 12 or head[:8] != HDF5_SIGNATURE or head[8] not in (2, 3) or head[11] == 0:
-            return
-        size = 12 + 4 * head[9]
-        if int.from_bytes(head[size : size + 4], "little") != lookup3(head[:size]):
-            return
-        patched = head[:11] + b"\0" + head[12:size]
-        f.seek(0)
-        f.write(patched + lookup3(patched).to_bytes(4, "little"))
-        f.flush()
-        os.fsync(f.fileno())
 
 
 # --- checkpoints ---------------------------------------------------------------------

@@ -19,10 +19,8 @@ import numpy as np
 from . import spec as specs
 from .checks import MAX_REST_OVERLAP, InputError, check_destination
 from .diagnostics import energy_ledger, energy_scale, ledger_closure, stress_shares
-from .io import (
-    BackgroundFrames, FileFormatError, Trajectory, describe_write_error, pause_point, read_checkpoint, read_frame, write_atomic,
-    write_checkpoint, write_point,
-)  # fmt: skip
+from .durable import describe_write_error, pause_point, write_atomic, write_point
+from .io import BackgroundFrames, FileFormatError, Trajectory, read_checkpoint, read_frame, write_checkpoint
 from .lock import RunFolderLock
 from .plan import Plan, RunError, builtin_pile, pile_path, plan_resume, plan_start, run_dir_of  # noqa: F401 (run's names)
 from .simulation import Simulation, graph_steps

@@ -632,7 +632,7 @@ def write_summary(folder: Path, rows: list[dict]) -> Path:
     path = folder / "summary.csv"
     from io import StringIO
 
-    from .io import write_atomic
+    from .durable import write_atomic
 
     folder.mkdir(parents=True, exist_ok=True)
     table = StringIO()
@@ -646,7 +646,7 @@ def write_record(folder: Path, settings: dict, rows: list[dict], wall_seconds: f
     """sweep.json: what ran where, with which versions, and how long it took."""
     import warp as wp
 
-    from .io import json_text, write_atomic
+    from .durable import json_text, write_atomic
 
     devices = sorted({(r.get("device"), r.get("device_name")) for r in rows if r.get("device")})
     record = {

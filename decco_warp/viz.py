@@ -205,7 +205,7 @@ class RerunLogger:
         recording = getattr(self, "_recording", None)
         if recording is not None:
             self._recording = None
-            from .io import write_point
+            from .durable import write_point
 
             try:
                 write_point(self.path.name)

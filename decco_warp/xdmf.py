@@ -20,7 +20,8 @@ from xml.etree import ElementTree as ET
 
 import h5py
 
-from .io import FileFormatError, Trajectory, _complete_frames, open_trajectory, write_atomic
+from .durable import write_atomic
+from .io import FileFormatError, Trajectory, _complete_frames, open_trajectory
 
 XDMF_FILE = "trajectory.xdmf"
 

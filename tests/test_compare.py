@@ -10,7 +10,7 @@ import pytest
 from scipy import stats
 
 from decco_warp.analysis import compare as cmp
-from decco_warp.io import json_text
+from decco_warp.durable import json_text
 
 from helpers import cli, cli_here
 

@@ -1,6 +1,6 @@
 """Faults in the middle of work: every write of every writing command fails in turn.
 
-The harness runs a command once with a journal of its writes (decco_warp.io.write_point), then
+The harness runs a command once with a journal of its writes (decco_warp.durable.write_point), then
 again with its k-th write failed as a full disk (ENOSPC) or an I/O error (EIO), for a k of
 every kind of write it makes (the first and the last of each kind).  Each failure must end the
 command with exit 5 and one line naming the error, the file and what is kept, with every file
@@ -25,6 +25,7 @@ from helpers import assert_same_run, cli
 from typer.testing import CliRunner
 
 import decco_warp as dw
+import decco_warp.durable as durable
 import decco_warp.io as dio
 from decco_warp.cli import EXIT_OUTPUT, app
 from decco_warp.io import read_checkpoint
@@ -35,7 +36,7 @@ KINDS = {"ENOSPC": os.strerror(errno.ENOSPC), "EIO": os.strerror(errno.EIO)}
 
 def invoke(*args, fail: str | None = None, journal: Path | None = None):
     """Run a command in this process with a fresh write count; ``fail``: "k:KIND"."""
-    dio._writes = 0
+    durable._writes = 0
     saved = {name: os.environ.pop(name, None) for name in ("DECCO_TEST_FAIL_WRITE", "DECCO_TEST_WRITES")}
     try:
         if fail:
@@ -291,7 +292,7 @@ def test_a_real_full_disk_ends_with_exit_5_and_resume_finishes_bit_for_bit(long_
         filler = disk / "filler"
         # Room for about half of the run; without the room check, checkpoints (which cannot fail
         # inside HDF5: they are made in memory) are rare, so that a frame meets the full disk.
-        room = 0.8 * size + dio.FRAME_HEADROOM if room_check else 0.7 * size
+        room = 0.8 * size + durable.FRAME_HEADROOM if room_check else 0.7 * size
         filler.write_bytes(b"\0" * int(stats.f_bavail * stats.f_frsize - room))
         command = [sys.executable, "-c", NO_ROOM_CHECK if not room_check else "from decco_warp.cli import main_entry; main_entry()"]
         options = LONG if room_check else [*LONG, "--checkpoint-every", "300"]
@@ -328,11 +329,11 @@ def test_a_frame_cut_off_inside_hdf5_is_abandoned_unclosed_and_the_file_stays_re
         original(datasets, step, time, value)
 
     monkeypatch.setattr(dio.Trajectory, "_append", staticmethod(cut_off))
-    before = len(dio.ABANDONED)
+    before = len(durable.ABANDONED)
     with pytest.raises(OSError) as raised:
         trajectory.append(10, 1.0, frame, {"e": 2.0})
     assert raised.value.errno == errno.ENOSPC and raised.value.filename == str(tmp_path / "t.h5")
-    assert len(dio.ABANDONED) == before + 1 and trajectory.broken
+    assert len(durable.ABANDONED) == before + 1 and trajectory.broken
     trajectory.close()  # never closes an abandoned file
     with pytest.raises(OSError, match="earlier write"):
         trajectory.append(20, 2.0, frame, {"e": 3.0})
@@ -343,7 +344,7 @@ def test_a_frame_cut_off_inside_hdf5_is_abandoned_unclosed_and_the_file_stays_re
     assert read.stdout.strip() == "[0]", read.stderr
     # HDF5 itself is whole here (the failure was made up): close it, and leave this process with no
     # abandoned file, which would end the in-process CLI calls of later tests with os._exit.
-    dio.ABANDONED.remove(trajectory.file)
+    durable.ABANDONED.remove(trajectory.file)
     trajectory.file.close()
 
 

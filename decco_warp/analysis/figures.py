@@ -27,7 +27,7 @@ def _size_label(k: int, radii=None) -> str:
 
 def save(fig, folder: Path, name: str) -> list[Path]:
     """Write ``name``.png and ``name``.pdf into ``folder``, each atomically; returns the paths."""
-    from ..io import write_atomic
+    from ..durable import write_atomic
 
     folder.mkdir(parents=True, exist_ok=True)
     paths = [folder / f"{name}.png", folder / f"{name}.pdf"]

@@ -13,7 +13,8 @@ import h5py
 import numpy as np
 
 from ..diagnostics import energy_scale, ledger_closure
-from ..io import OBSERVABLE_UNITS, json_ready, json_text, read_trajectory, write_atomic
+from ..durable import json_ready, json_text, write_atomic
+from ..io import OBSERVABLE_UNITS, read_trajectory
 from ..params import G_CGS
 from ..state import State
 from . import scaling
@@ -472,7 +473,7 @@ ANALYSIS_UNITS = {
 def write_analysis(path: Path, analysis: dict) -> None:
     """analysis.h5: a group per part of ``analysis``, each dataset with its unit (compressed: a run's
     analysis stays small enough to commit); the summary as the file's attributes (None left out)."""
-    from ..io import atomic_h5
+    from ..durable import atomic_h5
 
     with atomic_h5(path) as f:
         for group, values in analysis.items():
