@@ -483,7 +483,7 @@ def simulate(
         None, "--gravity", help="all-pairs (exact), tree (O(N log N), for large piles) or auto (by size and device)."
     ),
     gravity_every: Optional[str] = typer.Option(
-        None, "--gravity-every", help="K: gravity evaluated every K steps, the contacts every step (docs/model.md, \"Gravity on its own clock\"); 1 is the paper's scheme. Step counts must then be multiples of K."
+        None, "--gravity-every", help="K: gravity evaluated every K steps, the contacts every step (docs/model.md, \"Gravity on its own clock\"); 1 is the paper's scheme, auto is 10. Step counts must then be multiples of K."
     ),
     check: bool = typer.Option(False, "--check", help="Set up the collision, print its margins and predicted deepest overlap, run nothing."),
     output_every: Optional[int] = typer.Option(None, "--output-every", help="Steps between trajectory frames."),
