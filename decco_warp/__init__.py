@@ -17,6 +17,7 @@ from ._version import __version__  # noqa: E402
 from .analysis import Cluster, find_clusters  # noqa: E402
 from .collision import setup_collision  # noqa: E402
 from .device import DeviceError, resolve_device  # noqa: E402
+from .errors import DeccoError  # noqa: E402
 from .diagnostics import diagnostics  # noqa: E402
 from .layouts import Layout  # noqa: E402
 from .io import load_pile, read_trajectory, save_pile  # noqa: E402
@@ -52,6 +53,7 @@ __all__ = [
     "choose_stiffness",
     "choose_time_step",
     "compute_forces",
+    "DeccoError",
     "diagnostics",
     "Formation",
     "form_pile",

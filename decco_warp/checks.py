@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import InputError  # noqa: F401 (re-exported: the error lives in errors.py)
+
 #: A particle radius must lie in this range [cm]: 1 cm to 1000 km.
 RADIUS_RANGE = (1.0, 1.0e8)
 #: A particle's density m / (4/3 pi R^3) must lie in this range [g/cm^3] (ices to metals, with room).
@@ -24,10 +26,6 @@ MAX_SPEED = 1.0e8
 #: A pile at rest may press two spheres together by at most this fraction of the smaller radius.
 #: Settled piles reach ~0.01; coincident particles give 1 to 2.
 MAX_REST_OVERLAP = 0.25
-
-
-class InputError(ValueError):
-    """Input that cannot be used as it is: the message says which value and why."""
 
 
 def check_particles(state, source: str) -> None:

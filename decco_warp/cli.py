@@ -8,6 +8,8 @@ from typing import List, Optional
 import typer
 
 from ._version import __version__
+from .errors import EXIT_BLOW_UP, EXIT_INPUT, EXIT_NOT_SETTLED, EXIT_OUTPUT, EXIT_STOPPED, DeccoError  # noqa: F401
+# (The exit codes, README "When things go wrong", live in errors.py beside the errors that carry them.)
 
 app = typer.Typer(
     name="decco-warp",
@@ -21,14 +23,6 @@ app = typer.Typer(
 DeviceOption = typer.Option(
     None, "--device", help="cpu, cuda or cuda:N (default: $DECCO_DEVICE, else CUDA if present, else cpu)."
 )
-
-
-#: Exit codes (README, "When things go wrong").
-EXIT_INPUT = 2  # bad input: nothing was run or written
-EXIT_STOPPED = 3  # SIGINT/SIGTERM: checkpoint written, resumable
-EXIT_BLOW_UP = 4  # non-finite values or runaway overlaps: the last good checkpoint is kept
-EXIT_OUTPUT = 5  # writing the run folder failed (disk full): the last checkpoint is intact
-EXIT_NOT_SETTLED = 6  # resume --until-settled reached its step limit with the outcome still changing: the run is whole
 
 
 def fail(message: str, code: int = EXIT_INPUT) -> None:
@@ -83,6 +77,9 @@ def main_entry() -> None:
             raise
         typer.echo(f"decco-warp: error: {describe_write_error(error)}; the files written before it are whole", err=True)
         _end(EXIT_OUTPUT, before)
+    except DeccoError as error:  # one that no command caught (each adds what it keeps): still one line, its exit code
+        typer.echo(f"decco-warp: error: {error.line}", err=True)
+        _end(error.exit_code, before)
     except Exception as error:  # typer's (or click's) usage errors carry a message and an exit code
         if type(error).__name__ == "Abort":
             typer.echo("decco-warp: aborted", err=True)
@@ -220,8 +217,8 @@ def pile(
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Build a rubble pile: seed spheres without overlaps, collapse under gravity until settled."""
-    from .checks import InputError, check_destination
-    from .device import DeviceError, resolve_device
+    from .checks import check_destination
+    from .device import resolve_device
     from .params import GRAVITY_CHOICES, Params, choose_gravity
     from .engine import check_fits
     from .forming import TYPICAL_FORMATION_STEPS, FormationStopped, form_pile_file, partial_path
@@ -241,7 +238,7 @@ def pile(
         size_radii = _floats(radii, "--radii")
         check_formation_inputs(particles, size_radii, density, ke_threshold, fill, max_steps=max_steps)
         note = check_fits(particles, gravity, chosen, min(max_steps, TYPICAL_FORMATION_STEPS), "forming a pile")
-    except (DeviceError, InputError, ValueError) as error:
+    except ValueError as error:  # bad input: each input error of errors.py is a ValueError, as are Params' checks
         fail(str(error))
     if check:
         from .costs import formation_cost
@@ -292,7 +289,7 @@ def pile(
         except ValueError as error:
             failed = (str(error), EXIT_INPUT)
         except FormationError as error:
-            failed = (f"{error}; saved in {partial_path(out)}: the same command with a larger --max-steps continues", 1)
+            failed = (f"{error}; saved in {partial_path(out)}: the same command with a larger --max-steps continues", error.exit_code)
         except FormationStopped as error:
             failed = (str(error), EXIT_STOPPED)
         except OSError as error:  # a full disk, say: the last checkpoint (if any) is intact
@@ -385,18 +382,16 @@ def _rerun_observer(prepared, mode_text: str | None, every: int | None):
 
 def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: int | None = None, **kwargs):
     """Prepare a run (every input problem exits with code 2, nothing written), then run it with a progress bar."""
-    from .device import DeviceError
     from .checks import InputError
     from .io import FileFormatError
     from .run import BlowUp, OutputError, RunError, RunStopped, execute
-    from .spec import SpecError
     from .stability import StabilityError
 
     try:
         prepared = prepare(*args, **kwargs)
     except StabilityError as error:
         fail(f"{error}; set allow_unstable = true in [run] to run it anyway")
-    except (SpecError, RunError, FileFormatError, DeviceError, ValueError) as error:
+    except ValueError as error:  # bad input: each input error of errors.py is a ValueError, as are Params' checks
         fail(str(error))
     if prepared.note:
         typer.echo(prepared.note, err=True)
@@ -560,14 +555,11 @@ def _integer_or_auto(text: Optional[str], option: str):
 def _check(spec: dict) -> None:
     """``simulate --check``: the run's plan (its set-up, margins, predicted deepest overlap and resolved choices); exit 2 if it would be refused."""
     from .costs import run_cost
-    from .device import DeviceError
-    from .io import FileFormatError
-    from .plan import RunError, plan_start
-    from .spec import SpecError
+    from .plan import plan_start
 
     try:
         plan = plan_start(spec)
-    except (SpecError, RunError, FileFormatError, DeviceError, ValueError) as error:
+    except ValueError as error:  # bad input: each input error of errors.py is a ValueError, as are Params' checks
         fail(str(error))
     for line in [*plan.lines(), *plan.choices()]:
         typer.echo(line)
@@ -918,14 +910,11 @@ def _run_check(spec: dict) -> str:
     """One line of ``sweep --check`` for a run still to make: its set-up's margins, its predicted
     deepest overlap and its cost on this machine's device, or why it would be refused."""
     from .costs import run_cost
-    from .device import DeviceError
-    from .io import FileFormatError
-    from .plan import RunError, plan_start
-    from .spec import SpecError
+    from .plan import plan_start
 
     try:
         plan = plan_start(spec)
-    except (SpecError, RunError, FileFormatError, DeviceError, ValueError) as error:
+    except ValueError as error:  # bad input: each input error of errors.py is a ValueError, as are Params' checks
         return f"REFUSED: {error}"
     stability = plan.stability
     refused = "" if stability.stable or plan.allow_unstable else f"; REFUSED: {'; '.join(stability.problems())}"
@@ -951,9 +940,9 @@ def extract(
 ) -> None:
     """Write a fragment of a finished collision as a pile (centred, settled, its spin kept or removed)
     that simulate takes as a target or a projectile: the next collision of a hierarchy."""
-    from .checks import InputError, check_destination
-    from .device import DeviceError, resolve_device
-    from .io import FileFormatError, save_pile
+    from .checks import check_destination
+    from .device import resolve_device
+    from .io import save_pile
     from .remnant import extract_fragment
 
     if out.exists() and not overwrite:
@@ -972,7 +961,7 @@ def extract(
 
             remnant = extract_fragment(run_dir, fragment, spin=spin, settle=settle, ke_threshold=ke_threshold,
                                        max_steps=max_steps, device=chosen, progress=show)  # fmt: skip
-    except (InputError, DeviceError, FileFormatError, ValueError) as error:
+    except ValueError as error:  # bad input: each input error of errors.py is a ValueError, as are Params' checks
         fail(str(error))
     try:
         save_pile(remnant, out)
@@ -1022,7 +1011,7 @@ def compare(
     difference to a reference group with its 95 % interval (Welch's t for groups under 30 runs, else a
     seeded bootstrap), a verdict, and the runs per group a difference needs.  Rows of failed runs are
     left out."""
-    from .analysis.compare import CompareError, SingleRunGroup, compare as compare_runs, parse_where, read_rows
+    from .analysis.compare import SingleRunGroup, compare as compare_runs, parse_where, read_rows
     from .checks import InputError, check_destination
 
     try:
@@ -1034,7 +1023,7 @@ def compare(
         for line in error.comparison.lines():
             typer.echo(line)
         fail(str(error))
-    except (CompareError, InputError) as error:
+    except InputError as error:  # CompareError is one
         fail(str(error))
     for line in result.lines():
         typer.echo(line)
@@ -1109,7 +1098,6 @@ def view(
     """Replay a run into rerun: a local viewer, a recording (.rrd), or a viewer elsewhere."""
     from .checks import check_destination
     from .durable import WRITE_ERRNOS
-    from .io import FileFormatError
     from .viz import RerunUnavailable, parse_mode, replay
 
     trajectory = path / "trajectory.h5" if path.is_dir() else path
@@ -1132,7 +1120,7 @@ def view(
         if error.errno not in WRITE_ERRNOS:
             fail(" ".join(str(error).split()))
         write_failed(error, f"{save_to} is not written (a recording is renamed into place only when whole; any earlier one is as it was)")
-    except (ValueError, RerunUnavailable, FileFormatError) as error:
+    except (ValueError, RerunUnavailable) as error:
         fail(" ".join(str(error).split()))
     if save_to is not None:
         typer.echo(f"wrote {save_to} (view it with: rerun {save_to})")

@@ -13,6 +13,8 @@ import tempfile
 
 import warp as wp
 
+from .errors import DeviceError  # noqa: F401 (re-exported: the error lives in errors.py)
+
 ENV_VARIABLE = "DECCO_DEVICE"
 
 # Warp's native library prints this on every start on a machine without an
@@ -37,10 +39,6 @@ def init_warp() -> None:
         for line in captured.read().decode(errors="replace").splitlines():
             if _NO_DRIVER_NOTICE not in line:
                 print(line, file=sys.stderr)
-
-
-class DeviceError(ValueError):
-    """A device name that is malformed or not present on this machine."""
 
 
 def cuda_device_count() -> int:

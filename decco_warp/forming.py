@@ -13,6 +13,7 @@ from .io import FileFormatError, read_checkpoint, save_pile, write_checkpoint
 from .pile import Formation, FormationError, FormationProgress
 from .state import State
 from .stops import StopRequests
+from .errors import FormationStopped  # noqa: F401 (re-exported: the error lives in errors.py)
 
 #: A forming pile's checkpoint is its file's name plus this.
 FORMING_SUFFIX = ".forming"
@@ -21,15 +22,6 @@ FORMING_SUFFIX = ".forming"
 TYPICAL_FORMATION_STEPS = 150_000
 #: Wall seconds between checkpoints of a forming pile.
 CHECKPOINT_SECONDS = 60.0
-
-
-class FormationStopped(RuntimeError):
-    """SIGINT or SIGTERM arrived; the formation was saved and the same command continues it."""
-
-    def __init__(self, signal_name: str, step: int, partial: Path, timing: str = ""):
-        self.signal_name, self.step, self.partial, self.timing = signal_name, step, partial, timing
-        spent = f" (this session: {timing})" if timing else ""
-        super().__init__(f"stopped by {signal_name} at step {step}; saved in {partial}: the same command continues{spent}")
 
 
 def partial_path(out: Path) -> Path:

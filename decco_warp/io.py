@@ -38,16 +38,13 @@ from .checks import InputError, check_particles, check_pile
 from .durable import WRITE_ERRNOS, abandon, as_os_error, atomic_h5, check_space, complaints_held, first_line, pause_point, write_point
 from .repair import HDF5_SIGNATURE, clear_write_flags
 from .state import State
+from .errors import FileFormatError  # noqa: F401 (re-exported: the error lives in errors.py)
 
 PILE_FORMAT = "decco-warp pile"
 CHECKPOINT_FORMAT = "decco-warp checkpoint"
 FORMAT_VERSION = 1
 
 _STATE_ARRAYS = ("positions", "velocities", "omegas", "radii", "masses", "size_class")
-
-
-class FileFormatError(ValueError):
-    """A file that is missing, unreadable, or not what it claims to be."""
 
 
 # --- plain dictionaries <-> HDF5 groups ------------------------------------------

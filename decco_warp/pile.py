@@ -19,6 +19,7 @@ from .params import Params
 from .simulation import Simulation
 from .checks import DENSITY_RANGE, RADIUS_RANGE
 from .state import State
+from .errors import FormationError  # noqa: F401 (re-exported: the error lives in errors.py)
 
 #: The paper's particle radii [cm] (Table 1) and density [g/cm^3].
 PAPER_RADII = (0.75e6, 1.5e6, 2.25e6)
@@ -51,10 +52,6 @@ class FormationProgress:
         total = math.log10(self.peak_ke_over_u / self.threshold)
         fallen = math.log10(self.peak_ke_over_u / max(self.ke_over_u, self.threshold))
         return min(max(fallen / total, 0.0), 1.0)
-
-
-class FormationError(RuntimeError):
-    """A pile that did not settle within the allowed number of steps."""
 
 
 def size_class_counts(n_particles: int, radii=PAPER_RADII) -> np.ndarray:

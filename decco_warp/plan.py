@@ -24,12 +24,9 @@ from .io import FileFormatError, load_pile
 from .params import Params
 from .stability import CompressionForecast, StabilityReport, check_stability, predict_compression
 from .state import State
+from .errors import RunError  # noqa: F401 (re-exported: the error lives in errors.py)
 
 BUILTIN_PREFIX = "builtin:"
-
-
-class RunError(ValueError):
-    """A run that cannot start or continue as asked (bad folder, pile, checkpoint)."""
 
 
 # --- piles and folders ---------------------------------------------------------------

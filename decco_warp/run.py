@@ -27,6 +27,7 @@ from .simulation import Simulation, graph_steps
 from .stops import StopRequests
 from .stability import MIN_TIME_STEP_MARGIN, StabilityReport
 from .xdmf import write_xdmf
+from .errors import BlowUp, OutputError, RunStopped  # noqa: F401 (re-exported: the error lives in errors.py)
 
 SPEC_FILE = "spec.toml"
 TRAJECTORY_FILE = "trajectory.h5"
@@ -632,22 +633,6 @@ class RunDriver:
             self.run_dir, sim.step_count, sim.time, self.wall_before + self.wall, sim.step_count - self.first_step,
             self.stepping_before + self.stepping,
         )  # fmt: skip
-
-
-class BlowUp(RuntimeError):
-    """The run went numerically wrong (non-finite values or spheres passing through each other)."""
-
-
-class OutputError(RuntimeError):
-    """Writing the run folder failed (a full disk, a vanished folder); the last checkpoint is intact."""
-
-
-class RunStopped(RuntimeError):
-    """SIGINT or SIGTERM arrived; the run wrote a checkpoint and can be resumed."""
-
-    def __init__(self, signal_name: str, step: int, run_dir: Path):
-        self.signal_name, self.step, self.run_dir = signal_name, step, run_dir
-        super().__init__(f"stopped by {signal_name} at step {step}, a checkpoint written; continue with: decco-warp resume {run_dir}")
 
 
 def check_sanity(step: int, particles: dict) -> None:

@@ -35,15 +35,12 @@ from .engine import PRECISIONS
 from .layouts import LAYOUT_CHOICES
 from .params import GRAVITY_CHOICES, ROLLING_FRICTION_FORMS, Params, auto_gravity_every, choose_gravity
 from .stability import DEFAULT_MAX_COMPRESSION, choose_stiffness, choose_time_step
+from .errors import SpecError  # noqa: F401 (re-exported: the error lives in errors.py)
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover - Python 3.10
     import tomli as tomllib
-
-
-class SpecError(ValueError):
-    """A run specification that cannot be run as written."""
 
 
 @dataclass(frozen=True)

@@ -30,6 +30,7 @@ import numpy as np
 
 from .params import Params
 from .state import State
+from .errors import StabilityError  # noqa: F401 (re-exported: the error lives in errors.py)
 
 #: Smallest accepted eq. 15 margin: below 1 the deepest compression exceeds the
 #: particle radius (Delta ~ R / sqrt(margin)), and spheres can pass through each other.
@@ -37,14 +38,6 @@ MIN_STIFFNESS_MARGIN = 1.0
 #: Smallest accepted eq. 17 margin: with 10, a contact between the lightest
 #: particles lasts ~30 steps (half period pi sqrt(m/k) of the paired springs).
 MIN_TIME_STEP_MARGIN = 10.0
-
-
-class StabilityError(ValueError):
-    """A set-up that violates eq. 15 or 17; ``.report`` holds the numbers."""
-
-    def __init__(self, report: "StabilityReport"):
-        self.report = report
-        super().__init__("unstable set-up: " + "; ".join(report.problems()))
 
 
 @dataclass(frozen=True)

@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import RerunUnavailable  # noqa: F401 (re-exported: the error lives in errors.py)
+
 KM = 1e5
 MODES = ("spawn", "save", "connect", "serve")
 RECORDING_FILE = "recording.rrd"
@@ -48,10 +50,6 @@ ENERGY_SERIES = {
     "integration_error": (127, 127, 127),
 }
 CONTACT_SERIES = {"number_of_contacts": (31, 119, 180), "max_overlap": (214, 39, 40)}
-
-
-class RerunUnavailable(RuntimeError):
-    """rerun-sdk is not installed (or failed to import)."""
 
 
 def import_rerun():

@@ -160,3 +160,36 @@ def test_cli_rejects_bad_device_in_one_line():
     assert out.returncode == 2
     assert out.stderr.strip().count("\n") == 0 and "cpu, cuda or cuda:N" in out.stderr
     assert app.info.name == "decco-warp"
+
+
+def test_every_error_is_a_decco_error_with_its_exit_code_and_the_builtin_it_was(monkeypatch, capsys):
+    """decco_warp/errors.py: each error derives from dw.DeccoError and from the built-in it always
+    was, carries the command's exit code, and is importable where it used to live; main_entry turns
+    one that no command caught into one line and that code."""
+    from decco_warp import checks, cli, device, errors, forming, io, pile, plan, run, spec, stability, viz
+    from decco_warp.analysis.compare import CompareError
+    from decco_warp.lock import RunFolderBusy
+
+    expected = {
+        errors.InputError: (ValueError, 2), errors.SpecError: (ValueError, 2), errors.RunError: (ValueError, 2),
+        errors.FileFormatError: (ValueError, 2), errors.DeviceError: (ValueError, 2), errors.StabilityError: (ValueError, 2),
+        errors.RerunUnavailable: (RuntimeError, 2), errors.FormationError: (RuntimeError, 1), errors.BlowUp: (RuntimeError, 4),
+        errors.OutputError: (RuntimeError, 5), errors.RunStopped: (RuntimeError, 3), errors.FormationStopped: (RuntimeError, 3),
+        CompareError: (ValueError, 2), RunFolderBusy: (ValueError, 2),
+    }  # fmt: skip
+    for kind, (builtin, code) in expected.items():
+        assert issubclass(kind, dw.DeccoError) and issubclass(kind, builtin) and kind.exit_code == code, kind
+    homes = [(checks, "InputError"), (spec, "SpecError"), (plan, "RunError"), (io, "FileFormatError"), (device, "DeviceError"),
+             (stability, "StabilityError"), (viz, "RerunUnavailable"), (pile, "FormationError"), (run, "BlowUp"),
+             (run, "OutputError"), (run, "RunStopped"), (forming, "FormationStopped")]  # fmt: skip
+    assert all(getattr(module, name) is getattr(errors, name) for module, name in homes)
+    assert errors.OutputError("no space left\nsecond line").line == "no space left"
+
+    def uncaught(**options):
+        raise errors.OutputError("writing somewhere failed")
+
+    monkeypatch.setattr(cli, "app", uncaught)
+    with pytest.raises(SystemExit) as ended:
+        cli.main_entry()
+    assert ended.value.code == 5
+    assert capsys.readouterr().err == "decco-warp: error: writing somewhere failed\n"
