@@ -264,9 +264,8 @@ class NewtonGravity:
 
 
 class NewtonForces(ForcePath):
-    """The Newton layout: :class:`NewtonGravity`, then the contacts of the listed candidates, a
-    warp per particle (kernels/contacts.py ``contact_pass``; with Warp's CPU blocks on, the
-    CPU runs those lanes too: tests check the lanes' reduction so)."""
+    """The Newton layout: :class:`NewtonGravity`, then the contacts of the listed candidates
+    (:class:`ContactPass`)."""
 
     name = "newton"
 
@@ -320,8 +319,8 @@ def _candidate_observables(engine, contacts: list, candidate_count: wp.array, ca
 
 
 class TreeForces(ForcePath):
-    """The tree path: :class:`TreeGravity`, contacts from a hash grid's candidates, one thread per
-    particle in increasing j (kernels/tree.py, :class:`ContactPass`).  Frames too
+    """The tree path: :class:`TreeGravity`, contacts from a hash grid's candidates in increasing j
+    (kernels/tree.py, :class:`ContactPass`).  Frames too
     cost O(N log N): the potential from the tree, the contact observables from the grid's candidates."""
 
     name = "tree"

@@ -188,7 +188,8 @@ def _alone(x: np.ndarray, v: np.ndarray, m: np.ndarray, radii: np.ndarray, conta
         around = cKDTree(x).query_ball_point(x[seeds], r=near)
         s = np.repeat(seeds, [len(a) for a in around])
         j = np.concatenate([np.asarray(a, dtype=np.int64) for a in around])
-        s, j = s[j != s], j[j != s]
+        other = j != s
+        s, j = s[other], j[other]
         reach = ((v[j] - v[s]) ** 2).sum(axis=1) * np.linalg.norm(x[j] - x[s], axis=1)
         binds = np.zeros(n, dtype=bool)
         binds[s[reach < 2.0 * G * m[s]]] = True

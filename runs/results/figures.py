@@ -9,6 +9,7 @@ Reads only what the sweeps kept (summary.json and analysis.h5 of each run) and t
 
 from __future__ import annotations
 
+import csv
 import json
 import sys
 from pathlib import Path
@@ -220,8 +221,6 @@ def ladder_points() -> list[dict]:
             points.append({"n": s["n_particles"], "eta": round(s["eta"], 6), "value": s["largest_mass_ratio"], "firm": s.get("settled") is not False})
     final = RESULTS / "resolution" / "x4" / "final_frame.csv"
     if final.exists():
-        import csv
-
         for row in csv.DictReader(final.open()):
             points.append({"n": int(row["n_particles"]), "eta": float(row["eta"]), "value": float(row["largest_mass_ratio_final"]), "firm": False})
     return points

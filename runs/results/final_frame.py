@@ -14,24 +14,20 @@ import csv
 import sys
 from pathlib import Path
 
-import h5py
-
 import decco_warp as dw
 from decco_warp import spec as specs
 from decco_warp.analysis.clusters import find_clusters
+from decco_warp.io import read_checkpoint
 
 MIN_MEMBERS = 50
 
 
 def final_frame(run_dir: Path) -> dict:
     spec = specs.load_spec_file(run_dir / "spec.toml")
-    with h5py.File(run_dir / "checkpoint.h5", "r") as f:
-        snap, static = f["snapshot"], f["state"]
-        state = dw.State.from_arrays(snap["positions"][()], snap["velocities"][()], snap["omegas"][()], static["radii"][()], static["masses"][()])
-        target_mass = float(static["masses"][()][static["pile_id"][()] == 0].sum())
-        step = int(f["run"].attrs["last_frame_step"])
+    _, state, extra = read_checkpoint(run_dir / "checkpoint.h5")  # the state at the checkpoint, checked
+    target_mass = float(state.masses[state.pile_id == 0].sum())
     clusters = find_clusters(state, min_members=MIN_MEMBERS, G=float(spec.get("params", {}).get("G", dw.G_CGS)), device="cpu")
-    return {"run": run_dir.name, "n_particles": state.n, "eta": spec["collision"].get("eta"), "step": step,
+    return {"run": run_dir.name, "n_particles": state.n, "eta": spec["collision"].get("eta"), "step": int(extra["last_frame_step"]),
             "largest_mass_ratio_final": clusters[0].mass / target_mass if clusters else 0.0, "clusters": len(clusters)}  # fmt: skip
 
 
