@@ -30,9 +30,10 @@ from .kernels.reference import pair_forces_reference
 
 #: Threads per particle of the observables kernel on a GPU.
 OBSERVABLES_BLOCK = 128
-#: Lanes per particle of the Newton layout's contact pass on a GPU (one on the CPU): its
-#: candidates, at most kernels/contacts.py CANDIDATES, two a lane.
-CONTACT_BLOCK = 32
+#: The contact pass's lanes per particle and particles per block on a GPU (one and one on the
+#: CPU): ~8 listed candidates a particle, one a lane (kernels/contacts.py ``contact_pass``).
+CONTACT_LANES = 8
+CONTACT_PARTICLES = 4
 
 
 def tiled_blocks(starts: np.ndarray, ends: np.ndarray, per_block: int) -> np.ndarray:
@@ -79,23 +80,25 @@ def _bodies(engine, count: int) -> wp.array:
 
 
 class ContactPass:
-    """The contacts of listed candidates (lists in increasing j), a block of CONTACT_BLOCK lanes per
-    particle on a GPU (kernels/contacts.py ``contact_pass``: one thread per particle would
-    leave most of the GPU idle, a few warps per SM at paper sizes); one lane on the CPU, or every
-    lane with Warp's CPU blocks on (tests check the lanes' reduction so).  With ``accumulate``
-    the contact force is added to gravity's in engine.force, else written there alone."""
+    """The contacts of listed candidates (lists in increasing j), CONTACT_PARTICLES particles a
+    block of CONTACT_LANES lanes each on a GPU (kernels/contacts.py ``contact_pass``: one thread
+    per particle would leave most of the GPU idle, a few warps per SM at paper sizes); one lane on
+    the CPU, or the GPU's blocks with Warp's CPU blocks on (tests check the lanes' reduction so).
+    With ``accumulate`` the contact force is added to gravity's in engine.force, else written
+    there alone."""
 
     def __init__(self, engine, accumulate: bool):
         self.engine = engine
-        self.block = CONTACT_BLOCK if _on_cuda(engine.device) or wp.config.enable_cpu_blocks else 1
-        self.kernel = contact_pass(engine.params.rolling_friction, self.block, accumulate)
+        blocks = _on_cuda(engine.device) or wp.config.enable_cpu_blocks
+        self.lanes, self.particles = (CONTACT_LANES, CONTACT_PARTICLES) if blocks else (1, 1)
+        self.kernel = contact_pass(engine.params.rolling_friction, self.lanes, self.particles, accumulate)
 
     def launch(self, candidate_count: wp.array, candidates: wp.array, outputs: list) -> None:
         e = self.engine
         wp.launch_tiled(
             self.kernel,
-            dim=[e.count],
-            block_dim=self.block,
+            dim=[-(-e.count // self.particles)],
+            block_dim=self.lanes * self.particles,
             inputs=[e.model, e.ranges, e.radius, *e.contact_state(), candidate_count, candidates],
             outputs=outputs,
             device=e.device,

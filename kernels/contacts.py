@@ -8,8 +8,8 @@ out of the hot loops.
 
 Candidate lists are kept in increasing j as they are noted (``note_candidate``): the tree path's
 hash grid (:mod:`.tree` ``grid_candidates``) and the neighbour list of gravity on its own clock
-(:mod:`.neighbours`), and the Newton layout's gather (:mod:`.newton`).  ``contact_pass`` (a warp
-per particle on a GPU, one lane on the CPU) walks a list in order and reduces its lanes in a fixed
+(:mod:`.neighbours`), and the Newton layout's gather (:mod:`.newton`).  ``contact_pass`` (8 lanes a
+particle on a GPU, one on the CPU) walks a list in order and reduces its lanes in a fixed
 order, so its sums (and the ledger's channels) do not depend on scheduling, nor, since a listed
 pair that does not touch adds an exact zero, on which superset of the touching pairs the list
 holds; the observables walk the lists the same way (``candidates_walk``, ``candidate_at``).
@@ -226,15 +226,20 @@ def candidate_at(i: int, listed: bool, ranges: wp.array(dtype=wp.vec2i), candida
 
 
 @functools.cache
-def contact_pass(rolling: str = "couple", block_dim: int = 1, accumulate: bool = True):
-    """Build the contact pass over candidate lists kept in increasing j: a block of ``block_dim``
-    lanes per particle (32 on a GPU, 1 on the CPU; launch with ``wp.launch_tiled(dim=[N])``), each
-    lane evaluating every ``block_dim``-th candidate in float64 and adding them in list order, the
-    lanes then reduced in a fixed order, so that the sum does not depend on scheduling (one lane:
-    in increasing j).  After an overflow of the list, lane 0 looks at every j of the system in
-    turn.  Writes ``torque_out`` and the ledger's ``channels_out`` (when it has rows) whole; with
-    ``accumulate`` adds the contact force to ``force_inout`` (gravity's), without (gravity on its
-    own clock) writes it there alone."""
+def contact_pass(rolling: str = "couple", lanes: int = 1, particles: int = 1, accumulate: bool = True):
+    """Build the contact pass over candidate lists kept in increasing j: a block of ``particles``
+    particles with ``lanes`` lanes each (8 x 4 on a GPU, 1 x 1 on the CPU; launch with
+    ``wp.launch_tiled(dim=[ceil(N / particles)], block_dim=lanes * particles)``), each lane
+    evaluating every ``lanes``-th candidate of its particle in float64 and adding them in list
+    order, a particle's lanes then added in lane order (a tile sum along the lanes), so that the
+    sum does not depend on scheduling (one lane: in increasing j).  After an overflow of the list,
+    lane 0 looks at every j of the system in turn.  Writes ``torque_out`` and the ledger's
+    ``channels_out`` (when it has rows) whole; with ``accumulate`` adds the contact force to
+    ``force_inout`` (gravity's), without (gravity on its own clock) writes it there alone.
+
+    Why groups of lanes: a particle lists ~8 candidates (~30 in a squeezed pile), so a warp of 32
+    lanes a particle leaves most lanes idle and spends its time in a 32-lane reduction of 15
+    float64 values; 8 lanes keep each lane busy and a warp serves four particles."""
     contact_channels = contact_function(rolling)
     add_contact = contact_sum_function(rolling)
 
@@ -256,17 +261,26 @@ def contact_pass(rolling: str = "couple", block_dim: int = 1, accumulate: bool =
         channels_out: wp.array2d(dtype=wp.vec3d),
         deepest_out: wp.array(dtype=wp.int64),
     ):
-        i, lane = wp.tid()
-        noted = candidate_count[i]
-        listed = noted <= candidates.shape[1]
+        block, thread = wp.tid()
+        group = thread // wp.static(lanes)
+        lane = thread - group * wp.static(lanes)
+        i = block * wp.static(particles) + group
+        # Past the last particle a lane still takes part in the block's reduction, with nothing.
+        noted = int(0)
+        listed = True
+        if i < candidate_count.shape[0]:
+            noted = int(candidate_count[i])
+            listed = noted <= candidates.shape[1]
         mine = ContactRows()
-        for slot in range(lane, wp.where(listed, noted, 0), wp.block_dim()):
+        for slot in range(lane, wp.where(listed, noted, 0), wp.static(lanes)):
             spring, sliding, sliding_torque, rolling_force, rolling_torque = contact_channels(
                 model, i, candidates[i, slot], radius_in, position_in, velocity_in, omega_in, deepest_out
             )
             mine += wp.matrix_from_rows(spring, sliding, sliding_torque, rolling_force, rolling_torque)
-        total = contact_sum_of(wp.tile_sum(wp.tile(mine, preserve_type=True))[0])
-        if lane == 0:
+        per_lane = wp.tile_reshape(wp.tile(mine, preserve_type=True), shape=(wp.static(particles), wp.static(lanes)))
+        sums = wp.tile_sum(per_lane, axis=1)
+        if lane == 0 and i < candidate_count.shape[0]:
+            total = contact_sum_of(sums[group])
             if not listed:  # every j of the system, each checked in float64
                 for j in range(ranges[i][0], ranges[i][1]):
                     total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out, total)

@@ -52,6 +52,38 @@ def half_kick_work(
     )
 
 
+@wp.struct
+class Motion:
+    """A particle's velocity, spin and ledger work, loaded once per launch and stored once: the
+    kicks of a launch follow one another in registers, not through memory."""
+
+    velocity: wp.vec3d
+    omega: wp.vec3d
+    work: wp.vec4d  # (gravity, spring, sliding, rolling); zero without the ledger
+
+
+@wp.func
+def load_motion(
+    i: int, velocity_in: wp.array(dtype=wp.vec3d), omega_in: wp.array(dtype=wp.vec3d), work_in: wp.array(dtype=wp.vec4d)
+) -> Motion:
+    motion = Motion()
+    motion.velocity = velocity_in[i]
+    motion.omega = omega_in[i]
+    if work_in.shape[0] > 0:
+        motion.work = work_in[i]
+    return motion
+
+
+@wp.func
+def store_motion(
+    motion: Motion, i: int, velocity_out: wp.array(dtype=wp.vec3d), omega_out: wp.array(dtype=wp.vec3d), work_out: wp.array(dtype=wp.vec4d)
+):
+    velocity_out[i] = motion.velocity
+    omega_out[i] = motion.omega
+    if work_out.shape[0] > 0:
+        work_out[i] = motion.work
+
+
 @wp.func
 def half_kick(
     i: int,
@@ -60,35 +92,31 @@ def half_kick(
     inertia_in: wp.array(dtype=wp.float64),
     force_in: wp.array(dtype=wp.vec3d),
     torque_in: wp.array(dtype=wp.vec3d),
-    channels_in: wp.array2d(dtype=wp.vec3d),
-    velocity_inout: wp.array(dtype=wp.vec3d),
-    omega_inout: wp.array(dtype=wp.vec3d),
-    work_inout: wp.array(dtype=wp.vec4d),
-) -> wp.vec3d:
-    """v += F/m dt/2, w += T/I dt/2 for particle i, with its ledger; returns the new velocity."""
+    channels_in: wp.array2d(dtype=wp.vec3d),  # (N, 4) with the ledger, else empty
+    motion: Motion,
+) -> Motion:
+    """v += F/m dt/2, w += T/I dt/2 for particle i, with its ledger (when ``channels_in`` has rows)."""
     force = force_in[i]
     torque = torque_in[i]
-    velocity_old = velocity_inout[i]
-    omega_old = omega_inout[i]
-    velocity = velocity_old + (half_dt / mass_in[i]) * force
-    omega = omega_old + (half_dt / inertia_in[i]) * torque
-    velocity_inout[i] = velocity
-    omega_inout[i] = omega
-    if work_inout.shape[0] > 0:
-        work_inout[i] = work_inout[i] + half_kick_work(
+    out = Motion()
+    out.velocity = motion.velocity + (half_dt / mass_in[i]) * force
+    out.omega = motion.omega + (half_dt / inertia_in[i]) * torque
+    out.work = motion.work
+    if channels_in.shape[0] > 0:
+        out.work = motion.work + half_kick_work(
             force,
             torque,
             channels_in[i, 0],
             channels_in[i, 1],
             channels_in[i, 2],
             channels_in[i, 3],
-            velocity_old,
-            velocity,
-            omega_old,
-            omega,
+            motion.velocity,
+            out.velocity,
+            motion.omega,
+            out.omega,
             half_dt,
         )
-    return velocity
+    return out
 
 
 @wp.kernel
@@ -107,9 +135,9 @@ def kick(
     work_inout: wp.array(dtype=wp.vec4d),
 ):
     i = wp.tid()
-    half_kick(
-        i, wp.float64(0.5) * dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout
-    )
+    motion = load_motion(i, velocity_inout, omega_inout, work_inout)
+    motion = half_kick(i, wp.float64(0.5) * dt, mass_in, inertia_in, force_in, torque_in, channels_in, motion)
+    store_motion(motion, i, velocity_inout, omega_inout, work_inout)
 
 
 @wp.kernel
@@ -137,10 +165,12 @@ def kick_drift(
     with a ``body_out`` then the pack kernel, in the same launch."""
     i = wp.tid()
     half_dt = wp.float64(0.5) * dt
+    motion = load_motion(i, velocity_inout, omega_inout, work_inout)
     if close_step:
-        half_kick(i, half_dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout)
-    velocity = half_kick(i, half_dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout)
-    position = position_inout[i] + dt * velocity
+        motion = half_kick(i, half_dt, mass_in, inertia_in, force_in, torque_in, channels_in, motion)
+    motion = half_kick(i, half_dt, mass_in, inertia_in, force_in, torque_in, channels_in, motion)
+    store_motion(motion, i, velocity_inout, omega_inout, work_inout)
+    position = position_inout[i] + dt * motion.velocity
     position_inout[i] = position
     if body_out.shape[0] > 0:
         pack_body(G, radius_in[i], mass_in[i], position, body_out, i)
@@ -166,18 +196,20 @@ def gravity_half_kick(
     half_dt: wp.float64,
     mass_in: wp.array(dtype=wp.float64),
     gravity_in: wp.array(dtype=wp.vec3d),
-    velocity_inout: wp.array(dtype=wp.vec3d),
-    work_inout: wp.array(dtype=wp.vec4d),
-):
+    ledger: bool,
+    motion: Motion,
+) -> Motion:
     """v += g/m half_dt for particle i (gravity exerts no torque on a sphere), its kinetic energy
     change booked to gravity's work (``half_kick_work`` without contact channels: all of it gravity's)."""
     gravity = gravity_in[i]
-    velocity_old = velocity_inout[i]
-    velocity = velocity_old + (half_dt / mass_in[i]) * gravity
-    velocity_inout[i] = velocity
-    if work_inout.shape[0] > 0:
+    out = Motion()
+    out.velocity = motion.velocity + (half_dt / mass_in[i]) * gravity
+    out.omega = motion.omega
+    out.work = motion.work
+    if ledger:
         none = wp.vec3d()
-        work_inout[i] = work_inout[i] + half_kick_work(gravity, none, none, none, none, none, velocity_old, velocity, none, none, half_dt)
+        out.work = motion.work + half_kick_work(gravity, none, none, none, none, none, motion.velocity, out.velocity, none, none, half_dt)
+    return out
 
 
 @wp.kernel
@@ -200,9 +232,11 @@ def kick_outer(
 ):
     """A gravity half kick of K dt / 2; with ``close_step`` first ``kick`` (which closes an outer step)."""
     i = wp.tid()
+    motion = load_motion(i, velocity_inout, omega_inout, work_inout)
     if close_step:
-        half_kick(i, wp.float64(0.5) * dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout)
-    gravity_half_kick(i, wp.float64(0.5) * outer_dt, mass_in, gravity_in, velocity_inout, work_inout)
+        motion = half_kick(i, wp.float64(0.5) * dt, mass_in, inertia_in, force_in, torque_in, channels_in, motion)
+    motion = gravity_half_kick(i, wp.float64(0.5) * outer_dt, mass_in, gravity_in, work_inout.shape[0] > 0, motion)
+    store_motion(motion, i, velocity_inout, omega_inout, work_inout)
 
 
 @wp.kernel
@@ -236,12 +270,14 @@ def kick_drift_inner(
     opens, after them the neighbour list's displacement check (kernels/neighbours.py)."""
     i = wp.tid()
     half_dt = wp.float64(0.5) * dt
+    motion = load_motion(i, velocity_inout, omega_inout, work_inout)
     if close_step:
-        half_kick(i, half_dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout)
+        motion = half_kick(i, half_dt, mass_in, inertia_in, force_in, torque_in, channels_in, motion)
     for _ in range(gravity_kicks):
-        gravity_half_kick(i, wp.float64(0.5) * outer_dt, mass_in, gravity_in, velocity_inout, work_inout)
-    velocity = half_kick(i, half_dt, mass_in, inertia_in, force_in, torque_in, channels_in, velocity_inout, omega_inout, work_inout)
-    position = position_inout[i] + dt * velocity
+        motion = gravity_half_kick(i, wp.float64(0.5) * outer_dt, mass_in, gravity_in, work_inout.shape[0] > 0, motion)
+    motion = half_kick(i, half_dt, mass_in, inertia_in, force_in, torque_in, channels_in, motion)
+    store_motion(motion, i, velocity_inout, omega_inout, work_inout)
+    position = position_inout[i] + dt * motion.velocity
     position_inout[i] = position
     moved = position - reference_in[i]
     if wp.dot(moved, moved) > half_skin * half_skin:

@@ -11,8 +11,8 @@ computed once and given to both particles, in three launches with no atomics.
    and side, a row of field sums and 64-bit candidate words.
 2. ``gather_newton``, one thread per particle: adds its rows in float64 in tile order and lists its
    candidates in increasing j from the words.
-3. the contacts of the listed candidates in float64 (:mod:`.contacts` ``contact_pass``, a warp
-   per particle, as every path that lists candidates).
+3. the contacts of the listed candidates in float64 (:mod:`.contacts` ``contact_pass``, 8 lanes a
+   particle, as every path that lists candidates).
 
 Every sum has a fixed order, so the motion is bit-reproducible on a GPU, and the same source runs on
 the CPU (tiles of 4, one lane), where it equals the plain loop.  Half the pairs and no atomics give
