@@ -1210,6 +1210,8 @@ def sweep(
             runs = select_runs(runs, only)
     except SpecError as error:
         fail(str(error))
+    for repeat, original in settings["same_as"].items():
+        typer.echo(f"  {repeat} is the same set-up as {original}: run once")
     if check:
         states = [run_state(run) for run in runs]
         counts = {kind: sum(s.startswith(kind) for s in states) for kind in ("complete", "resumes", "to run")}

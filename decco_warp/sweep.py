@@ -164,7 +164,35 @@ def load_sweep(path, overrides: dict | None = None) -> tuple[dict, list[dict]]:
     names = [r["run"]["name"] for r in runs]
     if len(set(names)) != len(names):
         raise specs.SpecError("[sweep.grid] gives two runs the same name; use values that differ in their text")
+    runs, settings["same_as"] = _distinct(runs)
     return settings, runs
+
+
+def set_up_of(spec: dict) -> str:
+    """What makes a resolved run what it is (its tables but its name), with the axis of a body that
+    does not spin left out: two runs with the same set-up step the same motion."""
+    tables = {table: dict(values) for table, values in spec.items() if isinstance(values, dict)}
+    tables["run"].pop("name", None)
+    collision = tables.get("collision", {})
+    for body in ("target", "projectile"):
+        if not collision.get(f"{body}_spin"):
+            collision.pop(f"{body}_spin_axis", None)
+    return json.dumps(tables, sort_keys=True, default=str)
+
+
+def _distinct(runs: list[dict]) -> tuple[list[dict], dict[str, str]]:
+    """The runs whose set-up no earlier run has, and for each one left out the run it repeats (a
+    grid whose points differ only in the axis of a zero spin, say): a repeat would count one outcome
+    twice in a comparison of groups."""
+    kept, same_as, first = [], {}, {}
+    for run in runs:
+        key = set_up_of(run)
+        if key in first:
+            same_as[run["run"]["name"]] = first[key]
+        else:
+            first[key] = run["run"]["name"]
+            kept.append(run)
+    return kept, same_as
 
 
 def realization(point: dict, name: str, k: int, alternatives: dict[str, list[str]] | None = None) -> dict:

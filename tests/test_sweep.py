@@ -52,6 +52,25 @@ def test_grid_expands_to_checked_run_specs(tmp_path):
         load_sweep(path)
 
 
+def test_a_repeated_set_up_runs_once(tmp_path):
+    """Points that differ only in the axis of a zero spin are one set-up: its realization 0 runs once
+    (a comparison of groups would count it twice), its other realizations differ and all run."""
+    path = tmp_path / "s.toml"
+    grid = '''"collision.target_spin, collision.target_spin_axis" = [[0.0, "+z"], [0.0, "+x"], [0.5, "+z"], [0.5, "+x"]]
+'''
+    text = SWEEP.format(out=tmp_path).replace('"collision.eta" = [0.5, 1.0]\n"params.dt" = [0.04, 5.0]\n', grid)
+    text = text.replace("analyse_every = 2", "analyse_every = 2\nrealizations = 2")
+    path.write_text(text)
+    settings, runs = load_sweep(path)
+    names = [r["run"]["name"] for r in runs]
+    assert settings["same_as"] == {"target_spin0_target_spin_axispx": "target_spin0_target_spin_axispz"}
+    assert len(runs) == 7 and "target_spin0_target_spin_axispx_r1" in names and "target_spin0.5_target_spin_axispx" in names
+    result = cli("sweep", str(path), "--check")
+    assert result.returncode == 0, result.stderr
+    assert "target_spin0_target_spin_axispx is the same set-up as target_spin0_target_spin_axispz: run once" in result.stdout
+    assert "7 runs" in result.stdout
+
+
 def test_sweep_runs_on_two_workers_reports_failures_and_resumes(tmp_path):
     path = tmp_path / "s.toml"
     path.write_text(SWEEP.format(out=tmp_path))
