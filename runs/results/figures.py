@@ -157,6 +157,42 @@ def spins():
     return fig
 
 
+def spin_statistics():
+    """Fig. 9 with statistics (runs/results/fig9_statistics): per eta, each kind's realizations
+    (dots), mean and 95 % interval of the mean (bar); right, each kind's difference to no spin
+    with its 95 % interval (Welch's t, as ``decco-warp compare``)."""
+    from decco_warp.analysis.compare import difference_interval, mean_interval
+
+    summaries = [r["summary"] for r in runs("fig9_statistics")]
+    etas = sorted({round(s["eta"], 6) for s in summaries})
+    fig, (ax, diff) = plt.subplots(1, 2, figsize=(11.0, 4.4))
+    for e, eta in enumerate(etas):
+        groups = {kind: np.array([s["largest_mass_ratio"] for s in summaries if round(s["eta"], 6) == eta and (s.get("spin_kind") or "none") == kind]) for kind in KINDS}
+        for k, kind in enumerate(KINDS):
+            values = groups[kind]
+            if len(values) == 0:
+                continue
+            x = e * (len(KINDS) + 1) + k
+            low, high, _ = mean_interval(values)
+            ax.plot(np.full(len(values), x) + np.linspace(-0.15, 0.15, len(values)), values, ".", color=f"C{k}", alpha=0.5)
+            ax.errorbar([x], [values.mean()], yerr=[[values.mean() - low], [high - values.mean()]], marker="o", color=f"C{k}", capsize=4,
+                        label=(f"{kind} (n = {len(values)})" if e == 0 else None))  # fmt: skip
+            if kind != "none" and len(groups["none"]) > 1 and len(values) > 1:
+                low, high, _ = difference_interval(values, groups["none"])
+                d = values.mean() - groups["none"].mean()
+                diff.errorbar([x], [d], yerr=[[d - low], [high - d]], marker="o", color=f"C{k}", capsize=4)
+    ticks = [e * (len(KINDS) + 1) + 1.5 for e in range(len(etas))]
+    for a in (ax, diff):
+        a.set_xticks(ticks, [f"eta {eta:g}" for eta in etas])
+    ax.set_ylabel("m_lf / m_t")
+    ax.set_title("equal masses head-on, spins at half breakup: realizations,\nmean and its 95 % interval", fontsize=10)
+    ax.legend(fontsize=8)
+    diff.axhline(0.0, color="0.6", linewidth=0.6)
+    diff.set_ylabel("m_lf / m_t, kind minus no spin")
+    diff.set_title("difference to no spin, 95 % interval (Welch's t)", fontsize=10)
+    return fig
+
+
 def stress_shares():
     found = runs("fig8")
     fig, axes = plt.subplots(1, len(found), figsize=(4.4 * len(found), 3.8), squeeze=False, sharey=True)
@@ -269,6 +305,7 @@ def main() -> None:
         ("validation-largest-fragment-eta-all", largest_fragment("eta_all")),
         ("validation-size-change", size_change()),
         ("validation-spins", spins()),
+        ("validation-spin-statistics", spin_statistics()),
         ("validation-stress-shares", stress_shares()),
         ("validation-conservation", conservation()),
         ("validation-overlaps", overlaps()),
