@@ -19,6 +19,7 @@ from .collision import setup_collision  # noqa: E402
 from .device import DeviceError, resolve_device  # noqa: E402
 from .errors import DeccoError  # noqa: E402
 from .diagnostics import diagnostics  # noqa: E402
+from .folder import RunFolder  # noqa: E402
 from .layouts import Layout  # noqa: E402
 from .io import load_pile, read_trajectory, save_pile  # noqa: E402
 from .params import G_CGS, ROLLING_FRICTION_FORMS, Params  # noqa: E402
@@ -61,6 +62,7 @@ __all__ = [
     "predict_compression",
     "read_trajectory",
     "resolve_device",
+    "RunFolder",
     "save_pile",
     "setup_collision",
 ]

@@ -8,6 +8,7 @@ from typing import List, Optional
 import typer
 
 from ._version import __version__
+from .folder import RunFolder
 from .errors import EXIT_BLOW_UP, EXIT_INPUT, EXIT_NOT_SETTLED, EXIT_OUTPUT, EXIT_STOPPED, DeccoError  # noqa: F401
 # (The exit codes, README "When things go wrong", live in errors.py beside the errors that carry them.)
 
@@ -356,7 +357,6 @@ def _rerun_observer(prepared, mode_text: str | None, every: int | None):
     if mode_text is None:
         return None, []
     from .io import read_frame
-    from .run import TRAJECTORY_FILE
     from .viz import RerunLogger, RerunUnavailable, parse_mode
 
     try:
@@ -366,7 +366,7 @@ def _rerun_observer(prepared, mode_text: str | None, every: int | None):
         if every < 1 or every % outer:
             raise ValueError(f"--rerun-every must be a multiple of [params] gravity_every = {outer} (>= 1); got {every}")
         if prepared.resume:
-            first_particles, first_observables, static = read_frame(prepared.run_dir / TRAJECTORY_FILE, 0)
+            first_particles, first_observables, static = read_frame(RunFolder(prepared.run_dir).trajectory, 0)
         else:
             state = prepared.plan.state
             static = {"radius": state.radii, "mass": state.masses, "species": state.size_class, "pile_id": state.pile_id}
@@ -625,8 +625,8 @@ def _resume_until_settled(run_dir: Path, max_steps: int | None, min_members: int
         except (FileFormatError, OSError) as error:
             fail(f"{run_dir}: cannot judge whether the run is settled: {error}")
 
-    if not (run_dir / "trajectory.h5").is_file():
-        fail(f"{run_dir} holds no trajectory.h5" if run_dir.is_dir() else missing(run_dir))
+    if not RunFolder(run_dir).trajectory.is_file():
+        fail(f"{run_dir} holds no {RunFolder.TRAJECTORY}" if run_dir.is_dir() else missing(run_dir))
     result = _run_with_progress(prepare_resume, run_dir, device=device, rerun=rerun, rerun_every=rerun_every)  # its own steps first
     _report(result)
     judged = verdict()
@@ -815,7 +815,7 @@ def analyze(
     from .device import DeviceError, resolve_device
     from .durable import json_text, write_atomic
     from .io import FileFormatError
-    from .lock import AnalysisLock, RunFolderBusy, RunFolderLock, ensure_not_analysed
+    from .lock import AnalysisLock, RunFolderBusy, ensure_not_analysed
 
     if min_members < 1 or every < 1 or not poll > 0:
         fail("--min-members and --every must be >= 1, --poll > 0")
@@ -823,12 +823,12 @@ def analyze(
         device = resolve_device(device)
     except DeviceError as error:
         fail(str(error))
-    if (path / "trajectory.h5").is_file():
+    if RunFolder(path).trajectory.is_file():
         runs = [path]
     elif path.is_dir():
-        runs = sorted(p.parent for p in path.glob("*/trajectory.h5"))
+        runs = sorted(p.parent for p in path.glob(f"*/{RunFolder.TRAJECTORY}"))
         if not runs:
-            fail(f"{path} holds no trajectory.h5 and no run folders with one")
+            fail(f"{path} holds no {RunFolder.TRAJECTORY} and no run folders with one")
     else:
         fail(missing(path))
     if follow and len(runs) > 1:
@@ -845,7 +845,7 @@ def analyze(
 
     def analyse(run_dir: Path, task) -> tuple[dict, bool]:
         """One analysis of a run, and whether the run was still being written."""
-        writer = RunFolderLock(run_dir)
+        writer = RunFolder(run_dir).lock()
         try:  # a finished run: held, so that no run starts writing there meanwhile
             writer.acquire()
         except RunFolderBusy:
@@ -1057,7 +1057,7 @@ def _planned_end(runs: list[Path]) -> float | None:
     ends = []
     for run_dir in runs:
         try:
-            spec = resolve_spec(load_spec_file(run_dir / "spec.toml"))
+            spec = resolve_spec(load_spec_file(RunFolder(run_dir).spec))
         except SpecError:
             continue  # analysed all the same; its figures keep their own scale
         if isinstance(spec["params"]["dt"], float) and "steps" in spec["run"]:
@@ -1081,7 +1081,7 @@ def _last_step(run_dir: Path) -> int:
     from .io import FileFormatError, last_frame_step
 
     try:
-        return last_frame_step(run_dir / "trajectory.h5")
+        return last_frame_step(RunFolder(run_dir).trajectory)
     except FileFormatError:
         return -1
 
@@ -1100,7 +1100,7 @@ def view(
     from .durable import WRITE_ERRNOS
     from .viz import RerunUnavailable, parse_mode, replay
 
-    trajectory = path / "trajectory.h5" if path.is_dir() else path
+    trajectory = RunFolder(path).trajectory if path.is_dir() else path
     if not trajectory.is_file():
         fail(f"{path} does not exist" if not path.exists() else f"{path} is neither a run folder nor a trajectory file")
     try:
@@ -1140,20 +1140,20 @@ def export(
     from .checks import InputError, check_destination
     from .io import FileFormatError
     from .repair import clear_write_flags
-    from .lock import RunFolderBusy, RunFolderLock
-    from .xdmf import XDMF_FILE, write_xdmf
+    from .lock import RunFolderBusy
+    from .xdmf import write_xdmf
 
     if not xdmf:
         fail("say what to export: --xdmf")
-    trajectory = path / "trajectory.h5" if path.is_dir() else path
+    trajectory = RunFolder(path).trajectory if path.is_dir() else path
     if not trajectory.is_file():
-        fail(f"{path} does not exist" if not path.exists() else f"{path} is neither a run folder with a trajectory.h5 nor a trajectory file")
-    destination = trajectory.with_name(XDMF_FILE)
+        fail(f"{path} does not exist" if not path.exists() else f"{path} is neither a run folder with a {RunFolder.TRAJECTORY} nor a trajectory file")
+    destination = trajectory.with_name(RunFolder.XDMF)
     running = False
     try:
         check_destination(destination, "XDMF file")
         try:  # no run writes it: clear the flags a killed one left (as h5clear -s), which other readers refuse
-            with RunFolderLock(trajectory.parent):
+            with RunFolder(trajectory.parent).lock():
                 clear_write_flags(trajectory)
         except RunFolderBusy:
             running = True

@@ -17,6 +17,7 @@ import numpy as np
 
 from .checks import InputError
 from .diagnostics import diagnostics
+from .folder import RunFolder
 from .io import read_trajectory
 from .params import Params
 from .pile import remove_net_motion
@@ -46,9 +47,9 @@ def fragment_of(run_dir, fragment: int = 0) -> tuple[State, dict]:
     """The particles of cluster ``fragment`` (0: the largest) at a run's last frame, as its analysis
     found them, with where they came from."""
     run_dir = Path(run_dir)
-    analysis, trajectory = run_dir / "analysis.h5", run_dir / "trajectory.h5"
+    analysis, trajectory = RunFolder(run_dir).analysis, RunFolder(run_dir).trajectory
     if not trajectory.is_file():
-        raise InputError(f"{run_dir} holds no trajectory.h5: the fragment's particles come from its last frame")
+        raise InputError(f"{run_dir} holds no {RunFolder.TRAJECTORY}: the fragment's particles come from its last frame")
     if not analysis.is_file():
         raise InputError(f"{run_dir} is not analysed: decco-warp analyze {run_dir} finds its fragments first")
     with h5py.File(analysis, "r") as f:

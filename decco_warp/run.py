@@ -20,6 +20,7 @@ from . import spec as specs
 from .checks import MAX_REST_OVERLAP, InputError, check_destination
 from .diagnostics import energy_ledger, energy_scale, ledger_closure, stress_shares
 from .durable import describe_write_error, pause_point, write_atomic, write_point
+from .folder import RunFolder
 from .io import BackgroundFrames, FileFormatError, Trajectory, read_checkpoint, read_frame, write_checkpoint
 from .lock import RunFolderLock
 from .plan import Plan, RunError, builtin_pile, pile_path, plan_resume, plan_start, run_dir_of  # noqa: F401 (run's names)
@@ -29,10 +30,6 @@ from .stability import MIN_TIME_STEP_MARGIN, StabilityReport
 from .xdmf import write_xdmf
 from .errors import BlowUp, OutputError, RunStopped  # noqa: F401 (re-exported: the error lives in errors.py)
 
-SPEC_FILE = "spec.toml"
-TRAJECTORY_FILE = "trajectory.h5"
-CHECKPOINT_FILE = "checkpoint.h5"
-LOG_FILE = "run.log"
 #: Seconds of stepping between two looks at the stop requests (Ctrl-C, SIGTERM), whatever the pace.
 STOP_LATENCY = 2.0
 
@@ -163,7 +160,7 @@ def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None
         raise RunError(f"run folder {run_dir} already exists; use --overwrite to replace it or resume to continue it")
     check_writable(run_dir)
     # An existing folder (to be overwritten) is locked before anything else: no one else may write there.
-    lock = RunFolderLock(run_dir).acquire() if run_dir.is_dir() else None
+    lock = RunFolder(run_dir).lock().acquire() if run_dir.is_dir() else None
     try:
         plan = plan_start(spec, device)
         note = _check_fits(plan, plan.state.n, plan.steps)
@@ -204,7 +201,8 @@ def _check_fits(plan: Plan, n: int, steps: int) -> str | None:
 def prepare_resume(run_dir, steps: int | None = None, device: str | None = None) -> PreparedRun:
     """Check a run folder and load its checkpoint; ``steps`` raises the total to run."""
     run_dir = Path(run_dir)
-    spec_path, checkpoint_path, trajectory_path = (run_dir / n for n in (SPEC_FILE, CHECKPOINT_FILE, TRAJECTORY_FILE))
+    folder = RunFolder(run_dir)
+    spec_path, checkpoint_path, trajectory_path = folder.spec, folder.checkpoint, folder.trajectory
     for path in (spec_path, checkpoint_path):
         if not path.is_file():
             raise RunError(f"{run_dir} does not exist" if not Path(run_dir).exists() else f"{run_dir} is not a run folder: {path.name} is missing")
@@ -216,7 +214,7 @@ def prepare_resume(run_dir, steps: int | None = None, device: str | None = None)
             "put it back to resume, or delete the folder to run it again from the start"
         )
     check_writable(run_dir)
-    lock = RunFolderLock(run_dir).acquire()
+    lock = folder.lock().acquire()
     try:
         return _prepare_resume(run_dir, spec_path, checkpoint_path, trajectory_path, steps, device, lock)
     except BaseException:
@@ -255,7 +253,7 @@ def execute(
     """Write the run folder (or continue it) and step the run to its end, holding its lock."""
     if not run.resume:
         run.run_dir.mkdir(parents=True, exist_ok=True)
-    run.lock = run.lock or RunFolderLock(run.run_dir)
+    run.lock = run.lock or RunFolder(run.run_dir).lock()
     try:
         run.lock.acquire()  # a new folder: before anything in it is touched
         return _execute(run, progress, observers)
@@ -280,7 +278,7 @@ def _open_or_clean(run: PreparedRun, progress, observers) -> RunDriver:
                 thing.close()
         if run.resume:
             raise OutputError(_failed_write(run.run_dir, run.sim.step_count, error)) from None
-        for name in (SPEC_FILE, TRAJECTORY_FILE, CHECKPOINT_FILE, LOG_FILE):
+        for name in RunFolder.RUN_FILES:
             with contextlib.suppress(OSError):
                 (run.run_dir / name).unlink(missing_ok=True)
         raise OutputError(
@@ -296,7 +294,7 @@ OUTPUT_FAILURE = "writing the run folder"
 def _failed_write(run_dir: Path, step: int, error: OSError) -> str:
     """The one line of a run whose write failed at ``step``: what failed and what is kept."""
     try:
-        kept = int(read_checkpoint(run_dir / CHECKPOINT_FILE)[0]["step"])
+        kept = int(read_checkpoint(RunFolder(run_dir).checkpoint)[0]["step"])
     except (FileFormatError, OSError):
         return (
             f"writing the run folder failed at step {step} ({describe_write_error(error)}); no checkpoint is left in "
@@ -313,27 +311,28 @@ def _open(run: PreparedRun, progress, observers, opened: list) -> RunDriver:
     What it opens (the log, the trajectory) is added to ``opened`` as it goes."""
     observers = observers or []
     sim, plan, spec, run_dir, extra = run.sim, run.plan, run.spec, run.run_dir, run.extra
+    folder = RunFolder(run_dir)
     spec_text = specs.dumps(spec, header=f"decco-warp run specification, resolved {datetime.now(timezone.utc):%Y-%m-%d %H:%M UTC}")
     if run.resume:
         if spec_text.split("\n", 1)[1] != extra["spec_toml"].split("\n", 1)[1]:  # the total steps changed
             extra["spec_toml"] = spec_text
-            write_atomic(run_dir / SPEC_FILE, spec_text)
-        log = RunLog(run_dir / LOG_FILE)
+            write_atomic(folder.spec, spec_text)
+        log = RunLog(folder.log)
         opened.append(log)
         for stale in run_dir.glob(".*.tmp"):  # a checkpoint being written when the run was killed
             stale.unlink()
             log(f"resume: removed the unfinished {stale.name}")
         log(f"resume: from step {sim.step_count} of {plan.steps} on {sim.device}")
         sample = record(sim, int(extra["size_classes"]))[1]
-        trajectory = Trajectory.reopen(run_dir / TRAJECTORY_FILE, keep_through_step=sim.step_count, observables=sample)
+        trajectory = Trajectory.reopen(folder.trajectory, keep_through_step=sim.step_count, observables=sample)
         opened.append(trajectory)
         return RunDriver(sim, trajectory, plan, run_dir, log, extra, progress, observers)
 
-    for name in (TRAJECTORY_FILE, CHECKPOINT_FILE, LOG_FILE):
-        (run_dir / name).unlink(missing_ok=True)
-    write_atomic(run_dir / SPEC_FILE, spec_text)
+    for path in (folder.trajectory, folder.checkpoint, folder.log):
+        path.unlink(missing_ok=True)
+    write_atomic(folder.spec, spec_text)
     extra["spec_toml"] = spec_text
-    log = RunLog(run_dir / LOG_FILE)
+    log = RunLog(folder.log)
     opened.append(log)
     state = plan.state
     log(f"start: {state.n} particles on {sim.device}, precision {plan.precision}, {plan.steps} steps")
@@ -353,12 +352,12 @@ def _open(run: PreparedRun, progress, observers, opened: list) -> RunDriver:
             "predicted_overlap": plan.forecast.fraction,
         },
     }
-    trajectory = Trajectory.create(run_dir / TRAJECTORY_FILE, state, observables, parameters)
+    trajectory = Trajectory.create(folder.trajectory, state, observables, parameters)
     opened.append(trajectory)
     trajectory.append(sim.step_count, sim.time, particles, observables)
     for _, observe in observers:
         observe(sim.step_count, sim.time, particles, observables)
-    write_checkpoint(run_dir / CHECKPOINT_FILE, sim.snapshot(), state, extra)
+    write_checkpoint(folder.checkpoint, sim.snapshot(), state, extra)
     return RunDriver(sim, trajectory, plan, run_dir, log, extra, progress, observers)
 
 
@@ -379,7 +378,7 @@ def execute_ensemble(runs: list[PreparedRun]) -> list[RunResult | BaseException]
             try:
                 if not run.resume:
                     run.run_dir.mkdir(parents=True, exist_ok=True)
-                run.lock = run.lock or RunFolderLock(run.run_dir)
+                run.lock = run.lock or RunFolder(run.run_dir).lock()
                 run.lock.acquire()
                 locks.append(run.lock)
                 drivers[k] = _open_or_clean(run, None, None)
@@ -507,7 +506,7 @@ class RunDriver:
         self.trajectory.flush()  # the frames up to this step are on disk before the checkpoint says so
         self.extra["wall_seconds"] = self.wall_before + began - self.started
         self.extra["stepping_seconds"] = self.stepping_before + self.stepping
-        write_checkpoint(self.run_dir / CHECKPOINT_FILE, self.sim.snapshot(), self.sim.state, self.extra)
+        write_checkpoint(RunFolder(self.run_dir).checkpoint, self.sim.snapshot(), self.sim.state, self.extra)
         self.log(f"checkpoint: step {step}")
         self.outside["checkpoints"] += _time.perf_counter() - began
 
@@ -593,7 +592,7 @@ class RunDriver:
             with contextlib.suppress(OSError):
                 self.log(f"output error: the last frame may be missing from the trajectory ({error})")
         try:  # the sidecar through which ParaView and VisIt read the trajectory (decco_warp/xdmf.py)
-            write_xdmf(self.run_dir / TRAJECTORY_FILE)
+            write_xdmf(RunFolder(self.run_dir).trajectory)
         except (OSError, FileFormatError) as error:
             if isinstance(error, OSError):
                 failed = failed or error

@@ -53,6 +53,7 @@ import numpy as np
 from . import resolution as resolutions
 from . import spec as specs
 from ._version import __version__
+from .folder import RunFolder
 
 #: ``ensemble = "auto"`` on a GPU: runs go to a worker up to 8 at a time (fewer where that leaves a
 #: worker idle), and those of the same particle count up to ENSEMBLE_MAX_PARTICLES are stepped
@@ -81,9 +82,6 @@ SUMMARY_FIELDS = [
     "momentum_drift", "angular_momentum_drift", "ledger_closure", "wall_seconds", "stepping_seconds", "analysis_seconds",
     "device", "device_name", "ensemble",
 ]  # fmt: skip
-SUMMARY_FILE = "summary.json"
-TRAJECTORY_FILE = "trajectory.h5"
-CHECKPOINT_FILE = "checkpoint.h5"
 
 
 def load_sweep(path, overrides: dict | None = None) -> tuple[dict, list[dict]]:
@@ -348,7 +346,7 @@ def _complete_row(spec: dict) -> dict | None:
 
     run_dir = run_dir_of(spec)
     try:
-        if not _run_complete(run_dir):
+        if not RunFolder(run_dir).complete():
             return None
     except (*RUN_FAILURES, specs.SpecError):
         return None
@@ -362,12 +360,12 @@ def run_state(spec: dict) -> str:
 
     run_dir = run_dir_of(spec)
     try:
-        progress = _progress(run_dir)
+        progress = RunFolder(run_dir).progress()
     except (*RUN_FAILURES, specs.SpecError):  # the worker will report what is wrong with the folder
         return "to run (its folder cannot be read)"
     if progress is not None and progress[0] >= progress[1]:
         return "complete"
-    if progress is not None and (run_dir / CHECKPOINT_FILE).is_file():
+    if progress is not None and RunFolder(run_dir).checkpoint.is_file():
         return f"resumes at step {progress[0]}"
     return "to run"
 
@@ -391,8 +389,8 @@ def _prepare(spec: dict, device: str | None) -> tuple[dict, object]:
     run_dir = run_dir_of(spec)
     row = {"run": spec["run"]["name"], "run_dir": str(run_dir), "device": device or "auto"}
     try:
-        checkpoint = run_dir / CHECKPOINT_FILE
-        if _run_complete(run_dir):
+        checkpoint = RunFolder(run_dir).checkpoint
+        if RunFolder(run_dir).complete():
             row["status"] = "skipped (complete)"
             return row, None
         prepared = prepare_resume(run_dir, device=device) if checkpoint.is_file() else prepare_start(spec, overwrite=True, device=device)
@@ -408,7 +406,7 @@ def _timed(row: dict) -> dict:
     from .io import read_checkpoint
     from .run import RUN_FAILURES
 
-    checkpoint = Path(row["run_dir"]) / CHECKPOINT_FILE
+    checkpoint = RunFolder(row["run_dir"]).checkpoint
     try:
         if checkpoint.is_file():
             extra = read_checkpoint(checkpoint)[2]
@@ -420,34 +418,13 @@ def _timed(row: dict) -> dict:
     return row
 
 
-def _run_complete(run_dir: Path) -> bool:
-    """True when the run folder's checkpoint has reached the steps of its own spec.toml, or, for a run
-    kept without its checkpoint (the committed results), when its analysis reached them."""
-    progress = _progress(run_dir)
-    return progress is not None and progress[0] >= progress[1]
-
-
-def _progress(run_dir: Path) -> tuple[int, int] | None:
-    """(steps made, steps its spec.toml asks for) of a run folder, by its checkpoint or, kept without
-    one, by its analysis; None when it holds neither."""
-    from .io import read_checkpoint
-
-    checkpoint, summary = run_dir / CHECKPOINT_FILE, run_dir / SUMMARY_FILE
-    if not checkpoint.is_file() and not summary.is_file():
-        return None
-    needed = specs.resolve_spec(specs.load_spec_file(run_dir / "spec.toml"))["run"]["steps"]
-    if checkpoint.is_file():
-        return int(read_checkpoint(checkpoint)[0]["step"]), needed
-    return int(json.loads(summary.read_text()).get("steps", -1)), needed
-
-
 def stepped_fraction(spec: dict) -> float:
     """How far a sweep's run has stepped, 0 to 1, by its folder's last checkpoint (0 while it has
     none, or its folder cannot be read just now)."""
     from .run import RUN_FAILURES, run_dir_of
 
     try:
-        progress = _progress(run_dir_of(spec))
+        progress = RunFolder(run_dir_of(spec)).progress()
     except (*RUN_FAILURES, specs.SpecError, OSError):
         return 0.0
     return 0.0 if progress is None else min(1.0, progress[0] / max(1, progress[1]))
@@ -468,10 +445,10 @@ def analyse_one(run_dir: str, min_members: int, analyse_every: int, keep_traject
     took when it ran, also for a run found analysed).  Runs in a process of this machine; the
     cluster finder's O(N^2) density is summed on ``device`` (default as for runs: this machine's
     GPU when it has one, where a 6 250-particle frame takes milliseconds, else NumPy)."""
-    from .lock import AnalysisLock, RunFolderLock
+    from .lock import AnalysisLock
 
     # The run has finished: no one else should be writing there, nor analysing it (decco-warp analyze).
-    with RunFolderLock(run_dir), AnalysisLock(run_dir):
+    with RunFolder(run_dir).lock(), AnalysisLock(run_dir):
         return _analyse(Path(run_dir), min_members, analyse_every, keep_trajectory, device)
 
 
@@ -480,8 +457,8 @@ def _analyse(run_dir: Path, min_members: int, analyse_every: int, keep_trajector
     from .analysis.runs import analyse_run
     from .device import resolve_device
 
-    summary_path = run_dir / SUMMARY_FILE
-    trajectory = run_dir / TRAJECTORY_FILE
+    folder = RunFolder(run_dir)
+    summary_path, trajectory = folder.summary, folder.trajectory
     settings = {"min_members": min_members, "analyse_every": analyse_every}
     previous = json.loads(summary_path.read_text()) if summary_path.is_file() else None
     # A summary older than the settled verdict is analysed again (its finder stopped too early).
@@ -496,7 +473,7 @@ def _analyse(run_dir: Path, min_members: int, analyse_every: int, keep_trajector
         raise FileNotFoundError(f"{run_dir} has neither a trajectory nor a summary to report")
     if not keep_trajectory and trajectory.is_file():
         trajectory.unlink()  # analysis.h5, summary.json, figures/ and the checkpoint stay
-        trajectory.with_name("trajectory.xdmf").unlink(missing_ok=True)  # it describes the trajectory only
+        RunFolder(run_dir).xdmf.unlink(missing_ok=True)  # it describes the trajectory only
     return summary
 
 

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RerunUnavailable  # noqa: F401 (re-exported: the error lives in errors.py)
+from .folder import RunFolder
 
 KM = 1e5
 MODES = ("spawn", "save", "connect", "serve")
@@ -241,7 +242,7 @@ def replay(trajectory_path: Path, mode: str, address: str | None, save_to: Path 
 
 def _largest_fragments(run_dir: Path, data: dict) -> dict:
     """Members of the largest fragment at the last frame, if the run was analysed."""
-    path = run_dir / "analysis.h5"
+    path = RunFolder(run_dir).analysis
     if not path.is_file():
         return {}
     import h5py

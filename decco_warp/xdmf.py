@@ -21,9 +21,8 @@ from xml.etree import ElementTree as ET
 import h5py
 
 from .durable import write_atomic
+from .folder import RunFolder
 from .io import FileFormatError, Trajectory, _complete_frames, open_trajectory
-
-XDMF_FILE = "trajectory.xdmf"
 
 #: Per-frame H5MD elements as XDMF attributes: (element, attribute name, XDMF type); position is the geometry.
 FRAME_ATTRIBUTES = (("velocity", "velocity", "Vector"), ("omega", "omega", "Vector"), ("stress", "stress", "Scalar"))
@@ -36,7 +35,7 @@ def write_xdmf(trajectory, xdmf=None) -> int:
     covering its complete frames (a run still being written: those written so far).  The file is
     replaced atomically, so that a viewer never reads half of it.  Returns the number of frames."""
     trajectory = Path(trajectory)
-    xdmf = Path(xdmf) if xdmf is not None else trajectory.with_name(XDMF_FILE)
+    xdmf = Path(xdmf) if xdmf is not None else trajectory.with_name(RunFolder.XDMF)
     with open_trajectory(trajectory) as f:
         particles = f["particles/all"]
         frames = min(_complete_frames(particles[name], keep_through_step=2**62) for name in Trajectory.PARTICLE_ELEMENTS)

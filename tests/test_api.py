@@ -193,3 +193,21 @@ def test_every_error_is_a_decco_error_with_its_exit_code_and_the_builtin_it_was(
         cli.main_entry()
     assert ended.value.code == 5
     assert capsys.readouterr().err == "decco-warp: error: writing somewhere failed\n"
+
+
+def test_run_folder_names_the_files_and_tells_how_far_a_run_kept_without_checkpoint_went(tmp_path):
+    """A run folder kept as the committed results keep it (spec.toml and summary.json, no
+    checkpoint): its progress comes from the summary; a folder with neither file has none."""
+    import json
+
+    from decco_warp import spec as specs
+
+    folder = dw.RunFolder(tmp_path / "run")
+    assert folder.trajectory == tmp_path / "run" / "trajectory.h5" and folder.summary.name == "summary.json"
+    assert folder.progress() is None and not folder.complete()
+    folder.path.mkdir()
+    folder.spec.write_text(specs.dumps(specs.resolve_spec({"run": {"steps": 100, "name": "run", "out": str(tmp_path)}}), header="test"))
+    folder.summary.write_text(json.dumps({"steps": 60}))
+    assert folder.progress() == (60, 100) and not folder.complete()
+    folder.summary.write_text(json.dumps({"steps": 100}))
+    assert folder.progress() == (100, 100) and folder.complete()

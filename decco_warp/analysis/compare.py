@@ -28,6 +28,7 @@ import numpy as np
 from scipy import stats
 
 from ..checks import InputError
+from ..folder import RunFolder
 
 #: Intervals and verdicts are at this confidence (two-sided).
 CONFIDENCE = 0.95
@@ -82,9 +83,6 @@ class SingleRunGroup(CompareError):
 
 # --- reading summaries ----------------------------------------------------------------------------
 
-SUMMARY_JSON = "summary.json"
-
-
 def read_rows(paths) -> list[dict]:
     """The summary rows under ``paths``: each a run folder (its summary.json), a folder of run
     folders (theirs), or a sweep's summary.csv (its rows; blank cells are None, numbers floats).
@@ -113,12 +111,12 @@ def _rows_of(path: Path) -> list[tuple[Path, str, dict]]:
             raise CompareError(f"{path} holds no rows")
         rows = [{key: parse_cell(text) for key, text in row.items() if key is not None} for row in table]
         return [((path.parent / str(row.get("run", f"line {k + 2}"))).resolve(), f"{path} line {k + 2}", row) for k, row in enumerate(rows)]
-    if (path / SUMMARY_JSON).is_file():
-        summaries = [path / SUMMARY_JSON]
+    if (path / RunFolder.SUMMARY).is_file():
+        summaries = [path / RunFolder.SUMMARY]
     elif path.is_dir():
-        summaries = sorted(path.glob(f"*/{SUMMARY_JSON}"))
+        summaries = sorted(path.glob(f"*/{RunFolder.SUMMARY}"))
         if not summaries:
-            raise CompareError(f"{path} holds no {SUMMARY_JSON} and no run folders with one (a sweep's table: give its summary.csv)")
+            raise CompareError(f"{path} holds no {RunFolder.SUMMARY} and no run folders with one (a sweep's table: give its summary.csv)")
     elif not path.exists():
         raise CompareError(f"{path} does not exist")
     else:

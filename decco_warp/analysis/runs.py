@@ -14,6 +14,7 @@ import numpy as np
 
 from ..diagnostics import energy_scale, ledger_closure
 from ..durable import json_ready, json_text, write_atomic
+from ..folder import RunFolder
 from ..io import OBSERVABLE_UNITS, read_trajectory
 from ..params import G_CGS
 from ..state import State
@@ -301,7 +302,7 @@ def _analyse_frames(data: dict, frames: list[int], target_mass: float, min_membe
 def late_verdict(run_dir, min_members: int = 50, device: str | None = None) -> dict:
     """:func:`late_statistics` of a run as its trajectory stands, from the frames of its late window
     only (what ``resume --until-settled`` asks after each extension); writes nothing."""
-    data = read_trajectory(Path(run_dir) / "trajectory.h5")
+    data = read_trajectory(RunFolder(run_dir).trajectory)
     target_mass = float(data["static"]["mass"][data["static"]["pile_id"] == 0].sum())
     G = data["parameters"].get("spec", {}).get("params", {}).get("G")
     frames, _, _ = _analyse_frames(data, late_window(data["time"]).tolist(), target_mass, min_members, G, device)
@@ -314,7 +315,7 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
     ``device``: as for :func:`analyse_snapshot`."""
     started = time.perf_counter()
     run_dir = Path(run_dir)
-    data = read_trajectory(run_dir / "trajectory.h5")
+    data = read_trajectory(RunFolder(run_dir).trajectory)
     static = data["static"]
     spec = data["parameters"].get("spec", {})
     G = spec.get("params", {}).get("G")
@@ -381,8 +382,8 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
     # Kept with the summary, so that a sweep that finds the run analysed reports what it took then.
     summary["analysis_seconds"] = round(time.perf_counter() - started, 3)
     analysis["summary"] = summary
-    write_analysis(run_dir / "analysis.h5", analysis)
-    write_atomic(run_dir / "summary.json", json_text(summary))
+    write_analysis(RunFolder(run_dir).analysis, analysis)
+    write_atomic(RunFolder(run_dir).summary, json_text(summary))
     return analysis
 
 
@@ -526,7 +527,7 @@ def refresh_summary(run_dir, collision: dict, params: dict, piles: dict | None =
     summary.json replaced.  Series the analysis did not keep (the mass-weighted size change per frame)
     give None: those need the trajectory."""
     run_dir = Path(run_dir)
-    analysis = read_analysis(run_dir / "analysis.h5")
+    analysis = read_analysis(RunFolder(run_dir).analysis)
     old = analysis["summary"]
     final = analysis["final"]
     summary = summarise(
@@ -548,6 +549,6 @@ def refresh_summary(run_dir, collision: dict, params: dict, piles: dict | None =
             summary["particle_size_change_mass_weighted"] = mass_weighted_size_change(masses[members], masses)
     summary["analysis_seconds"] = old.get("analysis_seconds")
     analysis["summary"] = summary
-    write_analysis(run_dir / "analysis.h5", analysis)
-    write_atomic(run_dir / "summary.json", json_text(summary))
+    write_analysis(RunFolder(run_dir).analysis, analysis)
+    write_atomic(RunFolder(run_dir).summary, json_text(summary))
     return summary

@@ -1,0 +1,73 @@
+"""A run's folder: the names of its files in one place, its lock, and how far it has stepped.
+
+    folder = RunFolder("runs/out/fig8/eta3")
+    folder.spec, folder.trajectory, folder.checkpoint, folder.log   # what a run writes
+    folder.analysis, folder.summary                                  # what its analysis writes
+    folder.xdmf                                                      # the trajectory's XDMF description
+    folder.lock()                                                    # its writers' lock (lock.py)
+    folder.progress(), folder.complete()                             # how far it has stepped
+
+Every module that opens a run's file asks a RunFolder for its path, so that the layout is spelled
+out here alone.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+
+def _file(name: str) -> property:
+    return property(lambda folder: folder.path / name, doc=f"the folder's {name}")
+
+
+class RunFolder:
+    """The files of one run folder (a path; nothing is read until asked)."""
+
+    SPEC = "spec.toml"
+    TRAJECTORY = "trajectory.h5"
+    CHECKPOINT = "checkpoint.h5"
+    LOG = "run.log"
+    ANALYSIS = "analysis.h5"
+    SUMMARY = "summary.json"
+    XDMF = "trajectory.xdmf"
+    #: What a run writes: a run that fails before its first checkpoint leaves none of them.
+    RUN_FILES = (SPEC, TRAJECTORY, CHECKPOINT, LOG)
+
+    def __init__(self, path):
+        self.path = Path(path)
+
+    def __repr__(self) -> str:
+        return f"RunFolder({str(self.path)!r})"
+
+    spec = _file(SPEC)
+    trajectory = _file(TRAJECTORY)
+    checkpoint = _file(CHECKPOINT)
+    log = _file(LOG)
+    analysis = _file(ANALYSIS)
+    summary = _file(SUMMARY)
+    xdmf = _file(XDMF)
+
+    def lock(self):
+        """The lock that one writer of the folder holds (a run, a resume, an analysis)."""
+        from .lock import RunFolderLock
+
+        return RunFolderLock(self.path)
+
+    def progress(self) -> tuple[int, int] | None:
+        """(steps made, steps its spec.toml asks for), by its checkpoint or, for a run kept without
+        one (the committed results), by its summary; None when it holds neither."""
+        from . import spec as specs
+        from .io import read_checkpoint
+
+        if not self.checkpoint.is_file() and not self.summary.is_file():
+            return None
+        needed = specs.resolve_spec(specs.load_spec_file(self.spec))["run"]["steps"]
+        if self.checkpoint.is_file():
+            return int(read_checkpoint(self.checkpoint)[0]["step"]), needed
+        return int(json.loads(self.summary.read_text()).get("steps", -1)), needed
+
+    def complete(self) -> bool:
+        """Whether the run has made every step its spec.toml asks for."""
+        progress = self.progress()
+        return progress is not None and progress[0] >= progress[1]
