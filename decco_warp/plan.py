@@ -4,8 +4,12 @@
 (k_in, dt, gravity; a duration into steps), and chooses the device and the force layout; it
 predicts the stability margins and the deepest compression.  :func:`plan_resume` does the same
 for a run folder's own specification and checkpoint.  A :class:`Plan` is frozen: run.py,
-ensembles and sweeps execute it and never go back to the specification.  Nothing here compiles a
-kernel or writes a file.
+ensembles and sweeps execute it and never go back to the specification.  Nothing here writes a
+file.  Planning touches the device in one place: the set-up's potential energies (the target's,
+the projectile's and their sum, which fix the impact speed from eta) are summed over every pair by
+the reference kernel (collision.setup_collision -> diagnostics -> Engine), compiled on its first
+use; a NumPy sum would be O(N^2) on the host (a minute at 1e5 particles) and would change the
+speed's last bits, and with them every run's motion.
 """
 
 from __future__ import annotations
