@@ -9,6 +9,7 @@ import typer
 
 from ._version import __version__
 from .folder import RunFolder
+from .spec import pile_defaults
 from .errors import EXIT_BLOW_UP, EXIT_INPUT, EXIT_NOT_SETTLED, EXIT_OUTPUT, EXIT_STOPPED, DeccoError  # noqa: F401
 # (The exit codes, README "When things go wrong", live in errors.py beside the errors that carry them.)
 
@@ -190,10 +191,7 @@ def _floats(text: str, what: str) -> tuple[float, ...]:
     return values
 
 
-#: Defaults of ``decco-warp pile``, also those of the entries of ``decco-warp piles``.
-PILE_DEFAULTS = {"particles": 5000, "seed": 1, "radii": "0.75e6,1.5e6,2.25e6", "density": 2.7, "ke_threshold": 1e-5,
-                 "fill": 0.3, "max_steps": 5_000_000, "k_in": 1e18, "restitution": 0.9, "mu_k": 0.3, "mu_r": 1e-3,
-                 "dt": 0.04, "precision": "mixed", "gravity": "auto"}  # fmt: skip
+PILE_DEFAULTS = pile_defaults()
 
 
 @app.command()
@@ -218,6 +216,18 @@ def pile(
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Build a rubble pile: seed spheres without overlaps, collapse under gravity until settled."""
+    _form_pile(
+        out, overwrite, check, device, particles=particles, seed=seed, radii=radii, density=density, ke_threshold=ke_threshold,
+        fill=fill, max_steps=max_steps, k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt, precision=precision, gravity=gravity,
+    )  # fmt: skip
+
+
+def _form_pile(
+    out: Path, overwrite: bool, check: bool, device: Optional[str], *, particles: int, seed: int, radii: str, density: float,
+    ke_threshold: float, fill: float, max_steps: int, k_in: float, restitution: float, mu_k: float, mu_r: float, dt: float,
+    precision: str, gravity: str,
+) -> None:  # fmt: skip
+    """``decco-warp pile``'s work, also that of each pile of ``decco-warp piles``: exits as the command would."""
     from .checks import check_destination
     from .device import resolve_device
     from .params import GRAVITY_CHOICES, Params, choose_gravity
@@ -1308,11 +1318,6 @@ _AGAIN = "free space, then run the sweep again: finished runs are skipped, a sto
 
 # --- piles (a list of piles from a TOML file) ------------------------------------------------
 
-PILE_KEYS = {"out": str, "particles": int, "seed": int, "radii": list, "density": float, "ke_threshold": float,
-             "fill": float, "dt": float, "k_in": float, "restitution": float, "mu_k": float, "mu_r": float,
-             "gravity": str}  # fmt: skip
-
-
 @app.command()
 def piles(
     spec_file: Path = typer.Argument(..., help="TOML with [[pile]] tables: out, particles, seed, and any pile option."),
@@ -1324,22 +1329,10 @@ def piles(
 ) -> None:
     """Build every pile a TOML file lists (the paper's: runs/paper/piles.toml), skipping those already built."""
     from .checks import InputError, check_destination
-    from .spec import SpecError, load_spec_file
+    from .spec import SpecError, check_pile_list, load_spec_file, pile_options
 
     try:
-        raw = load_spec_file(spec_file)
-        entries = raw.get("pile")
-        if set(raw) - {"pile"} or not isinstance(entries, list) or not entries:
-            raise SpecError(f"{spec_file} must hold only [[pile]] tables")
-        for k, entry in enumerate(entries):
-            for key, value in entry.items():
-                kind = PILE_KEYS.get(key)
-                if kind is None:
-                    raise SpecError(f"[[pile]] {k + 1}: unknown key {key}; allowed: {', '.join(PILE_KEYS)}")
-                if not (isinstance(value, kind) or kind is float and isinstance(value, int)) or isinstance(value, bool):
-                    raise SpecError(f"[[pile]] {k + 1}: {key} = {value!r} must be {kind.__name__}")
-            if "out" not in entry or "particles" not in entry:
-                raise SpecError(f"[[pile]] {k + 1}: out and particles are required")
+        entries = check_pile_list(load_spec_file(spec_file), spec_file)
         if resolution != 1:
             from .resolution import pile_entry
 
@@ -1357,7 +1350,4 @@ def piles(
         if out.exists() and not overwrite:
             typer.echo(f"{out}: exists, skipped")
             continue
-        options = {**PILE_DEFAULTS, **{k: v for k, v in entry.items() if k != "out"}}
-        if isinstance(options["radii"], list):
-            options["radii"] = ",".join(str(v) for v in options["radii"])
-        pile(out=out, overwrite=True, check=False, device=device, **options)  # its errors exit as `decco-warp pile`'s would
+        _form_pile(out, True, False, device, **pile_options(entry))  # its errors exit as `decco-warp pile`'s would

@@ -141,6 +141,61 @@ SCHEMA: dict[str, dict[str, Key]] = {
     },
 }
 
+#: A pile's formation: the keys of a [[pile]] table of ``decco-warp piles`` and the defaults of
+#: ``decco-warp pile``'s options.  Only their types are checked here; their ranges where a pile is
+#: formed (pile.check_formation_inputs, Params), with the same messages for either command.
+#: radii: a list in a [[pile]] table, comma-separated on the command line (the default's form).
+PILE_SCHEMA: dict[str, Key] = {
+    "out": Key(str, None, _any, "a pile file path"),
+    "particles": Key(int, 5000, _any, ""),
+    "seed": Key(int, 1, _any, ""),
+    "radii": Key(list, "0.75e6,1.5e6,2.25e6", _any, ""),
+    "density": Key(float, 2.7, _any, ""),
+    "ke_threshold": Key(float, 1e-5, _any, ""),
+    "fill": Key(float, 0.3, _any, ""),
+    "max_steps": Key(int, 5_000_000, _any, ""),
+    "k_in": Key(float, _PARAMS_DEFAULT.k_in, _any, ""),
+    "restitution": Key(float, _PARAMS_DEFAULT.restitution, _any, ""),
+    "mu_k": Key(float, _PARAMS_DEFAULT.mu_k, _any, ""),
+    "mu_r": Key(float, _PARAMS_DEFAULT.mu_r, _any, ""),
+    "dt": Key(float, _PARAMS_DEFAULT.dt, _any, ""),
+    "precision": Key(str, "mixed", _any, ""),
+    "gravity": Key(str, "auto", _any, ""),
+}
+
+
+def pile_defaults() -> dict:
+    """``decco-warp pile``'s option defaults (every key of PILE_SCHEMA but out)."""
+    return {key: rule.default for key, rule in PILE_SCHEMA.items() if key != "out"}
+
+
+def check_pile_list(raw: dict, path) -> list[dict]:
+    """The [[pile]] tables of a ``decco-warp piles`` file (raw TOML), each key known and of its type,
+    out and particles given (SpecError otherwise)."""
+    entries = raw.get("pile")
+    if set(raw) - {"pile"} or not isinstance(entries, list) or not entries:
+        raise SpecError(f"{path} must hold only [[pile]] tables")
+    for k, entry in enumerate(entries):
+        for key, value in entry.items():
+            rule = PILE_SCHEMA.get(key)
+            if rule is None:
+                raise SpecError(f"[[pile]] {k + 1}: unknown key {key}; allowed: {', '.join(PILE_SCHEMA)}")
+            kind = rule.kind
+            if not (isinstance(value, kind) or kind is float and isinstance(value, int)) or isinstance(value, bool):
+                raise SpecError(f"[[pile]] {k + 1}: {key} = {value!r} must be {kind.__name__}")
+        if "out" not in entry or "particles" not in entry:
+            raise SpecError(f"[[pile]] {k + 1}: out and particles are required")
+    return entries
+
+
+def pile_options(entry: dict) -> dict:
+    """A checked [[pile]] table as ``decco-warp pile``'s options (its defaults for what it omits)."""
+    options = {**pile_defaults(), **{key: value for key, value in entry.items() if key != "out"}}
+    if isinstance(options["radii"], list):
+        options["radii"] = ",".join(str(v) for v in options["radii"])
+    return options
+
+
 #: Default collision energy when neither eta nor speed is given: the low end of the paper's range,
 #: where the shipped demo piles merge within the demo's 2000 s.
 DEFAULT_ETA = 0.5
