@@ -141,6 +141,43 @@ SCHEMA: dict[str, dict[str, Key]] = {
     },
 }
 
+def _count(v) -> bool:
+    return not isinstance(v, bool) and isinstance(v, int) and v >= 1
+
+
+#: A sweep's settings ([sweep] of a sweep file, beside its [sweep.grid] and
+#: [sweep.pile_alternatives], which sweep.py expands into runs): default, check, what it must be.
+SWEEP_SCHEMA: dict[str, tuple[Any, Callable[[Any], bool], str]] = {
+    "name": (None, lambda v: isinstance(v, str) and bool(_NAME.fullmatch(v)), "letters, digits, '.', '_' and '-'"),
+    "out": ("runs/out", _any, ""),
+    "min_members": (50, _count, "an integer >= 1"),
+    "analyse_every": (1, _count, "an integer >= 1"),
+    "keep_trajectory": (True, lambda v: isinstance(v, bool), "true or false"),
+    "ensemble": ("auto", lambda v: v == AUTO or _count(v), 'an integer >= 1 or "auto"'),
+    "realizations": (1, _count, "an integer >= 1"),
+    "resolution": (1, _any, ""),  # checked by resolution.length_factor, which says why
+    "scale_contacts": (True, lambda v: isinstance(v, bool), "true or false"),
+}
+#: What else a [sweep] table holds.
+SWEEP_TABLES = ("grid", "pile_alternatives")
+
+
+def sweep_settings(sweep: dict, default_name: str) -> dict:
+    """The checked settings of a [sweep] table (SWEEP_SCHEMA's defaults for what it omits; the name
+    defaults to ``default_name``); SpecError names the first that is wrong."""
+    allowed = set(SWEEP_SCHEMA) | set(SWEEP_TABLES)
+    unknown = sorted(set(sweep) - allowed)
+    if unknown:
+        raise SpecError(f"unknown key [sweep] {unknown[0]}; allowed: {', '.join(sorted(allowed))}")
+    settings = {key: sweep.get(key, default) for key, (default, _, _) in SWEEP_SCHEMA.items()}
+    settings["name"] = sweep.get("name", default_name)
+    settings["out"] = str(settings["out"])
+    for key, (_, check, must) in SWEEP_SCHEMA.items():
+        if not check(settings[key]):
+            raise SpecError(f"[sweep] {key} = {settings[key]!r}: must be {must}")
+    return settings
+
+
 #: A pile's formation: the keys of a [[pile]] table of ``decco-warp piles`` and the defaults of
 #: ``decco-warp pile``'s options.  Only their types are checked here; their ranges where a pile is
 #: formed (pile.check_formation_inputs, Params), with the same messages for either command.

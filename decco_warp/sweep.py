@@ -65,10 +65,6 @@ AUTO_ENSEMBLE = 8
 #: 1.25x at 10 000 (a sweep: 4 runs of 10 000 in 505 s against ~668 s one at a time), 1.14x at
 #: 16 384 and 1.09x at 20 000, as one system fills more of the GPU.  Larger runs go alone.
 ENSEMBLE_MAX_PARTICLES = 20_000
-SWEEP_KEYS = {
-    "name", "out", "min_members", "analyse_every", "keep_trajectory", "ensemble", "realizations", "grid", "pile_alternatives",
-    "resolution", "scale_contacts",
-}  # fmt: skip
 SUMMARY_FIELDS = [
     "run", "status", "reason", "n_particles", "mass_ratio", "theta_deg", "eta", "speed", "spin_kind", "realization", "orientation_seed",
     "target_pile", "projectile_pile",
@@ -93,33 +89,8 @@ def load_sweep(path, overrides: dict | None = None) -> tuple[dict, list[dict]]:
         sweep = {**sweep, **{key: value for key, value in overrides.items() if value is not None}}
     if not isinstance(sweep, dict):
         raise specs.SpecError(f"{path} has no [sweep] table")
-    unknown = sorted(set(sweep) - SWEEP_KEYS)
-    if unknown:
-        raise specs.SpecError(f"unknown key [sweep] {unknown[0]}; allowed: {', '.join(sorted(SWEEP_KEYS))}")
-    name = sweep.get("name", Path(path).stem)
-    if not isinstance(name, str) or not specs._NAME.fullmatch(name):
-        raise specs.SpecError(f"[sweep] name = {name!r}: must be letters, digits, '.', '_' and '-'")
-    settings = {
-        "name": name,
-        "out": str(sweep.get("out", "runs/out")),
-        "min_members": sweep.get("min_members", 50),
-        "analyse_every": sweep.get("analyse_every", 1),
-        "keep_trajectory": sweep.get("keep_trajectory", True),
-        "ensemble": sweep.get("ensemble", "auto"),
-        "realizations": sweep.get("realizations", 1),
-        "resolution": sweep.get("resolution", 1),
-        "scale_contacts": sweep.get("scale_contacts", True),
-    }
-    for key in ("min_members", "analyse_every", "ensemble", "realizations"):
-        value = settings[key]
-        if key == "ensemble" and value == "auto":
-            continue
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            also = ' or "auto"' if key == "ensemble" else ""
-            raise specs.SpecError(f"[sweep] {key} = {value!r}: must be an integer >= 1{also}")
-    for key in ("keep_trajectory", "scale_contacts"):
-        if not isinstance(settings[key], bool):
-            raise specs.SpecError(f"[sweep] {key} = {settings[key]!r}: must be true or false")
+    settings = specs.sweep_settings(sweep, Path(path).stem)
+    name = settings["name"]
     try:
         resolutions.length_factor(settings["resolution"])
     except ValueError as error:

@@ -212,7 +212,8 @@ def test_keys_that_go_together_are_one_grid_entry(tmp_path):
     path = tmp_path / "s.toml"
     pairs = '[["+z", "+z"], ["+z", "-z"], ["+x", "+z"]]'
     entry = f'"collision.target_spin_axis, collision.projectile_spin_axis" = {pairs}\n'
-    path.write_text(SWEEP.format(out=tmp_path, k=1, etas="[1.0, 2.0]").replace("[run]", entry + "[run]"))
+    spinning = "[collision]\ntarget_spin = 0.5\nprojectile_spin = 0.5\n"  # the axes of bodies that spin: distinct set-ups
+    path.write_text(SWEEP.format(out=tmp_path, k=1, etas="[1.0, 2.0]").replace("[run]", entry + spinning + "[run]"))
     _, runs = load_sweep(path)
     axes = [(r["collision"]["target_spin_axis"], r["collision"]["projectile_spin_axis"], r["collision"]["eta"]) for r in runs]
     assert axes == [(t, p, eta) for eta in (1.0, 2.0) for t, p in (("+z", "+z"), ("+z", "-z"), ("+x", "+z"))]
