@@ -1,5 +1,6 @@
-"""Bad input, round two: one writer per run folder, damaged piles refused up front, destinations
-checked before any work, blow-ups explained, and a property-based fuzz of the whole CLI."""
+"""Bad input: one writer per run folder, damaged piles refused up front (physically wrong ones and
+damaged files of every kind, hypothesis), destinations checked before any work, blow-ups
+explained, and a property-based fuzz of the whole CLI."""
 
 import contextlib
 import io
@@ -11,6 +12,7 @@ import sys
 import time
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 from helpers import cli
@@ -19,8 +21,9 @@ from hypothesis import strategies as st
 
 import decco_warp as dw
 from decco_warp.forming import read_partial
-from decco_warp.io import read_checkpoint, save_pile
-from decco_warp.run import OverlapWatch, builtin_pile, likely_cause
+from decco_warp import spec as specs
+from decco_warp.io import FileFormatError, load_pile, read_checkpoint, save_pile
+from decco_warp.run import OverlapWatch, RunError, builtin_pile, likely_cause, prepare_start
 from decco_warp.stability import StabilityReport
 
 # --- one writer per run folder --------------------------------------------------------------------
@@ -106,6 +109,64 @@ def test_damaged_piles_are_refused_up_front_with_the_reason(tmp_path, name, chan
     assert not out.exists()
 
 
+@pytest.fixture(scope="module")
+def good_pile(tmp_path_factory):
+    path = tmp_path_factory.mktemp("pile") / "good.h5"
+    save_pile(load_pile(builtin_pile("projectile")), path)
+    return path
+
+
+_damage = st.one_of(
+    st.tuples(st.just("truncate"), st.floats(0.0, 0.999)),
+    st.tuples(st.just("nan"), st.sampled_from(["positions", "velocities", "omegas", "radii", "masses"])),
+    st.tuples(st.just("negative"), st.sampled_from(["radii", "masses"])),
+    st.tuples(st.just("delete"), st.sampled_from(["pile/positions", "pile/radii", "pile/size_class", "pile"])),
+    st.tuples(st.just("reshape"), st.sampled_from(["positions", "radii", "velocities"])),
+    st.tuples(st.just("format"), st.text(st.characters(blacklist_characters="\x00"), max_size=8)),
+)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(_damage, st.integers(0, 149))
+def test_damaged_pile_files_are_refused_with_a_reason(good_pile, tmp_path, damage, index):
+    good_pile_bytes = good_pile.read_bytes()
+    path = tmp_path / "damaged.h5"
+    path.write_bytes(good_pile_bytes)
+    kind, what = damage
+    if kind == "truncate":
+        path.write_bytes(good_pile_bytes[: int(what * len(good_pile_bytes))])
+    else:
+        with h5py.File(path, "r+") as f:
+            if kind == "nan":
+                data = f["pile"][what][()].astype(float)
+                data[index] = np.nan
+                del f["pile"][what]
+                f["pile"][what] = data
+            elif kind == "negative":
+                f["pile"][what][index] = -1.0
+            elif kind == "delete":
+                del f[what]
+            elif kind == "reshape":
+                data = f["pile"][what][()]
+                del f["pile"][what]
+                f["pile"][what] = data[:-1]
+            else:
+                f.attrs["format"] = what
+    with pytest.raises(FileFormatError) as raised:
+        load_pile(path)
+    assert str(raised.value) and "\n" not in str(raised.value)
+
+
+def test_a_damaged_pile_through_the_cli_is_exit_2_and_writes_nothing(good_pile, tmp_path):
+    good_pile_bytes = good_pile.read_bytes()
+    pile = tmp_path / "bad.h5"
+    pile.write_bytes(good_pile_bytes[: len(good_pile_bytes) // 2])
+    out = tmp_path / "out"
+    result = cli("simulate", "--projectile", str(pile), "--out", str(out), "--device", "cpu")
+    assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
+    assert not out.exists()
+
+
 def test_settled_piles_pass_the_checks():
     for path in [builtin_pile("target"), builtin_pile("projectile"), *sorted(Path("runs/paper/piles").glob("*.h5"))]:
         dw.load_pile(path)  # raises if refused
@@ -135,7 +196,23 @@ def test_every_writing_command_refuses_an_unwritable_destination_up_front(tmp_pa
         result = cli(*args)
         assert result.returncode == 2, (args, result.stderr)
         assert "cannot write the" in result.stderr and len(result.stderr.strip().splitlines()) == 1, result.stderr
+        if args[0] == "simulate":  # says which part of the path is in the way
+            assert f"{blocker} is not a writable folder" in result.stderr, result.stderr
     assert blocker.read_text() == "not a folder" and not (tmp_path / "ok.h5").exists()
+
+
+def test_unwritable_output_folder_is_refused_before_any_work(tmp_path):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        if os.access(locked, os.W_OK):
+            pytest.skip("running as a user who can write anywhere")
+        spec = specs.resolve_spec({"run": {"out": str(locked / "runs"), "device": "cpu"}})
+        with pytest.raises(RunError, match="cannot write the run folder"):
+            prepare_start(spec)
+    finally:
+        locked.chmod(0o700)
 
 
 _FINISHED: dict = {}
