@@ -229,38 +229,32 @@ def _form_pile(
 ) -> None:  # fmt: skip
     """``decco-warp pile``'s work, also that of each pile of ``decco-warp piles``: exits as the command would."""
     from .checks import check_destination
-    from .device import resolve_device
-    from .params import GRAVITY_CHOICES, Params, choose_gravity
-    from .engine import check_fits
-    from .forming import TYPICAL_FORMATION_STEPS, FormationStopped, form_pile_file, partial_path
-    from .pile import FormationError, check_formation_inputs
+    from .forming import TYPICAL_FORMATION_STEPS, FormationStopped, form_pile_file, partial_path, plan_pile
+    from .pile import FormationError
 
     if out.exists() and not overwrite and not check:
         fail(f"{out} already exists; use --overwrite to replace it")
     try:
         if not check:
             check_destination(out, "pile file")
-        chosen = resolve_device(device)
-        if gravity not in GRAVITY_CHOICES:
-            raise ValueError(f"--gravity must be one of {', '.join(GRAVITY_CHOICES)}; got {gravity!r}")
-        if gravity == "auto":
-            gravity = choose_gravity(particles, chosen)
-        params = Params(k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt, gravity=gravity)
-        size_radii = _floats(radii, "--radii")
-        check_formation_inputs(particles, size_radii, density, ke_threshold, fill, max_steps=max_steps)
-        note = check_fits(particles, gravity, chosen, min(max_steps, TYPICAL_FORMATION_STEPS), "forming a pile")
+        plan = plan_pile(
+            out, particles=particles, seed=seed, radii=_floats(radii, "--radii"), density=density, ke_threshold=ke_threshold, fill=fill,
+            max_steps=max_steps, k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt, precision=precision, gravity=gravity,
+            device=device,
+        )  # fmt: skip
     except ValueError as error:  # bad input: each input error of errors.py is a ValueError, as are Params' checks
         fail(str(error))
+    gravity, chosen = plan.params.gravity, plan.device
     if check:
         from .costs import formation_cost
 
-        typer.echo(f"pile: {particles} particles of radii {', '.join(f'{r / 1e5:g}' for r in size_radii)} km (equal mass per size class), "
+        typer.echo(f"pile: {particles} particles of radii {', '.join(f'{r / 1e5:g}' for r in plan.radii)} km (equal mass per size class), "
                    f"density {density:g} g/cm^3, seed {seed}, {gravity} gravity on {chosen}")  # fmt: skip
         typer.echo(f"cost: {formation_cost(particles, density, fill, dt, gravity, chosen)}; gives up at {max_steps} steps")
         typer.echo(f"verdict: would form {out}" + (" (replacing it)" if out.exists() else ""))
         return
-    if note:
-        typer.echo(f"{note} (a pile takes ~{TYPICAL_FORMATION_STEPS:.0e} steps to settle)", err=True)
+    if plan.note:
+        typer.echo(f"{plan.note} (a pile takes ~{TYPICAL_FORMATION_STEPS:.0e} steps to settle)", err=True)
     typer.echo(f"forming a {particles}-particle pile on {chosen} (seed {seed}, {gravity} gravity)", err=True)
     bar = _progress_bar("forming", "step", "ratio")
     with bar:
@@ -281,22 +275,7 @@ def _form_pile(
         failed = None  # reported after the bar's last line
         timing = []
         try:
-            formed = form_pile_file(
-                out,
-                progress=show,
-                on_resume=resumed,
-                on_done=timing.append,
-                n_particles=particles,
-                seed=seed,
-                device=chosen,
-                radii=size_radii,
-                density=density,
-                params=params,
-                ke_threshold=ke_threshold,
-                fill=fill,
-                max_steps=max_steps,
-                precision=precision,
-            )
+            formed = form_pile_file(out, progress=show, on_resume=resumed, on_done=timing.append, **plan.options())
         except ValueError as error:
             failed = (str(error), EXIT_INPUT)
         except FormationError as error:

@@ -6,11 +6,15 @@ Large piles need this: the paper's 5 000-particle piles took ~1.5e5 steps, and a
 from __future__ import annotations
 
 import time as _time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from .device import resolve_device
+from .engine import check_fits
 from .io import FileFormatError, read_checkpoint, save_pile, write_checkpoint
-from .pile import Formation, FormationError, FormationProgress
+from .params import GRAVITY_CHOICES, Params, choose_gravity
+from .pile import Formation, FormationError, FormationProgress, check_formation_inputs
 from .state import State
 from .stops import StopRequests
 from .errors import FormationStopped  # noqa: F401 (re-exported: the error lives in errors.py)
@@ -22,6 +26,49 @@ FORMING_SUFFIX = ".forming"
 TYPICAL_FORMATION_STEPS = 150_000
 #: Wall seconds between checkpoints of a forming pile.
 CHECKPOINT_SECONDS = 60.0
+
+
+@dataclass(frozen=True)
+class PilePlan:
+    """A pile's formation resolved once (its device and its gravity chosen, its inputs checked): what
+    ``decco-warp pile --check`` reports and :func:`form_planned` forms."""
+
+    out: Path
+    particles: int
+    seed: int
+    radii: tuple[float, ...]
+    density: float
+    ke_threshold: float
+    fill: float
+    max_steps: int
+    params: Params
+    precision: str
+    device: str
+    note: str | None  # the line that says a formation would take hours here, else None
+
+    def options(self) -> dict:
+        """:class:`decco_warp.pile.Formation`'s options."""
+        return {"n_particles": self.particles, "seed": self.seed, "device": self.device, "radii": self.radii, "density": self.density,
+                "params": self.params, "ke_threshold": self.ke_threshold, "fill": self.fill, "max_steps": self.max_steps,
+                "precision": self.precision}  # fmt: skip
+
+
+def plan_pile(
+    out, *, particles: int, seed: int, radii, density: float, ke_threshold: float, fill: float, max_steps: int, k_in: float,
+    restitution: float, mu_k: float, mu_r: float, dt: float, precision: str, gravity: str, device: str | None = None,
+) -> PilePlan:  # fmt: skip
+    """The plan of a pile's formation (``decco-warp pile``'s options; spec.PILE_SCHEMA): ValueError
+    (an InputError for what the checks refuse) on bad input, before anything is formed."""
+    chosen = resolve_device(device)
+    if gravity not in GRAVITY_CHOICES:
+        raise ValueError(f"--gravity must be one of {', '.join(GRAVITY_CHOICES)}; got {gravity!r}")
+    if gravity == "auto":
+        gravity = choose_gravity(particles, chosen)
+    params = Params(k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt, gravity=gravity)
+    radii = tuple(float(r) for r in radii)
+    check_formation_inputs(particles, radii, density, ke_threshold, fill, max_steps=max_steps)
+    note = check_fits(particles, gravity, chosen, min(max_steps, TYPICAL_FORMATION_STEPS), "forming a pile")
+    return PilePlan(Path(out), particles, seed, radii, density, ke_threshold, fill, max_steps, params, precision, chosen, note)
 
 
 def partial_path(out: Path) -> Path:
