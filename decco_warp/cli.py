@@ -1268,6 +1268,9 @@ def sweep(
     except OSError as error:
         write_failed(error, f"the runs' folders and summary.csv are whole; {_AGAIN}")
     lock.release()
+    if rows is None and len(finished) == len(runs):  # stopped while its workers shut down: nothing to continue
+        fail(f"sweep stopped after its {len(runs)} runs had finished (summary.csv holds them), before its figures: "
+             "run it again to draw them (every run is skipped)", code=EXIT_STOPPED)  # fmt: skip
     if rows is None:
         fail(
             f"sweep stopped after {len(finished)} of {len(runs)} runs (summary.csv holds them); run it again to "
