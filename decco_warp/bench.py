@@ -13,6 +13,7 @@ mean step time, the rate an all-pairs step would need to keep up.
 
 from __future__ import annotations
 
+import itertools
 import math
 import subprocess
 import time
@@ -237,6 +238,43 @@ def bench_size(
         gravity_every=gravity_every,
         list_builds_per_step=builds,
     )
+
+
+def bench_rows(
+    sizes, kinds, device: str, precision: str = "mixed", budget: float = 1.0, steps: int = 100, solvers=("all-pairs",),
+    layouts=(), ensembles=(), clocks=(),
+):  # fmt: skip
+    """Every row of ``decco-warp bench``, in order, as each is measured: per size and test system, the
+    default all-pairs layout (beside the one-thread-per-particle baseline) and ``layouts``, the tree,
+    ensembles of ``ensembles`` systems (against one at a time), and gravity every K of ``clocks``
+    (against K = 1 with the same solver); each comparison is added to the row's layout text."""
+    for size, kind in itertools.product(sizes, kinds):
+        runs = [("all-pairs", layout) for layout in [None, *layouts]] if "all-pairs" in solvers else []
+        runs += [("tree", None)] if "tree" in solvers else []
+        runs = [(solver, layout, 1, 1) for solver, layout in runs]
+        runs += [("all-pairs", None, k, 1) for k in ensembles]
+        runs += [(solver, None, 1, every) for every in clocks for solver in solvers]
+        alone, every_step = None, {}
+        for solver, layout, systems, every in runs:
+            first = (solver, layout, systems, every) == runs[0]
+            row = bench_size(
+                size, device, precision, layout, budget, steps, baseline=first, gravity=solver, systems=systems, system=kind,
+                gravity_every=every,
+            )  # fmt: skip
+            if len(kinds) > 1:
+                row.layout += f", {kind}"
+            if systems == 1 and layout is None and every == 1:
+                every_step[solver] = row
+                alone = row if solver == "all-pairs" else alone
+            if systems > 1 and alone is not None:
+                row.layout += f": {row.step_pairs_per_s / alone.step_pairs_per_s:.2f}x one at a time"
+            if solver == "tree" and every == 1 and alone is not None:  # the tree in its own terms: its time against all-pairs'
+                row.versus_all_pairs = alone.step_seconds / row.step_seconds
+                row.layout += f": {row.versus_all_pairs:.2f}x the all-pairs step"
+            if every > 1:  # against gravity every step with the same solver, and how often the list was built
+                row.versus_every_step = every_step[solver].step_seconds / row.step_seconds
+                row.layout += f": {row.versus_every_step:.2f}x the K = 1 step, {row.list_builds_per_step:.3g} list builds a step"
+            yield row
 
 
 def as_dict(row: BenchRow) -> dict:

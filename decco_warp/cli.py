@@ -667,7 +667,7 @@ def bench(
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Pairs/s of the force kernel and of the full step, beside a one-thread-per-particle baseline."""
-    import itertools
+    import math
 
     import warp as wp
 
@@ -675,7 +675,7 @@ def bench(
     from .checks import InputError, check_destination
     from .device import DeviceError, resolve_device
     from .engine import PRECISIONS
-    from .layouts import Layout
+    from .layouts import parse_layout
     from .params import GRAVITY_SOLVERS
 
     try:
@@ -703,27 +703,10 @@ def bench(
     sizes = [int(v) for v in _floats(n or default_sizes, "--n")]
     if any(v < 2 for v in sizes) or steps < 1 or budget <= 0:
         fail("--n values must be >= 2, --steps >= 1 and --seconds > 0")
-    extra_layouts = []
-    for item in filter(None, (part.strip() for part in layouts.split(","))):
-        try:
-            parts = item.split(":")
-            flags = []
-            while parts and parts[-1] in ("newton", "unfused") and parts[-1] not in flags:
-                flags.append(parts.pop())
-            values = [int(v) for v in parts]
-            if len(values) not in (2, 3, 4) or (not chosen.startswith("cuda") and values[0] != 1):
-                raise ValueError
-            if "newton" in flags and chosen.startswith("cuda") and values[0] != 32:
-                raise ValueError
-            extra_layouts.append(
-                Layout(*values, newton="newton" in flags, fuse_kicks="unfused" not in flags)
-            )
-        except ValueError:
-            fail(
-                "--layouts entries must be BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]] or "
-                "BLOCK_DIM:TILE[:SLOTS[:MAX_REGISTERS]]:newton (BLOCK_DIM 32, TILE a multiple of it; SLOTS unused), "
-                f"either with :unfused (the kicks in launches of their own), BLOCK_DIM 1 on CPU; got {item!r}"
-            )
+    try:
+        extra_layouts = [parse_layout(item, chosen) for item in filter(None, (part.strip() for part in layouts.split(",")))]
+    except ValueError as error:
+        fail(str(error))
     limit, how = benchmarks.device_limit_pairs_per_s(chosen)
     d = wp.get_device(chosen)
     typer.echo(f"device: {chosen} ({d.name}), warp-lang {wp.config.version}, precision {precision}")
@@ -731,40 +714,16 @@ def bench(
     header = f"{'N':>8} {'force pairs/s':>14} {'step pairs/s':>13} {'step ms':>9} {'particles/s':>12} {'of limit':>9} {'baseline pairs/s':>17} {'speed-up':>9}  layout"
     typer.echo(header)
     rows = []
-    for size, kind in itertools.product(sizes, kinds):
-        runs = [("all-pairs", layout) for layout in [None, *extra_layouts]] if "all-pairs" in solvers else []
-        runs += [("tree", None)] if "tree" in solvers else []
-        runs = [(solver, layout, 1, 1) for solver, layout in runs]
-        runs += [("all-pairs", None, k, 1) for k in ensembles]
-        runs += [(solver, None, 1, every) for every in clocks for solver in solvers]
-        alone, every_step = None, {}
-        for solver, layout, systems, every in runs:
-            first = (solver, layout, systems, every) == runs[0]
-            row = benchmarks.bench_size(
-                size, chosen, precision, layout, budget, steps, baseline=first, gravity=solver, systems=systems, system=kind,
-                gravity_every=every,
-            )  # fmt: skip
-            if len(kinds) > 1:
-                row.layout += f", {kind}"
-            rows.append(row)
-            if systems == 1 and layout is None and every == 1:
-                every_step[solver] = row
-                alone = row if solver == "all-pairs" else alone
-            if systems > 1 and alone is not None:
-                row.layout += f": {row.step_pairs_per_s / alone.step_pairs_per_s:.2f}x one at a time"
-            if solver == "tree" and every == 1 and alone is not None:  # the tree in its own terms: its time against all-pairs'
-                row.versus_all_pairs = alone.step_seconds / row.step_seconds
-                row.layout += f": {row.versus_all_pairs:.2f}x the all-pairs step"
-            if every > 1:  # against gravity every step with the same solver, and how often the list was built
-                row.versus_every_step = every_step[solver].step_seconds / row.step_seconds
-                row.layout += f": {row.versus_every_step:.2f}x the K = 1 step, {row.list_builds_per_step:.3g} list builds a step"
-            fraction = f"{100 * row.fraction_of_limit:8.1f}%" if row.fraction_of_limit is not None else f"{'n/a':>9}"
-            baseline_text = f"{row.baseline_pairs_per_s:17.3g} {row.speedup:8.1f}x" if first else f"{'':>17} {'':>9}"
-            rates = f"{row.force_pairs_per_s:14.3g} {row.step_pairs_per_s:13.3g}" if solver == "all-pairs" else f"{'-':>14} {'-':>13}"
-            typer.echo(
-                f"{size:>8} {rates} {1e3 * row.step_seconds:9.3f} {row.particles_per_s:12.3g} "
-                f"{fraction} {baseline_text}  {row.layout}"
-            )
+    for row in benchmarks.bench_rows(sizes, kinds, chosen, precision, budget, steps, solvers, extra_layouts, ensembles, clocks):
+        rows.append(row)
+        baseline = not math.isnan(row.baseline_seconds)
+        fraction = f"{100 * row.fraction_of_limit:8.1f}%" if row.fraction_of_limit is not None else f"{'n/a':>9}"
+        baseline_text = f"{row.baseline_pairs_per_s:17.3g} {row.speedup:8.1f}x" if baseline else f"{'':>17} {'':>9}"
+        rates = f"{row.force_pairs_per_s:14.3g} {row.step_pairs_per_s:13.3g}" if row.gravity == "all-pairs" else f"{'-':>14} {'-':>13}"
+        typer.echo(
+            f"{row.n:>8} {rates} {1e3 * row.step_seconds:9.3f} {row.particles_per_s:12.3g} "
+            f"{fraction} {baseline_text}  {row.layout}"
+        )
     if json_out is not None:
         from .durable import json_text, write_atomic
 

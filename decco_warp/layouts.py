@@ -115,3 +115,25 @@ def layout_for(choice: str, n: int, device: str) -> Layout | None:
     if choice not in LAYOUT_CHOICES:
         raise ValueError(f"layout must be one of {', '.join(LAYOUT_CHOICES)}; got {choice!r}")
     return None if choice == "auto" else newton_layout(device)
+
+
+def parse_layout(text: str, device: str) -> Layout:
+    """A layout written BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]] or
+    BLOCK_DIM:TILE[:SLOTS[:MAX_REGISTERS]]:newton, either with :unfused (``decco-warp bench --layouts``);
+    ValueError, naming the forms, for anything else or what ``device`` cannot run."""
+    try:
+        parts = text.split(":")
+        flags = []
+        while parts and parts[-1] in ("newton", "unfused") and parts[-1] not in flags:
+            flags.append(parts.pop())
+        values = [int(v) for v in parts]
+        on_cuda = device.startswith("cuda")
+        if len(values) not in (2, 3, 4) or (not on_cuda and values[0] != 1) or ("newton" in flags and on_cuda and values[0] != 32):
+            raise ValueError
+        return Layout(*values, newton="newton" in flags, fuse_kicks="unfused" not in flags)
+    except ValueError:
+        raise ValueError(
+            "--layouts entries must be BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]] or "
+            "BLOCK_DIM:TILE[:SLOTS[:MAX_REGISTERS]]:newton (BLOCK_DIM 32, TILE a multiple of it; SLOTS unused), "
+            f"either with :unfused (the kicks in launches of their own), BLOCK_DIM 1 on CPU; got {text!r}"
+        ) from None
