@@ -185,6 +185,9 @@ def bad_inputs(sweep, tmp_path):
     lone = write_runs(tmp_path / "lone", fake_rows({"none": [1.0, 1.1], "parallel": [1.2]}))
     mixed = write_runs(tmp_path / "mixed", fake_rows({"none": [1.0, 1.1]}) + fake_rows({"parallel": [1.2, 1.3]}, mass_ratio=0.25))
     (tmp_path / "empty").mkdir()
+    outcome = {"particle_size_change": 2.5, "deepest_overlap": 0.61, "momentum_drift": 1.2e-9}
+    twice = fake_rows({"none": [1.0, 1.1, 1.2], "parallel": [1.3, 1.3]})
+    twice = write_runs(tmp_path / "twice", [{**row, **outcome} for row in twice])  # parallel_r0, parallel_r1: one run
     return {
         "unknown column": ([str(sweep), "--by", "spin_kind", "--metric", "largest_mass"], ["--metric largest_mass: no such column", "spin_kind"]),
         "unknown --at": ([str(sweep), *base, "--at", "etta"], ["--at etta: no such column", "eta"]),
@@ -197,6 +200,7 @@ def bad_inputs(sweep, tmp_path):
         "bad --where": ([str(sweep), *base, "--where", "eta"], ["--where takes COLUMN=VALUE"]),
         "unknown reference": ([str(sweep), *base, "--reference", "oblique"], ["--reference oblique", "none, parallel"]),
         "read twice": ([str(sweep), str(sweep / "summary.csv"), *base], ["is read twice"]),
+        "one set-up twice": ([str(twice), *base], ["parallel_eta6_r0 and parallel_eta6_r1 have the same outcome", "give it once"]),
     }
 
 

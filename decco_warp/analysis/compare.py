@@ -96,7 +96,22 @@ def read_rows(paths) -> list[dict]:
             rows.append(row)
     if not rows:
         raise CompareError(f"no summaries in {', '.join(map(str, paths))}")
+    seen = {}
+    for row in rows:  # two runs of one set-up under two names: one outcome that would count twice
+        signature = tuple(row.get(column) for column in OUTCOME_COLUMNS)
+        if sum(value is not None for value in signature) >= 3:
+            if signature in seen:
+                raise CompareError(
+                    f"runs {seen[signature]} and {row.get('run')} have the same outcome to the last digit "
+                    f"({', '.join(c for c, v in zip(OUTCOME_COLUMNS, signature) if v is not None)}): one set-up run twice "
+                    "under two names; give it once"
+                )
+            seen[signature] = row.get("run")
     return rows
+
+
+#: Outcome columns that two distinct runs never share all of, to the last digit (chaotic motion).
+OUTCOME_COLUMNS = ("largest_mass_ratio", "particle_size_change", "deepest_overlap", "momentum_drift", "angular_momentum_drift", "ledger_closure")
 
 
 def _rows_of(path: Path) -> list[tuple[Path, str, dict]]:
