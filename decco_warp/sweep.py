@@ -68,7 +68,7 @@ ENSEMBLE_MAX_PARTICLES = 20_000
 SUMMARY_FIELDS = [
     "run", "status", "reason", "n_particles", "mass_ratio", "theta_deg", "eta", "speed", "spin_kind", "realization", "orientation_seed",
     "target_pile", "projectile_pile",
-    "k_in", "dt", "steps",
+    "k_in", "dt", "gravity_every", "steps",
     "largest_mass_ratio", "settled", "settled_note", "largest_mass_ratio_late_low", "largest_mass_ratio_late_high",
     "ls12_largest_mass_ratio", "ls12_band_low", "ls12_band_high", "ls12_planets_largest_mass_ratio",
     "eta_potential", "eta_self", "eta_all", "cross_potential", "contact_surface_speed", "contact_twist_rate",

@@ -179,6 +179,7 @@ def test_a_run_without_any_cluster_writes_null_not_nan(tmp_path):
     summary = _strict((tmp_path / "a" / "summary.json").read_text())
     assert summary["largest_mass_ratio"] == 0.0 and summary["particle_size_change"] is None and summary["size_change_late"] is None
     assert summary["settled"] is False and "NOT SETTLED (no cluster" in result.stdout
+    assert summary["gravity_every"] == 1 and summary["dt"] == 0.04  # the clocks, recorded for compare
 
 
 def test_analysis_keeps_velocities_labels_per_frame_and_units(sweep):

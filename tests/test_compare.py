@@ -184,6 +184,7 @@ def bad_inputs(sweep, tmp_path):
     base = ["--by", "spin_kind", "--metric", "largest_mass_ratio"]
     lone = write_runs(tmp_path / "lone", fake_rows({"none": [1.0, 1.1], "parallel": [1.2]}))
     mixed = write_runs(tmp_path / "mixed", fake_rows({"none": [1.0, 1.1]}) + fake_rows({"parallel": [1.2, 1.3]}, mass_ratio=0.25))
+    clocks = write_runs(tmp_path / "clocks", fake_rows({"none": [1.0, 1.1]}, gravity_every=1) + fake_rows({"parallel": [1.2, 1.3]}, gravity_every=10))
     (tmp_path / "empty").mkdir()
     outcome = {"particle_size_change": 2.5, "deepest_overlap": 0.61, "momentum_drift": 1.2e-9}
     twice = fake_rows({"none": [1.0, 1.1, 1.2], "parallel": [1.3, 1.3]})
@@ -194,6 +195,7 @@ def bad_inputs(sweep, tmp_path):
         "not numeric": ([str(sweep), "--by", "spin_kind", "--metric", "eta_potential"], ["--metric eta_potential is not numeric", "'self'"]),
         "group of one": ([str(lone), *base], ["1 group(s) of one run", "parallel", "--allow-single"]),
         "mixed set-ups": ([str(mixed), *base], ["differ in mass_ratio (0.25, 1)", "--allow-mixed"]),
+        "mixed clocks": ([str(clocks), *base], ["differ in gravity_every (1, 10)", "--allow-mixed"]),
         "no runs": ([str(tmp_path / "empty"), *base], ["holds no summary.json"]),
         "no such path": ([str(tmp_path / "nowhere"), *base], ["does not exist"]),
         "nothing matches": ([str(sweep), *base, "--where", "eta=12"], ["no run matches --where eta=12"]),

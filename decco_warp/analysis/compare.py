@@ -52,7 +52,7 @@ WHERE_TOLERANCE = 0.01
 #: The columns that define a set-up: rows compared at one point must agree in each of these (where
 #: present) unless it is the ``by`` or ``at`` column.  (Summaries do not record restitution or the
 #: friction coefficients yet; they are checked once they do.)
-SETUP_COLUMNS = ("mass_ratio", "theta_deg", "k_in", "dt", "eta_potential", "n_particles", "restitution", "mu_k", "mu_r")
+SETUP_COLUMNS = ("mass_ratio", "theta_deg", "k_in", "dt", "gravity_every", "eta_potential", "n_particles", "restitution", "mu_k", "mu_r")
 #: The group that ``spin_kind`` is compared against by default, where present.
 NO_SPIN = "none"
 

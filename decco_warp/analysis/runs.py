@@ -413,6 +413,8 @@ def summarise(name: str, analysis: dict, collision: dict, params: dict, n_partic
         "target_mass": target_mass,
         "k_in": params.get("k_in"),
         "dt": params.get("dt"),
+        # The clock of gravity (a run made before it existed: 1, the paper's scheme).
+        "gravity_every": params.get("gravity_every", 1) if params else None,
         "steps": int(frames["step"][-1]),
         "final_time": float(frames["time"][-1]),
         "largest_mass_ratio": float(frames["largest_mass_ratio"][-1]),
