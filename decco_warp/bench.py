@@ -27,6 +27,7 @@ from .layouts import Layout, choose_layout
 from .params import Params
 from .simulation import Simulation, graph_steps
 from .state import State
+from .errors import InputError
 
 #: Arithmetic per pair used for the device limit (gravity ~20 flops), as in the issue tracker.
 FLOPS_PER_PAIR = 20
@@ -118,7 +119,7 @@ def bench_system(kind: str, n: int, systems: int = 1) -> State:
     """The bench's ``kind`` of system at ``n`` particles, or ``systems`` of them one after another
     (an ensemble: each different)."""
     if kind not in TEST_SYSTEMS:
-        raise ValueError(f"the test system must be one of {', '.join(TEST_SYSTEMS)}; got {kind!r}")
+        raise InputError(f"the test system must be one of {', '.join(TEST_SYSTEMS)}; got {kind!r}")
     make = lattice_pile if kind == "lattice" else pile_mosaic
     piles = [make(n, seed=k) for k in range(systems)]
 

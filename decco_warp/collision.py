@@ -16,6 +16,7 @@ import numpy as np
 from .diagnostics import diagnostics
 from .params import G_CGS, Params
 from .state import State
+from .errors import InputError
 
 #: What eta = KE / |U| (paper eq. 18) takes as U: "self" sums each pile's own pairs (the default,
 #: and the reading of every committed run); "all" sums every pair of both piles at set-up, the
@@ -49,7 +50,7 @@ def random_rotations(seed: int, count: int = 2) -> np.ndarray:
     A unit quaternion with four independent normal components is uniform on the 3-sphere, and so
     its rotation is uniform over SO(3) (Shoemake 1992)."""
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"orientation_seed must be an integer >= 0; got {seed!r}")
+        raise InputError(f"orientation_seed must be an integer >= 0; got {seed!r}")
     quaternions = np.random.default_rng(int(seed)).standard_normal((count, 4))
     w, x, y, z = (quaternions / np.linalg.norm(quaternions, axis=1, keepdims=True)).T
     return np.stack(
@@ -78,14 +79,14 @@ def spin_axis(axis, what: str = "spin axis") -> np.ndarray:
     finite numbers, not all zero (normalised here)."""
     if isinstance(axis, str):
         if axis not in SPIN_AXES:
-            raise ValueError(f"{what} must be one of {', '.join(SPIN_AXES)} or a vector of three numbers; got {axis!r}")
+            raise InputError(f"{what} must be one of {', '.join(SPIN_AXES)} or a vector of three numbers; got {axis!r}")
         return np.array(SPIN_AXES[axis])
     try:
         vector = np.array([float(c) for c in axis]) if not isinstance(axis, bool) and len(axis) == 3 else None
     except (TypeError, ValueError):
         vector = None
     if vector is None or not np.isfinite(vector).all() or not np.linalg.norm(vector) > 0:
-        raise ValueError(f"{what} must be one of {', '.join(SPIN_AXES)} or a vector of three numbers, not all zero; got {axis!r}")
+        raise InputError(f"{what} must be one of {', '.join(SPIN_AXES)} or a vector of three numbers, not all zero; got {axis!r}")
     return vector / np.linalg.norm(vector)
 
 
@@ -95,9 +96,9 @@ def _spin_vector(spin, state: State, G: float, which: str) -> np.ndarray | None:
     try:
         fraction, axis = spin
     except (TypeError, ValueError):
-        raise ValueError(f"{which}_spin must be (fraction, axis), e.g. (0.5, '+z'); got {spin!r}") from None
+        raise InputError(f"{which}_spin must be (fraction, axis), e.g. (0.5, '+z'); got {spin!r}") from None
     if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or not 0 <= fraction <= 1:
-        raise ValueError(f"{which}_spin fraction of breakup must be in [0, 1]; got {fraction!r}")
+        raise InputError(f"{which}_spin fraction of breakup must be in [0, 1]; got {fraction!r}")
     return fraction * breakup_spin(state, G) * spin_axis(axis, f"{which}_spin axis")
 
 
@@ -139,19 +140,19 @@ def setup_collision(
     ...                     target_spin=None, projectile_spin=(0.5, "+z"))
     """
     if (eta is None) == (speed is None):
-        raise ValueError("give exactly one of eta (KE/|U|) or speed (relative speed in cm/s)")
+        raise InputError("give exactly one of eta (KE/|U|) or speed (relative speed in cm/s)")
     if eta is not None and not (_is_number(eta) and eta > 0):
-        raise ValueError(f"eta must be > 0; got {eta!r}")
+        raise InputError(f"eta must be > 0; got {eta!r}")
     if speed is not None and not (_is_number(speed) and speed > 0):
-        raise ValueError(f"speed must be > 0 cm/s; got {speed!r}")
+        raise InputError(f"speed must be > 0 cm/s; got {speed!r}")
     if not (_is_number(theta_deg) and 0 <= theta_deg < 90):
-        raise ValueError(f"theta_deg must be in [0, 90); got {theta_deg!r}")
+        raise InputError(f"theta_deg must be in [0, 90); got {theta_deg!r}")
     if not (_is_number(gap) and gap >= 0):
-        raise ValueError(f"gap must be >= 0 cm; got {gap!r}")
+        raise InputError(f"gap must be >= 0 cm; got {gap!r}")
     if eta_potential not in ETA_POTENTIALS:
-        raise ValueError(f"eta_potential must be one of {', '.join(ETA_POTENTIALS)}; got {eta_potential!r}")
+        raise InputError(f"eta_potential must be one of {', '.join(ETA_POTENTIALS)}; got {eta_potential!r}")
     if projectile.total_mass > target.total_mass:
-        raise ValueError(
+        raise InputError(
             f"the target must be the more massive pile: target {target.total_mass:.4g} g < "
             f"projectile {projectile.total_mass:.4g} g; swap them"
         )

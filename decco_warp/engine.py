@@ -24,6 +24,7 @@ from .kernels.contacts import CANDIDATES, LEDGER_CHANNELS, unpack_depth
 from .kernels.pair import ContactModel
 from .params import Params
 from .state import State
+from .errors import InputError
 
 FORCE_KERNELS = ("tiled", "reference")
 
@@ -42,7 +43,7 @@ def system_sizes(systems: Sequence[int] | None, count: int) -> np.ndarray:
     """The sizes of an ensemble's systems, checked against the particle count (None: one system)."""
     sizes = np.array([count] if systems is None else list(systems), dtype=np.int64)
     if sizes.ndim != 1 or len(sizes) == 0 or (sizes <= 0).any() or sizes.sum() != count:
-        raise ValueError(f"systems must be positive sizes adding up to the {count} particles; got {list(sizes)}")
+        raise InputError(f"systems must be positive sizes adding up to the {count} particles; got {list(sizes)}")
     return sizes
 
 
@@ -73,9 +74,9 @@ class Engine:
         """``systems``: the sizes of independent systems laid one after another in ``state``
         (an ensemble: each particle feels only its own system; default, one system)."""
         if precision not in PRECISIONS:
-            raise ValueError(f"precision must be one of {', '.join(PRECISIONS)}; got {precision!r}")
+            raise InputError(f"precision must be one of {', '.join(PRECISIONS)}; got {precision!r}")
         if force_kernel not in FORCE_KERNELS:
-            raise ValueError(f"force_kernel must be one of {', '.join(FORCE_KERNELS)}; got {force_kernel!r}")
+            raise InputError(f"force_kernel must be one of {', '.join(FORCE_KERNELS)}; got {force_kernel!r}")
         self.device = resolve_device(device)
         self.params = params
         self.precision = precision
@@ -248,7 +249,7 @@ class Engine:
         kick and drift and the packing of its bodies are one launch (kernels/integrate.py
         ``kick_drift``, ``kick_drift_inner``)."""
         if steps % self.gravity_every:
-            raise ValueError(f"steps must be a multiple of gravity_every = {self.gravity_every}; got {steps}")
+            raise InputError(f"steps must be a multiple of gravity_every = {self.gravity_every}; got {steps}")
         if not self.layout.fuse_kicks:
             for _ in range(steps // self.gravity_every):
                 self.step()
@@ -339,12 +340,12 @@ class Engine:
         ]:
             values = np.asarray(snapshot[name], dtype=np.float64)
             if values.shape != target.numpy().shape:
-                raise ValueError(f"snapshot {name} has shape {values.shape}; expected {target.numpy().shape}")
+                raise InputError(f"snapshot {name} has shape {values.shape}; expected {target.numpy().shape}")
             target.assign(wp.array(values, dtype=target.dtype, device=self.device))
         # The record since the last frame (checkpoints of decco-warp 0.2 have none: it starts afresh).
         records = np.asarray(snapshot.get("deepest_contact", np.zeros(self.count)), dtype=np.int64)
         if records.shape != (self.count,):
-            raise ValueError(f"snapshot deepest_contact has shape {records.shape}; expected {(self.count,)}")
+            raise InputError(f"snapshot deepest_contact has shape {records.shape}; expected {(self.count,)}")
         self.deepest_contact.assign(wp.array(records, dtype=wp.int64, device=self.device))
         self.path.restored()
 

@@ -17,6 +17,7 @@ from .diagnostics import state_diagnostics
 from .simulation import Simulation
 from .stability import StabilityReport
 from .state import State
+from .errors import InputError
 
 
 class Ensemble:
@@ -28,18 +29,18 @@ class Ensemble:
 
     def __init__(self, members: list[Simulation]):
         if not members:
-            raise ValueError("an ensemble needs at least one member")
+            raise InputError("an ensemble needs at least one member")
         first = members[0]
         for sim in members[1:]:
             if sim.params != first.params:
-                raise ValueError("the members of an ensemble must share their Params")
+                raise InputError("the members of an ensemble must share their Params")
             if sim.step_count != first.step_count or sim.device != first.device:
-                raise ValueError("the members of an ensemble must be at the same step on the same device")
+                raise InputError("the members of an ensemble must be at the same step on the same device")
             # One layout and precision for all: a member stepped otherwise would not move as it would alone.
             if sim.engine.layout != first.engine.layout or sim.engine.precision != first.engine.precision:
-                raise ValueError("the members of an ensemble must share their force layout and precision")
+                raise InputError("the members of an ensemble must share their force layout and precision")
         if not all(sim.engine.ledger for sim in members):
-            raise ValueError("the members of an ensemble keep the energy ledger (ledger=True)")
+            raise InputError("the members of an ensemble keep the energy ledger (ledger=True)")
         snapshots = [sim.snapshot() for sim in members]
         statics = [sim.static for sim in members]
         sizes = np.array([s.n for s in statics])

@@ -27,6 +27,7 @@ from .kernels.fused import pair_forces_tiled
 from .kernels.neighbours import GRID_CELLS, REACH_MARGIN, build_neighbour_list, cell_keys, cell_ranges
 from .kernels.newton import GatherRows, TilePair, gather_newton, pair_gravity_newton
 from .kernels.reference import pair_forces_reference
+from .errors import InputError
 
 #: Threads per particle of the observables kernel on a GPU.
 OBSERVABLES_BLOCK = 128
@@ -185,7 +186,7 @@ def _check_cpu_blocks(engine, newton: bool) -> None:
     # (Warp's CPU blocks, wp.config.enable_cpu_blocks, run every lane: tests use them to check the
     # GPU layouts' reductions on a CPU; the Newton layout's lane shuffles exist on a GPU only.)
     if not _on_cuda(engine.device) and engine.layout.block_dim != 1 and (newton or not wp.config.enable_cpu_blocks):
-        raise ValueError("on the CPU a layout's block_dim must be 1 (Warp runs one thread per block)")
+        raise InputError("on the CPU a layout's block_dim must be 1 (Warp runs one thread per block)")
 
 
 class FusedForces(ForcePath):
@@ -229,7 +230,7 @@ class NewtonGravity:
 
     def __init__(self, engine, layout, body: wp.array, candidate_count: wp.array | None = None, candidates: wp.array | None = None):
         if _on_cuda(engine.device) and layout.block_dim != 32:
-            raise ValueError(f"a Newton layout's block is one warp: block_dim must be 32 on CUDA; got {layout.block_dim}")
+            raise InputError(f"a Newton layout's block is one warp: block_dim must be 32 on CUDA; got {layout.block_dim}")
         self.engine, self.layout, self.body = engine, layout, body
         listing = candidates is not None
         if not listing:  # nothing listed, nothing noted: empty arrays in the kernels' signatures
@@ -292,7 +293,7 @@ class TreeGravity:
 
     def __init__(self, engine):
         if len(engine.systems) > 1:
-            raise ValueError('the tree path steps one system at a time; an ensemble needs gravity = "all-pairs"')
+            raise InputError('the tree path steps one system at a time; an ensemble needs gravity = "all-pairs"')
         self.engine = engine
         self.tree = GravityTree(engine.count, engine.device, engine.precision)
 
@@ -427,7 +428,7 @@ class RespaForces(ForcePath):
         else:
             largest = int(engine.systems.max())
             if _on_cuda(engine.device) and largest > NEWTON_MAX:
-                raise ValueError(
+                raise InputError(
                     f"gravity_every > 1 sums all-pairs gravity with the Newton sweep, which holds systems of up to "
                     f"{NEWTON_MAX} particles; this one has {largest}: use gravity = \"tree\""
                 )
@@ -489,7 +490,7 @@ def path_name(force_kernel: str, params, layout) -> str:
     ``params`` and ``layout``."""
     if force_kernel == "reference":
         if params.gravity_every > 1:
-            raise ValueError("the reference kernel evaluates gravity with every force: it steps with gravity_every = 1 only")
+            raise InputError("the reference kernel evaluates gravity with every force: it steps with gravity_every = 1 only")
         return "reference"
     if params.gravity_every > 1:
         return "respa"

@@ -17,7 +17,7 @@ from .params import GRAVITY_CHOICES, Params, choose_gravity
 from .pile import Formation, FormationError, FormationProgress, check_formation_inputs
 from .state import State
 from .stops import StopRequests
-from .errors import FormationStopped  # noqa: F401 (re-exported: the error lives in errors.py)
+from .errors import FormationStopped, InputError  # noqa: F401 (re-exported: the error lives in errors.py)
 
 #: A forming pile's checkpoint is its file's name plus this.
 FORMING_SUFFIX = ".forming"
@@ -61,7 +61,7 @@ def plan_pile(
     (an InputError for what the checks refuse) on bad input, before anything is formed."""
     chosen = resolve_device(device)
     if gravity not in GRAVITY_CHOICES:
-        raise ValueError(f"--gravity must be one of {', '.join(GRAVITY_CHOICES)}; got {gravity!r}")
+        raise InputError(f"--gravity must be one of {', '.join(GRAVITY_CHOICES)}; got {gravity!r}")
     if gravity == "auto":
         gravity = choose_gravity(particles, chosen)
     params = Params(k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt, gravity=gravity)

@@ -7,6 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .kernels.newton import NEWTON_TILE_MAX
+from .errors import InputError
 
 
 @dataclass(frozen=True)
@@ -39,14 +40,14 @@ class Layout:
         for name in ("block_dim", "particles_per_block", "contact_slots"):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
-                raise ValueError(f"Layout.{name} must be a positive integer; got {value!r}")
+                raise InputError(f"Layout.{name} must be a positive integer; got {value!r}")
         if not isinstance(self.max_registers, int) or self.max_registers < 0:
-            raise ValueError(f"Layout.max_registers must be an integer >= 0; got {self.max_registers!r}")
+            raise InputError(f"Layout.max_registers must be an integer >= 0; got {self.max_registers!r}")
         for name in ("newton", "fuse_kicks"):
             if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"Layout.{name} must be true or false; got {getattr(self, name)!r}")
+                raise InputError(f"Layout.{name} must be true or false; got {getattr(self, name)!r}")
         if self.newton and (self.particles_per_block % self.block_dim or self.particles_per_block > NEWTON_TILE_MAX):
-            raise ValueError(
+            raise InputError(
                 "a Newton layout's particles_per_block must be a multiple of its block_dim (each lane keeps "
                 f"as many particles) and at most {NEWTON_TILE_MAX}; got {self}"
             )
@@ -113,7 +114,7 @@ def layout_for(choice: str, n: int, device: str) -> Layout | None:
     """The :class:`Layout` a run's ``layout`` choice names for ``n`` particles on ``device``
     (None for "auto": the engine's own choice)."""
     if choice not in LAYOUT_CHOICES:
-        raise ValueError(f"layout must be one of {', '.join(LAYOUT_CHOICES)}; got {choice!r}")
+        raise InputError(f"layout must be one of {', '.join(LAYOUT_CHOICES)}; got {choice!r}")
     return None if choice == "auto" else newton_layout(device)
 
 
@@ -129,10 +130,10 @@ def parse_layout(text: str, device: str) -> Layout:
         values = [int(v) for v in parts]
         on_cuda = device.startswith("cuda")
         if len(values) not in (2, 3, 4) or (not on_cuda and values[0] != 1) or ("newton" in flags and on_cuda and values[0] != 32):
-            raise ValueError
+            raise InputError
         return Layout(*values, newton="newton" in flags, fuse_kicks="unfused" not in flags)
     except ValueError:
-        raise ValueError(
+        raise InputError(
             "--layouts entries must be BLOCK_DIM:PER_BLOCK[:SLOTS[:MAX_REGISTERS]] or "
             "BLOCK_DIM:TILE[:SLOTS[:MAX_REGISTERS]]:newton (BLOCK_DIM 32, TILE a multiple of it; SLOTS unused), "
             f"either with :unfused (the kicks in launches of their own), BLOCK_DIM 1 on CPU; got {text!r}"

@@ -6,6 +6,8 @@ import math
 import numbers
 from dataclasses import asdict, dataclass, fields
 
+from .errors import InputError
+
 #: Gravitational constant [cm^3 g^-1 s^-2] (CODATA 2018).
 G_CGS = 6.67430e-8
 
@@ -88,12 +90,12 @@ class Params:
         _require(self, "theta_open", lambda v: 0 < v < 2, "in (0, 2)")
         every = self.gravity_every
         if isinstance(every, bool) or not isinstance(every, numbers.Integral) or every < 1:
-            raise ValueError(f"gravity_every must be an integer >= 1 (steps of dt per gravity evaluation); got {every!r}")
+            raise InputError(f"gravity_every must be an integer >= 1 (steps of dt per gravity evaluation); got {every!r}")
         object.__setattr__(self, "gravity_every", int(every))
         if self.gravity not in GRAVITY_SOLVERS:
-            raise ValueError(f"gravity must be one of {', '.join(GRAVITY_SOLVERS)}; got {self.gravity!r}")
+            raise InputError(f"gravity must be one of {', '.join(GRAVITY_SOLVERS)}; got {self.gravity!r}")
         if self.rolling_friction not in ROLLING_FRICTION_FORMS:
-            raise ValueError(
+            raise InputError(
                 f"rolling_friction must be one of {', '.join(ROLLING_FRICTION_FORMS)}; got {self.rolling_friction!r}"
             )
 
@@ -110,15 +112,15 @@ class Params:
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(values) - known)
         if unknown:
-            raise ValueError(f"unknown parameter(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
+            raise InputError(f"unknown parameter(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
         return cls(**values)
 
 
 def _require(params: Params, name: str, ok, allowed: str) -> None:
     value = getattr(params, name)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"{name} must be a number {allowed}; got {value!r}")
+        raise InputError(f"{name} must be a number {allowed}; got {value!r}")
     value = float(value)
     if not math.isfinite(value) or not ok(value):
-        raise ValueError(f"{name} must be {allowed}; got {value!r}")
+        raise InputError(f"{name} must be {allowed}; got {value!r}")
     object.__setattr__(params, name, value)

@@ -19,7 +19,7 @@ from .params import Params
 from .simulation import Simulation
 from .checks import DENSITY_RANGE, RADIUS_RANGE
 from .state import State
-from .errors import FormationError  # noqa: F401 (re-exported: the error lives in errors.py)
+from .errors import FormationError, InputError  # noqa: F401 (re-exported: the error lives in errors.py)
 
 #: The paper's particle radii [cm] (Table 1) and density [g/cm^3].
 PAPER_RADII = (0.75e6, 1.5e6, 2.25e6)
@@ -298,7 +298,7 @@ def _check_same_settings(saved: dict, asked: dict) -> None:
         else:
             differs = before != value
         if differs:
-            raise ValueError(
+            raise InputError(
                 f"the saved formation was begun with {key} = {before!r}, not {value!r}: "
                 "continue it with the same options, or delete its file to begin afresh"
             )
@@ -336,16 +336,16 @@ def check_formation_inputs(n_particles, radii, density, ke_threshold, fill, chec
     """Raise ValueError naming the first input of :func:`form_pile` that cannot make a pile."""
     radii = np.asarray(radii, dtype=float)
     if isinstance(n_particles, bool) or not isinstance(n_particles, (int, np.integer)) or n_particles < 2:
-        raise ValueError(f"n_particles must be an integer >= 2; got {n_particles!r}")
+        raise InputError(f"n_particles must be an integer >= 2; got {n_particles!r}")
     low, high = RADIUS_RANGE
     if radii.ndim != 1 or radii.size == 0 or not np.all(np.isfinite(radii)) or np.any(radii < low) or np.any(radii > high):
-        raise ValueError(f"radii must be sizes from {low:g} to {high:g} cm; got {radii.tolist()}")
+        raise InputError(f"radii must be sizes from {low:g} to {high:g} cm; got {radii.tolist()}")
     low, high = DENSITY_RANGE
     if not (math.isfinite(density) and low <= density <= high):
-        raise ValueError(f"density must be from {low:g} to {high:g} g/cm^3; got {density!r}")
+        raise InputError(f"density must be from {low:g} to {high:g} g/cm^3; got {density!r}")
     if not (0 < ke_threshold < COLLAPSE_PEAK):
-        raise ValueError(f"ke_threshold must be in (0, {COLLAPSE_PEAK:g}); got {ke_threshold!r}")
+        raise InputError(f"ke_threshold must be in (0, {COLLAPSE_PEAK:g}); got {ke_threshold!r}")
     if not (0 < fill < 0.5):
-        raise ValueError(f"fill must be in (0, 0.5); got {fill!r}")
+        raise InputError(f"fill must be in (0, 0.5); got {fill!r}")
     if check_every < 1 or max_steps < 1:
-        raise ValueError("check_every and max_steps must be >= 1")
+        raise InputError("check_every and max_steps must be >= 1")

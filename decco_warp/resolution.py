@@ -16,12 +16,13 @@ import math
 from pathlib import Path
 
 from .params import auto_gravity_every
+from .errors import InputError
 
 
 def length_factor(resolution: float) -> float:
     """f = R^(-1/3): how a length (a radius) scales at resolution R."""
     if isinstance(resolution, bool) or not isinstance(resolution, (int, float)) or not math.isfinite(resolution) or resolution <= 0:
-        raise ValueError(f"resolution must be a number > 0 (the factor on the particle count); got {resolution!r}")
+        raise InputError(f"resolution must be a number > 0 (the factor on the particle count); got {resolution!r}")
     return float(resolution) ** (-1.0 / 3.0)
 
 
@@ -30,7 +31,7 @@ def pile_file(path: str, resolution: float) -> str:
     if resolution == 1:
         return path
     if path.startswith("builtin:"):
-        raise ValueError(f"the shipped pile {path} has no other resolution; build your own (decco-warp piles FILE --resolution R)")
+        raise InputError(f"the shipped pile {path} has no other resolution; build your own (decco-warp piles FILE --resolution R)")
     p = Path(path)
     return str(p.with_name(f"{p.stem}_x{resolution:g}{p.suffix}"))
 

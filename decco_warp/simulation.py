@@ -15,6 +15,7 @@ from .layouts import Layout
 from .params import Params
 from .stability import StabilityError, StabilityReport, check_stability
 from .state import State
+from .errors import InputError
 
 #: Steps recorded into one graph and replayed as a unit (CUDA graphs; on the CPU, Warp's recorded
 #: graphs replay the kernels without Python between them).
@@ -127,11 +128,11 @@ class Simulation:
         ``params.gravity_every``: whole outer steps): whole blocks of steps replay a recorded graph
         (the steps of a block, and those left over, share launches: :meth:`Engine.advance`)."""
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
-            raise ValueError(f"step count must be a non-negative integer; got {n!r}")
+            raise InputError(f"step count must be a non-negative integer; got {n!r}")
         n = int(n)
         every = self.params.gravity_every
         if n % every:
-            raise ValueError(f"with gravity_every = {every} the step count must be a multiple of {every} (whole outer steps); got {n}")
+            raise InputError(f"with gravity_every = {every} the step count must be a multiple of {every} (whole outer steps); got {n}")
         while self._record and n >= self._graph_steps:
             graph = self._step_graph()
             if graph is None:

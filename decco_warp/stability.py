@@ -30,7 +30,7 @@ import numpy as np
 
 from .params import Params
 from .state import State
-from .errors import StabilityError  # noqa: F401 (re-exported: the error lives in errors.py)
+from .errors import InputError, StabilityError  # noqa: F401 (re-exported: the error lives in errors.py)
 
 #: Smallest accepted eq. 15 margin: below 1 the deepest compression exceeds the
 #: particle radius (Delta ~ R / sqrt(margin)), and spheres can pass through each other.
@@ -196,10 +196,10 @@ def choose_stiffness(state: State, max_compression: float = DEFAULT_MAX_COMPRESS
     :func:`predict_compression`) stays within ``max_compression`` of the smallest radius,
     rounded up to three significant digits [dyne/cm]."""
     if not 0 < max_compression <= 1:
-        raise ValueError(f"max_compression must be in (0, 1] (fraction of the smallest radius); got {max_compression!r}")
+        raise InputError(f"max_compression must be in (0, 1] (fraction of the smallest radius); got {max_compression!r}")
     probe = predict_compression(state, 1.0)  # the overlap scales as 1/sqrt(k_in)
     if not probe.overlap > 0:
-        raise ValueError("the particles do not move (impact speed 0), so no spring constant follows from eq. 12")
+        raise InputError("the particles do not move (impact speed 0), so no spring constant follows from eq. 12")
     return _round_sig((probe.overlap / (max_compression * probe.light_radius)) ** 2, up=True)
 
 

@@ -7,6 +7,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .errors import InputError
+
 
 @dataclass
 class State:
@@ -55,7 +57,7 @@ class State:
         radii = _float_array("radii", radii, None)
         n = radii.shape[0]
         if n == 0:
-            raise ValueError("a State needs at least one particle")
+            raise InputError("a State needs at least one particle")
         state = cls(
             positions=_float_array("positions", positions, (n, 3)),
             velocities=_float_array("velocities", velocities, (n, 3)),
@@ -72,7 +74,7 @@ class State:
             values = getattr(state, name)
             bad = np.flatnonzero(values <= 0)
             if bad.size:
-                raise ValueError(f"{name} must be > 0; particle {bad[0]} has {values[bad[0]]!r}")
+                raise InputError(f"{name} must be > 0; particle {bad[0]} has {values[bad[0]]!r}")
         return state
 
     @property
@@ -133,14 +135,14 @@ def _float_array(name: str, values, shape) -> np.ndarray:
     try:
         array = np.array(values, dtype=np.float64, copy=True)
     except (TypeError, ValueError) as error:
-        raise ValueError(f"{name} must be numeric: {error}") from None
+        raise InputError(f"{name} must be numeric: {error}") from None
     expected = shape if shape is not None else (array.shape[0],) if array.ndim == 1 else None
     if expected is None or array.shape != expected:
         want = "(N,)" if shape is None else str(shape)
-        raise ValueError(f"{name} must have shape {want}; got {array.shape}")
+        raise InputError(f"{name} must have shape {want}; got {array.shape}")
     bad = np.flatnonzero(~np.isfinite(array).reshape(max(array.shape[0], 1), -1).all(axis=1))
     if bad.size:
-        raise ValueError(f"{name} must be finite; particle {bad[0]} has {array[bad[0]]!r}")
+        raise InputError(f"{name} must be finite; particle {bad[0]} has {array[bad[0]]!r}")
     return array
 
 
@@ -149,5 +151,5 @@ def _int_array(name: str, values, n: int) -> np.ndarray:
         return np.zeros(n, dtype=np.int32)
     array = np.asarray(values)
     if array.shape != (n,) or not np.issubdtype(array.dtype, np.integer):
-        raise ValueError(f"{name} must be an integer array of shape ({n},); got {array.dtype} {array.shape}")
+        raise InputError(f"{name} must be an integer array of shape ({n},); got {array.dtype} {array.shape}")
     return array.astype(np.int32, copy=True)

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import RerunUnavailable  # noqa: F401 (re-exported: the error lives in errors.py)
+from .errors import InputError, RerunUnavailable  # noqa: F401 (re-exported: the error lives in errors.py)
 from .folder import RunFolder
 
 KM = 1e5
@@ -68,7 +68,7 @@ def parse_mode(text: str) -> tuple[str, str | None]:
     """'spawn', 'save', 'serve', 'connect' or 'connect=ADDR' -> (mode, address)."""
     mode, _, address = text.partition("=")
     if mode not in MODES or (address and mode != "connect"):
-        raise ValueError(f"--rerun must be one of spawn, save, connect[=ADDR], serve; got {text!r}")
+        raise InputError(f"--rerun must be one of spawn, save, connect[=ADDR], serve; got {text!r}")
     return mode, address or None
 
 

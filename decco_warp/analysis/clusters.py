@@ -32,6 +32,7 @@ from scipy.spatial import cKDTree
 
 from ..params import G_CGS
 from ..state import State
+from ..errors import InputError
 
 #: The Gaussian's standard deviation, in particle radii (paper sect. 2.7).
 SMOOTHING_RADII = 10.0
@@ -127,7 +128,7 @@ def find_clusters(state: State, min_members: int = 50, G: float = G_CGS, device:
     >>> largest = clusters[0]; largest.mass, largest.members.size
     """
     if isinstance(min_members, bool) or not isinstance(min_members, (int, np.integer)) or min_members < 1:
-        raise ValueError(f"min_members must be an integer >= 1; got {min_members!r}")
+        raise InputError(f"min_members must be an integer >= 1; got {min_members!r}")
     x, v, m, radii = state.positions, state.velocities, state.masses, state.radii
     n = state.n
     contacts = contact_graph(x, radii)
