@@ -195,6 +195,25 @@ def test_every_error_is_a_decco_error_with_its_exit_code_and_the_builtin_it_was(
     assert capsys.readouterr().err == "decco-warp: error: writing somewhere failed\n"
 
 
+def test_the_library_refuses_bad_arguments_with_a_decco_error_that_is_still_a_value_error():
+    """What the API refuses (a negative time step, a bad layout, mismatched arrays, an unknown test
+    system, a bad cluster threshold) is one class to catch, dw.DeccoError, and still a ValueError."""
+    from decco_warp.bench import bench_system
+
+    state = dw.State.from_arrays(np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((2, 3)), np.ones(2), np.ones(2))
+    refusals = [
+        lambda: dw.Params(dt=-1.0),
+        lambda: dw.Layout(0, 4),
+        lambda: dw.State.from_arrays(np.zeros((2, 3)), np.zeros((3, 3)), np.zeros((2, 3)), np.ones(2), np.ones(2)),
+        lambda: bench_system("marbles", 8),
+        lambda: dw.find_clusters(state, min_members=0),
+    ]
+    for refuse in refusals:
+        with pytest.raises(dw.DeccoError) as raised:
+            refuse()
+        assert isinstance(raised.value, ValueError) and raised.value.exit_code == 2 and raised.value.line
+
+
 def test_run_folder_names_the_files_and_tells_how_far_a_run_kept_without_checkpoint_went(tmp_path):
     """A run folder kept as the committed results keep it (spec.toml and summary.json, no
     checkpoint): its progress comes from the summary; a folder with neither file has none."""
