@@ -160,30 +160,26 @@ def spins():
 def spin_statistics():
     """Fig. 9 with statistics (runs/results/fig9_statistics): per eta, each kind's realizations
     (dots), mean and 95 % interval of the mean (bar); right, each kind's difference to no spin
-    with its 95 % interval (Welch's t, as ``decco-warp compare``)."""
-    from decco_warp.analysis.compare import difference_interval, mean_interval
+    with its 95 % interval: the numbers of ``decco-warp compare ... --by spin_kind --at eta``."""
+    from decco_warp.analysis.compare import compare, read_rows
 
-    summaries = [r["summary"] for r in runs("fig9_statistics")]
-    etas = sorted({round(s["eta"], 6) for s in summaries})
+    comparison = compare(read_rows([RESULTS / "fig9_statistics"]), "spin_kind", "largest_mass_ratio", at="eta")
+    colours = {kind: f"C{k}" for k, kind in enumerate(KINDS)}
     fig, (ax, diff) = plt.subplots(1, 2, figsize=(11.0, 4.4))
-    for e, eta in enumerate(etas):
-        groups = {kind: np.array([s["largest_mass_ratio"] for s in summaries if round(s["eta"], 6) == eta and (s.get("spin_kind") or "none") == kind]) for kind in KINDS}
-        for k, kind in enumerate(KINDS):
-            values = groups[kind]
-            if len(values) == 0:
-                continue
-            x = e * (len(KINDS) + 1) + k
-            low, high, _ = mean_interval(values)
-            ax.plot(np.full(len(values), x) + np.linspace(-0.15, 0.15, len(values)), values, ".", color=f"C{k}", alpha=0.5)
-            ax.errorbar([x], [values.mean()], yerr=[[values.mean() - low], [high - values.mean()]], marker="o", color=f"C{k}", capsize=4,
-                        label=(f"{kind} (n = {len(values)})" if e == 0 else None))  # fmt: skip
-            if kind != "none" and len(groups["none"]) > 1 and len(values) > 1:
-                low, high, _ = difference_interval(values, groups["none"])
-                d = values.mean() - groups["none"].mean()
-                diff.errorbar([x], [d], yerr=[[d - low], [high - d]], marker="o", color=f"C{k}", capsize=4)
-    ticks = [e * (len(KINDS) + 1) + 1.5 for e in range(len(etas))]
+    ticks = []
+    for e, point in enumerate(comparison.points):
+        place = {kind: e * (len(KINDS) + 1) + k for k, kind in enumerate(KINDS)}
+        ticks.append(e * (len(KINDS) + 1) + 1.5)
+        for g in point.groups:
+            x, values = place[g.group], np.array(g.values)
+            ax.plot(np.full(len(values), x) + np.linspace(-0.15, 0.15, len(values)), values, ".", color=colours[g.group], alpha=0.5)
+            ax.errorbar([x], [g.mean], yerr=[[g.mean - g.low], [g.high - g.mean]], marker="o", color=colours[g.group], capsize=4,
+                        label=(f"{g.group} (n = {g.n})" if e == 0 else None))  # fmt: skip
+        for d in point.differences:
+            diff.errorbar([place[d.group]], [d.difference], yerr=[[d.difference - d.low], [d.high - d.difference]], marker="o",
+                          color=colours[d.group], capsize=4)  # fmt: skip
     for a in (ax, diff):
-        a.set_xticks(ticks, [f"eta {eta:g}" for eta in etas])
+        a.set_xticks(ticks, [f"eta {point.at:g}" for point in comparison.points])
     ax.set_ylabel("m_lf / m_t")
     ax.set_title("equal masses head-on, spins at half breakup: realizations,\nmean and its 95 % interval", fontsize=10)
     ax.legend(fontsize=8)
