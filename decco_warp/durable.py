@@ -67,13 +67,14 @@ def write_atomic(path, data: bytes | str, what: str | None = None) -> Path:
 
 
 @contextlib.contextmanager
-def atomic_h5(path: Path):
-    """Write an HDF5 file atomically: built in memory, then written whole (see :func:`write_atomic`).
+def atomic_h5(path: Path, **options):
+    """Write an HDF5 file atomically: built in memory, then written whole (see :func:`write_atomic`);
+    ``options`` go to h5py.File (``libver``, say).
 
     HDF5 never meets the disk here, so a full disk or an I/O error is one clean OSError and can
     never leave HDF5's own state broken (which can crash the process when the file is closed)."""
     buffer = _io.BytesIO()
-    with h5py.File(buffer, "w") as f:
+    with h5py.File(buffer, "w", **options) as f:
         yield f
     write_atomic(path, buffer.getvalue())
 

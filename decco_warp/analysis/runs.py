@@ -381,10 +381,16 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
     )
     # Kept with the summary, so that a sweep that finds the run analysed reports what it took then.
     summary["analysis_seconds"] = round(time.perf_counter() - started, 3)
-    analysis["summary"] = summary
-    write_analysis(RunFolder(run_dir).analysis, analysis)
-    write_atomic(RunFolder(run_dir).summary, json_text(summary))
+    _write_results(run_dir, analysis, summary)
     return analysis
+
+
+def _write_results(run_dir, analysis: dict, summary: dict) -> None:
+    """A run's analysis.h5 (the summary within it) and summary.json."""
+    folder = RunFolder(run_dir)
+    analysis["summary"] = summary
+    write_analysis(folder.analysis, analysis)
+    write_atomic(folder.summary, json_text(summary))
 
 
 def summarise(name: str, analysis: dict, collision: dict, params: dict, n_particles: int, target_mass: float,
@@ -473,12 +479,25 @@ ANALYSIS_UNITS = {
 }
 
 
+#: Datasets of analysis.h5 below this many bytes are stored whole: a chunk index costs more than
+#: compression saves (a run's ~60 series of ~200 frames), larger ones in gzip-compressed chunks.
+WHOLE_BELOW_BYTES = 4096
+
+
+def dataset_storage(value: np.ndarray) -> dict:
+    """h5py create_dataset options for an analysis.h5 dataset of ``value``."""
+    if value.nbytes < WHOLE_BELOW_BYTES:
+        return {}
+    return {"compression": "gzip", "compression_opts": 6, "shuffle": True}
+
+
 def write_analysis(path: Path, analysis: dict) -> None:
-    """analysis.h5: a group per part of ``analysis``, each dataset with its unit (compressed: a run's
-    analysis stays small enough to commit); the summary as the file's attributes (None left out)."""
+    """analysis.h5: a group per part of ``analysis``, each dataset with its unit (the large ones
+    compressed, in HDF5's latest format: a run's analysis stays small enough to commit); the summary
+    as the file's attributes (None left out)."""
     from ..durable import atomic_h5
 
-    with atomic_h5(path) as f:
+    with atomic_h5(path, libver="latest") as f:
         for group, values in analysis.items():
             if group == "summary":
                 for key, value in values.items():
@@ -488,8 +507,7 @@ def write_analysis(path: Path, analysis: dict) -> None:
             g = f.create_group(group)
             for key, value in values.items():
                 value = np.asarray(value)
-                compress = {"compression": "gzip", "compression_opts": 6, "shuffle": True} if value.size > 64 else {}
-                dataset = g.create_dataset(key, data=value, **compress)
+                dataset = g.create_dataset(key, data=value, **dataset_storage(value))
                 unit = CATALOGUE_UNITS.get(key) if group == "catalogue" else ANALYSIS_UNITS.get(key)
                 if unit is not None:
                     dataset.attrs["unit"] = unit
@@ -550,7 +568,5 @@ def refresh_summary(run_dir, collision: dict, params: dict, piles: dict | None =
         if members.any():
             summary["particle_size_change_mass_weighted"] = mass_weighted_size_change(masses[members], masses)
     summary["analysis_seconds"] = old.get("analysis_seconds")
-    analysis["summary"] = summary
-    write_analysis(RunFolder(run_dir).analysis, analysis)
-    write_atomic(RunFolder(run_dir).summary, json_text(summary))
+    _write_results(run_dir, analysis, summary)
     return summary

@@ -1,7 +1,7 @@
 """Make committed run folders lean: each analysis.h5 without its per-particle arrays of the final
 frame's motion and the per-frame cluster labels, the largest datasets of a run (~0.7 of its ~0.8 MB
-at 10 000 particles), in HDF5's latest format with the small datasets stored whole (no chunk
-index: about half of what is left), so that whole campaigns fit runs/results' 40 MB.
+at 10 000 particles), stored as ``decco-warp analyze`` now writes it (HDF5's latest format, the small
+datasets whole: about half of what an older analysis left), so that whole campaigns fit runs/results' 40 MB.
 
     python runs/results/lean.py runs/results/gravity_every runs/results/resolution   # folders of runs
 
@@ -20,9 +20,9 @@ from pathlib import Path
 
 import h5py
 
+from decco_warp.analysis.runs import dataset_storage
+
 DROPPED = ("final/positions", "final/velocities", "frames/label")
-#: Datasets below this many bytes are stored whole, larger ones in gzip-compressed chunks.
-SMALL = 4096
 #: A file attribute this script sets: the file is lean already.
 MARK = "lean_layout"
 
@@ -46,10 +46,7 @@ def lean(path: Path) -> bool:
                     group.attrs.update(item.attrs)
                 else:
                     data = item[()]
-                    if data.nbytes < SMALL:  # stored whole: a chunk index costs more than it saves
-                        copied = target.create_dataset(name, data=data)
-                    else:
-                        copied = target.create_dataset(name, data=data, compression="gzip", compression_opts=9, shuffle=True)
+                    copied = target.create_dataset(name, data=data, **dataset_storage(data))  # as analyze writes it
                     copied.attrs.update(item.attrs)
 
             source.visititems(copy)
