@@ -31,7 +31,7 @@ CHECKPOINT_SECONDS = 60.0
 @dataclass(frozen=True)
 class PilePlan:
     """A pile's formation resolved once (its device and its gravity chosen, its inputs checked): what
-    ``decco-warp pile --check`` reports and :func:`form_planned` forms."""
+    ``decco-warp pile --check`` reports and :func:`form_pile_file` forms (with :meth:`options`)."""
 
     out: Path
     particles: int

@@ -47,7 +47,8 @@ def fragment_of(run_dir, fragment: int = 0) -> tuple[State, dict]:
     """The particles of cluster ``fragment`` (0: the largest) at a run's last frame, as its analysis
     found them, with where they came from."""
     run_dir = Path(run_dir)
-    analysis, trajectory = RunFolder(run_dir).analysis, RunFolder(run_dir).trajectory
+    folder = RunFolder(run_dir)
+    analysis, trajectory = folder.analysis, folder.trajectory
     if not trajectory.is_file():
         raise InputError(f"{run_dir} holds no {RunFolder.TRAJECTORY}: the fragment's particles come from its last frame")
     if not analysis.is_file():

@@ -331,12 +331,13 @@ def run_state(spec: dict) -> str:
 
     run_dir = run_dir_of(spec)
     try:
-        progress = RunFolder(run_dir).progress()
+        folder = RunFolder(run_dir)
+        progress = folder.progress()
     except (*RUN_FAILURES, specs.SpecError):  # the worker will report what is wrong with the folder
         return "to run (its folder cannot be read)"
     if progress is not None and progress[0] >= progress[1]:
         return "complete"
-    if progress is not None and RunFolder(run_dir).checkpoint.is_file():
+    if progress is not None and folder.checkpoint.is_file():
         return f"resumes at step {progress[0]}"
     return "to run"
 
@@ -360,11 +361,11 @@ def _prepare(spec: dict, device: str | None) -> tuple[dict, object]:
     run_dir = run_dir_of(spec)
     row = {"run": spec["run"]["name"], "run_dir": str(run_dir), "device": device or "auto"}
     try:
-        checkpoint = RunFolder(run_dir).checkpoint
-        if RunFolder(run_dir).complete():
+        folder = RunFolder(run_dir)
+        if folder.complete():
             row["status"] = "skipped (complete)"
             return row, None
-        prepared = prepare_resume(run_dir, device=device) if checkpoint.is_file() else prepare_start(spec, overwrite=True, device=device)
+        prepared = prepare_resume(run_dir, device=device) if folder.checkpoint.is_file() else prepare_start(spec, overwrite=True, device=device)
         row["device"] = prepared.sim.device
         return row, prepared
     except RUN_FAILURES as error:
@@ -444,7 +445,7 @@ def _analyse(run_dir: Path, min_members: int, analyse_every: int, keep_trajector
         raise FileNotFoundError(f"{run_dir} has neither a trajectory nor a summary to report")
     if not keep_trajectory and trajectory.is_file():
         trajectory.unlink()  # analysis.h5, summary.json, figures/ and the checkpoint stay
-        RunFolder(run_dir).xdmf.unlink(missing_ok=True)  # it describes the trajectory only
+        folder.xdmf.unlink(missing_ok=True)  # it describes the trajectory only
     return summary
 
 
