@@ -182,28 +182,28 @@ def sweep_settings(sweep: dict, default_name: str) -> dict:
 #: ``decco-warp pile``'s options.  Only their types are checked here; their ranges where a pile is
 #: formed (pile.check_formation_inputs, Params), with the same messages for either command.
 #: radii: a list in a [[pile]] table, comma-separated on the command line (the default's form).
-PILE_SCHEMA: dict[str, Key] = {
-    "out": Key(str, None, _any, "a pile file path"),
-    "particles": Key(int, 5000, _any, ""),
-    "seed": Key(int, 1, _any, ""),
-    "radii": Key(list, "0.75e6,1.5e6,2.25e6", _any, ""),
-    "density": Key(float, 2.7, _any, ""),
-    "ke_threshold": Key(float, 1e-5, _any, ""),
-    "fill": Key(float, 0.3, _any, ""),
-    "max_steps": Key(int, 5_000_000, _any, ""),
-    "k_in": Key(float, _PARAMS_DEFAULT.k_in, _any, ""),
-    "restitution": Key(float, _PARAMS_DEFAULT.restitution, _any, ""),
-    "mu_k": Key(float, _PARAMS_DEFAULT.mu_k, _any, ""),
-    "mu_r": Key(float, _PARAMS_DEFAULT.mu_r, _any, ""),
-    "dt": Key(float, _PARAMS_DEFAULT.dt, _any, ""),
-    "precision": Key(str, "mixed", _any, ""),
-    "gravity": Key(str, "auto", _any, ""),
+PILE_SCHEMA: dict[str, tuple[type, Any]] = {  # key: (type, default)
+    "out": (str, None),
+    "particles": (int, 5000),
+    "seed": (int, 1),
+    "radii": (list, "0.75e6,1.5e6,2.25e6"),
+    "density": (float, 2.7),
+    "ke_threshold": (float, 1e-5),
+    "fill": (float, 0.3),
+    "max_steps": (int, 5_000_000),
+    "k_in": (float, _PARAMS_DEFAULT.k_in),
+    "restitution": (float, _PARAMS_DEFAULT.restitution),
+    "mu_k": (float, _PARAMS_DEFAULT.mu_k),
+    "mu_r": (float, _PARAMS_DEFAULT.mu_r),
+    "dt": (float, _PARAMS_DEFAULT.dt),
+    "precision": (str, "mixed"),
+    "gravity": (str, "auto"),
 }
 
 
 def pile_defaults() -> dict:
     """``decco-warp pile``'s option defaults (every key of PILE_SCHEMA but out)."""
-    return {key: rule.default for key, rule in PILE_SCHEMA.items() if key != "out"}
+    return {key: default for key, (_, default) in PILE_SCHEMA.items() if key != "out"}
 
 
 def check_pile_list(raw: dict, path) -> list[dict]:
@@ -214,10 +214,9 @@ def check_pile_list(raw: dict, path) -> list[dict]:
         raise SpecError(f"{path} must hold only [[pile]] tables")
     for k, entry in enumerate(entries):
         for key, value in entry.items():
-            rule = PILE_SCHEMA.get(key)
-            if rule is None:
+            if key not in PILE_SCHEMA:
                 raise SpecError(f"[[pile]] {k + 1}: unknown key {key}; allowed: {', '.join(PILE_SCHEMA)}")
-            kind = rule.kind
+            kind = PILE_SCHEMA[key][0]
             if not (isinstance(value, kind) or kind is float and isinstance(value, int)) or isinstance(value, bool):
                 raise SpecError(f"[[pile]] {k + 1}: {key} = {value!r} must be {kind.__name__}")
         if "out" not in entry or "particles" not in entry:
