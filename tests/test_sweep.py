@@ -131,6 +131,13 @@ def test_shipped_paper_sweeps_are_valid(name):
     if name == "fig9_spin":  # two axis pairs of each kind of spin, at every eta
         kinds = [spin_kind(SPIN_AXES[r["collision"]["target_spin_axis"]], SPIN_AXES[r["collision"]["projectile_spin_axis"]]) for r in runs]
         assert sorted(set(kinds)) == ["anti-parallel", "parallel", "perpendicular"] and all(kinds.count(k) == 8 for k in set(kinds))
+    if name == "fig6_clock":  # fig6_statistics' own eta 12 set-ups (realizations 0 to 2), on the other clock
+        stats = {r["run"]["name"]: r for r in load_sweep(PAPER / "fig6_statistics.toml")[1]}
+        for run in runs:
+            twin = stats[run["run"]["name"]]
+            assert run["collision"] == twin["collision"] and run["piles"] == twin["piles"]
+            assert {k: v for k, v in run["params"].items() if k != "gravity_every"} == {k: v for k, v in twin["params"].items() if k != "gravity_every"}
+            assert (run["params"]["gravity_every"], twin["params"]["gravity_every"]) == (1, 10)
     if name in ("fig3_oblique", "realizations"):  # the same folder and names as the head-on runs they join
         headon = {r["run"]["name"]: r for r in load_sweep(Path(__file__).parent.parent / "runs" / "paper" / "fig3_headon.toml")[1]}
         assert {r["run"]["out"] for r in runs} == {r["run"]["out"] for r in headon.values()}
