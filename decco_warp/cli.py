@@ -939,6 +939,14 @@ def compare(
     reference: Optional[str] = typer.Option(
         None, "--reference", help="The group the others are compared with (default: none for spin_kind where present, else the first group in sorted order)."
     ),
+    against: Optional[float] = typer.Option(
+        None, "--against", metavar="VALUE", help="Compare each group's mean with this value instead of with a group (its interval by Student's t, "
+        "or the bootstrap from 30 runs), e.g. --against 0: does the size change differ from none?"
+    ),
+    confidence: float = typer.Option(
+        0.95, "--confidence", metavar="LEVEL", help="Level of every interval and verdict (two-sided): 0.983 (1 - 0.05/3) keeps three "
+        "comparisons with one reference at 95 % together (Bonferroni)."
+    ),
     resolve: Optional[float] = typer.Option(
         None, "--resolve", metavar="DELTA", help="Difference to resolve [the metric's units] (default: each difference seen): the runs per group it needs are "
         "n = 2 (z_0.975 + z_0.8)^2 s^2 / DELTA^2 rounded up (two-sided 5 %, power 0.8; s^2 the mean of the two groups' variances)."
@@ -956,17 +964,17 @@ def compare(
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the table as JSON here."),
 ) -> None:
     """Compare groups of runs: per group (and point), the mean and spread of a metric, and the
-    difference to a reference group with its 95 % interval (Welch's t for groups under 30 runs, else a
-    seeded bootstrap), a verdict, and the runs per group a difference needs.  Rows of failed runs are
-    left out."""
+    difference to a reference group (or to a value, --against) with its 95 % interval (Welch's t for
+    groups under 30 runs, else a seeded bootstrap), a verdict, and the runs per group a difference
+    needs.  Rows of failed runs are left out."""
     from .analysis.compare import SingleRunGroup, compare as compare_runs, parse_where, read_rows
     from .checks import InputError, check_destination
 
     try:
         if json_out is not None:
             check_destination(json_out, "comparison table")
-        result = compare_runs(read_rows(paths), by, metric, at, reference=reference, resolve=resolve,
-                              where=parse_where(where or []), allow_mixed=allow_mixed, allow_single=allow_single)  # fmt: skip
+        result = compare_runs(read_rows(paths), by, metric, at, reference=reference, resolve=resolve, where=parse_where(where or []),
+                              allow_mixed=allow_mixed, allow_single=allow_single, against=against, confidence=confidence)  # fmt: skip
     except SingleRunGroup as error:  # the rest is shown, so that one sees what the runs there give
         for line in error.comparison.lines():
             typer.echo(line)

@@ -56,6 +56,62 @@ def test_bootstrap_intervals_of_large_groups_cover_the_true_difference_95_percen
     assert abs(rate - 0.95) <= COVERAGE_TOLERANCE, rate
 
 
+def test_intervals_against_a_value_cover_the_true_mean_95_percent_of_the_time():
+    """--against: each small group's mean against the value it was drawn about (Student's t)."""
+    covered = 0
+    for trial in range(TRIALS):
+        rng = np.random.default_rng(trial)
+        rows = fake_rows({"none": rng.normal(2.5, 1.0, 5)})
+        (difference,) = cmp.compare(rows, "spin_kind", "largest_mass_ratio", against=2.5).points[0].differences
+        covered += difference.low <= 0.0 <= difference.high
+    assert abs(covered / TRIALS - 0.95) <= COVERAGE_TOLERANCE, covered / TRIALS
+
+
+def test_a_bonferroni_level_keeps_three_comparisons_at_95_percent_together():
+    """Three groups drawn like the reference (no effect at all): at --confidence 1 - 0.05/3 a trial
+    resolves none of its three differences at least 95 % of the time (Bonferroni bounds the family's
+    error by 5 %; the shared reference makes it a little conservative); at 0.95 each alone errs 5 %."""
+    level = 1 - 0.05 / 3
+    clean = {level: 0, 0.95: 0}
+    for trial in range(TRIALS):
+        rng = np.random.default_rng(1000 + trial)
+        rows = fake_rows({kind: rng.normal(1.39, 0.02, 8) for kind in ("none", "parallel", "anti-parallel", "perpendicular")})
+        for confidence in clean:
+            result = cmp.compare(rows, "spin_kind", "largest_mass_ratio", confidence=confidence)
+            clean[confidence] += not any(d.resolved for d in result.points[0].differences)
+    assert clean[level] / TRIALS >= 0.95 - COVERAGE_TOLERANCE, clean
+    assert clean[0.95] / TRIALS < 0.92, clean  # three comparisons at 95 % each err together ~13 % of the time
+
+
+def test_the_level_sets_the_t_quantile_and_the_runs_needed():
+    rows = fake_rows({"none": [1.0, 2.0, 3.0], "parallel": [2.0, 4.0, 6.0, 8.0]})
+    for confidence in (0.9, 0.99):
+        result = cmp.compare(rows, "spin_kind", "largest_mass_ratio", confidence=confidence)
+        none, (difference,) = result.points[0].groups[0], result.points[0].differences
+        half = stats.t.ppf(0.5 + confidence / 2, 2) / math.sqrt(3)
+        assert (none.low, none.high) == pytest.approx((2 - half, 2 + half), rel=1e-12)
+        assert (difference.low, difference.high) == pytest.approx(cmp.welch_interval(np.array([2.0, 4, 6, 8]), np.array([1.0, 2, 3]), confidence), rel=1e-12)
+        assert difference.runs_needed == cmp.runs_needed(math.sqrt((1 + 20 / 3) / 2), 3.0, confidence)
+        assert result.as_dict()["confidence"] == confidence
+    against = cmp.compare(rows, "spin_kind", "largest_mass_ratio", against=1.0).points[0]
+    assert [d.group for d in against.differences] == ["none", "parallel"]  # every group, none a reference
+    none = against.differences[0]
+    assert none.difference == pytest.approx(1.0) and none.method == "t"
+    assert (none.low, none.high) == pytest.approx((1 - stats.t.ppf(0.975, 2) / math.sqrt(3), 1 + stats.t.ppf(0.975, 2) / math.sqrt(3)))
+    assert none.runs_needed == cmp.runs_needed(1.0, 1.0, samples=1) == 8  # (1.959964 + 0.841621)^2 = 7.85
+
+
+def test_against_a_value_checks_the_set_up_within_each_group_only():
+    """Groups of different set-ups (the three mass ratios) may each be held against a value; runs
+    of two set-ups within one group are still refused."""
+    rows = fake_rows({"none": [1.0, 1.1]}, n_particles=5500) + fake_rows({"parallel": [1.2, 1.3]}, n_particles=10000)
+    with pytest.raises(cmp.MixedSetups):
+        cmp.compare(rows, "spin_kind", "largest_mass_ratio")
+    assert len(cmp.compare(rows, "spin_kind", "largest_mass_ratio", against=0.0).points[0].differences) == 2
+    with pytest.raises(cmp.MixedSetups):
+        cmp.compare(rows, "eta", "largest_mass_ratio", against=0.0)  # one group of 5 500 and 10 000 particles
+
+
 def test_the_method_follows_the_group_sizes_and_the_bootstrap_is_reproducible():
     rng = np.random.default_rng(7)
     small = fake_rows({"none": rng.normal(0, 1, cmp.BOOTSTRAP_FROM - 1), "parallel": rng.normal(0, 1, 40)})
@@ -202,6 +258,8 @@ def bad_inputs(sweep, tmp_path):
         "bad --where": ([str(sweep), *base, "--where", "eta"], ["--where takes COLUMN=VALUE"]),
         "unknown reference": ([str(sweep), *base, "--reference", "oblique"], ["--reference oblique", "none, parallel"]),
         "read twice": ([str(sweep), str(sweep / "summary.csv"), *base], ["is read twice"]),
+        "group and value": ([str(sweep), *base, "--reference", "none", "--against", "0"], ["--reference and --against", "not both"]),
+        "bad level": ([str(sweep), *base, "--confidence", "95"], ["--confidence must be a level from 0.5 to 0.9999", "got 95"]),
         "one set-up twice": ([str(twice), *base], ["parallel_eta6_r0 and parallel_eta6_r1 have the same outcome", "give it once"]),
     }
 

@@ -5,7 +5,10 @@ The rows are run summaries (``summary.json`` of a run folder, or the rows of a s
 and optionally by a second (``at``: eta), and gives, per point and group, the metric's mean and
 spread, and for each group its difference to a reference group with a 95 % confidence interval, a
 verdict (resolved, or not at the runs there are) and the runs per group that a given difference
-needs.  :func:`error_bars` gives the same numbers as a figure's error bars.
+needs.  With ``against`` each group's mean is compared with a fixed value instead ("does the
+fragment's mean grain grow?": against 0), and ``confidence`` sets the level (0.983 for three
+comparisons at a family-wise 95 %, Bonferroni).  :func:`error_bars` gives the same numbers as a
+figure's error bars.
 
     rows = read_rows(["runs/results/fig9", "runs/results/fig3"])
     result = compare(rows, by="spin_kind", metric="largest_mass_ratio", at="eta",
@@ -209,15 +212,17 @@ def _matches(value, wanted) -> bool:
 # --- statistics --------------------------------------------------------------------------------
 
 
-def runs_needed(spread: float, delta: float, confidence: float = CONFIDENCE, power: float = POWER) -> int | None:
+def runs_needed(spread: float, delta: float, confidence: float = CONFIDENCE, power: float = POWER, samples: int = 2) -> int | None:
     """Runs per group that resolve a difference ``delta`` between two groups of scatter ``spread``
     (the metric's standard deviation, its units as ``delta``'s) at two-sided ``1 - confidence`` and
     ``power``: the two-sample normal approximation n = 2 (z_(1-a/2) + z_power)^2 s^2 / delta^2,
-    rounded up, at least 2 (a group of one has no spread).  None: delta 0, never resolved."""
+    rounded up, at least 2 (a group of one has no spread).  ``samples = 1``: the runs that resolve
+    one group's mean ``delta`` away from a fixed value, n = (z_(1-a/2) + z_power)^2 s^2 / delta^2.
+    None: delta 0, never resolved."""
     if delta == 0:
         return None
     z = stats.norm.ppf(0.5 + confidence / 2) + stats.norm.ppf(power)
-    return max(2, math.ceil(2 * z**2 * spread**2 / delta**2))
+    return max(2, math.ceil(samples * z**2 * spread**2 / delta**2))
 
 
 def welch_interval(a: np.ndarray, b: np.ndarray, confidence: float = CONFIDENCE) -> tuple[float, float]:
@@ -284,7 +289,7 @@ class Group:
     n: int  #: runs
     mean: float  #: mean of the metric [the metric's units]
     std: float | None  #: standard deviation (ddof 1) [the metric's units]; None for one run
-    low: float | None  #: the mean's 95 % interval [the metric's units]
+    low: float | None  #: the mean's interval (95 % unless asked otherwise) [the metric's units]
     high: float | None
     method: str | None  #: "t" or "bootstrap"
     runs: list  #: the runs' names, as their summaries give them
@@ -293,14 +298,15 @@ class Group:
 
 @dataclass
 class Difference:
-    """A group's mean minus the reference group's at one point, and what it takes to resolve it."""
+    """A group's mean minus the reference group's (or the ``against`` value) at one point, and what
+    it takes to resolve it."""
 
     group: object
-    reference: object
+    reference: object  #: the reference group, or the value compared against
     difference: float  #: [the metric's units]
-    low: float | None  #: its 95 % interval; None where a group has one run
+    low: float | None  #: its interval (95 % unless asked otherwise); None where a group has one run
     high: float | None
-    method: str | None  #: "Welch t" or "bootstrap"
+    method: str | None  #: "Welch t" or "bootstrap" (two groups); "t" or "bootstrap" (against a value)
     delta: float  #: the difference the runs estimate is for (``resolve``, else |difference|)
     runs_needed: int | None  #: per group, for ``delta`` at the two groups' mean variance; None: never
     resolved: bool
@@ -332,10 +338,12 @@ class Comparison:
     met: dict  #: the values of each ``where`` column that rows matched
     missing: dict = field(default_factory=dict)  #: {column: rows left out without a value there}
     resamples: int = RESAMPLES  #: of each bootstrap interval
+    against: float | None = None  #: each group's mean compared with this value (``reference`` is it)
+    confidence: float = CONFIDENCE  #: of every interval and verdict (two-sided)
 
     def as_dict(self) -> dict:
         """Plain data (numbers as floats, None where none exists), for JSON."""
-        return {"confidence": CONFIDENCE, "power": POWER, "bootstrap_from": BOOTSTRAP_FROM, "seed": SEED, **asdict(self)}
+        return {"power": POWER, "bootstrap_from": BOOTSTRAP_FROM, "seed": SEED, **asdict(self)}
 
     def single(self) -> list[tuple[object, object]]:
         """(point, group) of every group of one run."""
@@ -347,15 +355,20 @@ class Comparison:
         kept = sum(g.n for p in self.points for g in p.groups)
         left = [f"{self.failed} failed"] if self.failed else []
         left += [f"{n} without {column}" for column, n in self.missing.items()]
+        level = f"{100 * self.confidence:.4g} %"
+        if self.against is None:
+            intervals = f"difference to {label(self.reference)}: {level} interval by Welch's t where a group has fewer than "
+        else:
+            intervals = f"each mean minus {self.against:g}: {level} interval by Student's t where a group has fewer than "
         text = [
-            f"{self.metric} by {self.by}" + (f" at {self.at}" if self.at else "") + f"; reference: {label(self.reference)}",
+            f"{self.metric} by {self.by}" + (f" at {self.at}" if self.at else "")
+            + (f"; reference: {label(self.reference)}" if self.against is None else f"; against: {self.against:g}"),
             f"runs: {self.read} read" + (f", {', '.join(left)} left out" if left else "") + (f", {kept} kept by --where {where}" if where else f", {kept} kept"),
-            f"difference to {label(self.reference)}: {100 * CONFIDENCE:g} % interval by Welch's t where a group has fewer than "
-            f"{BOOTSTRAP_FROM} runs, else by bootstrap (BCa, {self.resamples} resamples, seed {SEED}); runs to resolve: per group, for "
+            intervals + f"{BOOTSTRAP_FROM} runs, else by bootstrap (BCa, {self.resamples} resamples, seed {SEED}); runs to resolve: per group, for "
             + (f"a difference of {self.resolve:g}" if self.resolve is not None else "the difference seen")
-            + f" (two-sided {100 * (1 - CONFIDENCE):g} %, power {POWER:g})",
+            + f" (two-sided {100 * (1 - self.confidence):.3g} %, power {POWER:g})",
         ]
-        header = (self.by, "n", "mean", "std", "diff", f"{100 * CONFIDENCE:g} % interval", "method", "runs to resolve", "verdict")
+        header = (self.by, "n", "mean", "std", "diff", f"{level} interval", "method", "runs to resolve", "verdict")
         for point in self.points:
             rows = [header]
             differences = {d.group: d for d in point.differences}
@@ -369,7 +382,7 @@ class Comparison:
                     needed = "-" if d.low is None else "never" if d.runs_needed is None else str(d.runs_needed)  # "-": a spread unknown
                     row += [_digits(d.difference, 3, "+"), interval, d.method or "-", needed, d.verdict]
                 rows.append(row)
-            if self.reference not in {g.group for g in point.groups}:
+            if self.against is None and self.reference not in {g.group for g in point.groups}:
                 rows.append(["", "", "", "", f"no {label(self.reference)} here: nothing to compare with", "", "", "", ""])
             widths = [max(len(r[k]) for r in rows) for k in range(len(header))]
             text.append(f"{self.at} {label(point.at)}:" if self.at else "all runs:")
@@ -419,10 +432,12 @@ def _check_setups(point, rows: list[dict], by: str, at: str | None) -> None:
 
 def compare(rows: list[dict], by: str, metric: str, at: str | None = None, reference=None, resolve: float | None = None,
             where: dict | None = None, allow_mixed: bool = False, allow_single: bool = False,
-            resamples: int = RESAMPLES) -> Comparison:  # fmt: skip
+            resamples: int = RESAMPLES, against: float | None = None, confidence: float = CONFIDENCE) -> Comparison:  # fmt: skip
     """Group ``rows`` (run summaries) by ``by`` and ``at``, and compare each group's ``metric`` with
     the ``reference`` group's at each point (default: "none" for spin_kind where present, else the
-    first group in sorted order).
+    first group in sorted order), or, with ``against``, each group's mean with that value (a
+    reference group and ``against`` exclude each other).  Intervals and verdicts are at
+    ``confidence`` (two-sided, 0.5 to 0.9999; 1 - 0.05 / m for m comparisons at a family-wise 95 %).
 
     Rows of failed runs (status "failed") are left out, and so are rows without a value of ``by``,
     ``at`` or ``metric`` (counted in ``missing``).  ``where``: {column: values}, keep only the rows
@@ -439,6 +454,12 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
     _check_columns(rows, options)
     if resolve is not None and not (math.isfinite(resolve) and resolve > 0):
         raise CompareError(f"--resolve must be a difference > 0; got {resolve:g}")
+    if not (math.isfinite(confidence) and 0.5 <= confidence <= 0.9999):
+        raise CompareError(f"--confidence must be a level from 0.5 to 0.9999 (0.95: 95 %); got {confidence:g}")
+    if against is not None and not math.isfinite(against):
+        raise CompareError(f"--against must be a finite value; got {against:g}")
+    if against is not None and reference is not None:
+        raise CompareError("--reference and --against: compare with a group or with a value, not both")
     done = [row for row in rows if row.get("status") != "failed"]
     kept, met = select(done, where)
     if not kept:
@@ -460,7 +481,9 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
     for row in kept:
         points.setdefault(value_key(row[at]) if at else None, {}).setdefault(value_key(row[by]), []).append(row)
     groups = sorted({g for point in points.values() for g in point}, key=_order)
-    if reference is None:
+    if against is not None:
+        reference = against
+    elif reference is None:
         reference = NO_SPIN if by == "spin_kind" and NO_SPIN in groups else groups[0]
     else:
         reference = value_key(parse_cell(str(reference)))
@@ -470,13 +493,21 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
     result = []
     for at_key in sorted(points, key=lambda k: _order(k) if k is not None else (0, 0.0)):
         point = points[at_key]
-        if not allow_mixed:
-            _check_setups(at_key, [row for members in point.values() for row in members], by, at)
-        order = sorted(point, key=lambda g: (g != reference, _order(g)))  # the reference first
-        stats_of = {g: _group(g, point[g], metric, resamples) for g in order}
-        differences = [_difference(stats_of[g], stats_of[reference], resolve, resamples) for g in order if g != reference and reference in point]
+        if not allow_mixed:  # the rows compared with each other: all at the point, or each group's against a value
+            for members in ([row for members in point.values() for row in members],) if against is None else point.values():
+                _check_setups(at_key, members, by, at)
+        if against is None:
+            order = sorted(point, key=lambda g: (g != reference, _order(g)))  # the reference first
+            stats_of = {g: _group(g, point[g], metric, resamples, confidence) for g in order}
+            differences = [_difference(stats_of[g], stats_of[reference], resolve, resamples, confidence)
+                           for g in order if g != reference and reference in point]  # fmt: skip
+        else:
+            order = sorted(point, key=_order)
+            stats_of = {g: _group(g, point[g], metric, resamples, confidence) for g in order}
+            differences = [_against(stats_of[g], against, resolve, confidence) for g in order]
         result.append(Point(at_key, [stats_of[g] for g in order], differences))
-    comparison = Comparison(metric, by, at, reference, resolve, result, len(rows), len(rows) - len(done), where, met, missing, resamples)
+    comparison = Comparison(metric, by, at, reference, resolve, result, len(rows), len(rows) - len(done), where, met, missing, resamples,
+                            against, confidence)  # fmt: skip
     single = comparison.single()
     if single and not allow_single:
         named = "; ".join(f"{label(g)}" + (f" at {at} {label(p)}" if at else "") for p, g in single)
@@ -485,24 +516,40 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
     return comparison
 
 
-def _group(key, rows: list[dict], metric: str, resamples: int) -> Group:
+def _group(key, rows: list[dict], metric: str, resamples: int, confidence: float = CONFIDENCE) -> Group:
     values = np.array([float(row[metric]) for row in rows])
-    low, high, method = mean_interval(values, resamples=resamples)
+    low, high, method = mean_interval(values, confidence, resamples)
     std = float(values.std(ddof=1)) if values.size > 1 else None
     return Group(key, int(values.size), float(values.mean()), std, low, high, method, [row.get("run") for row in rows], values.tolist())
 
 
-def _difference(group: Group, reference: Group, resolve: float | None, resamples: int) -> Difference:
+def _difference(group: Group, reference: Group, resolve: float | None, resamples: int, confidence: float = CONFIDENCE) -> Difference:
     difference = group.mean - reference.mean
     delta = resolve if resolve is not None else abs(difference)
     if group.n < 2 or reference.n < 2:
         one = group.group if group.n < 2 else reference.group
         return Difference(group.group, reference.group, difference, None, None, None, delta, None, False, f"spread unknown: 1 run of {label(one)}")
-    low, high, method = difference_interval(np.array(group.values), np.array(reference.values), resamples=resamples)
-    needed = runs_needed(math.sqrt((group.std**2 + reference.std**2) / 2), delta)
-    resolved = low > 0 or high < 0
-    verdict = "resolved" if resolved else f"not resolved at n = {group.n} and {reference.n}"
-    return Difference(group.group, reference.group, difference, low, high, method, delta, needed, resolved, verdict)
+    low, high, method = difference_interval(np.array(group.values), np.array(reference.values), confidence, resamples)
+    needed = runs_needed(math.sqrt((group.std**2 + reference.std**2) / 2), delta, confidence)
+    return _verdict(Difference(group.group, reference.group, difference, low, high, method, delta, needed, False, ""), f"n = {group.n} and {reference.n}")
+
+
+def _against(group: Group, value: float, resolve: float | None, confidence: float) -> Difference:
+    """A group's mean minus a fixed ``value``: the mean's own interval, shifted."""
+    difference = group.mean - value
+    delta = resolve if resolve is not None else abs(difference)
+    if group.n < 2:
+        return Difference(group.group, value, difference, None, None, None, delta, None, False, f"spread unknown: 1 run of {label(group.group)}")
+    needed = runs_needed(group.std, delta, confidence, samples=1)
+    moved = Difference(group.group, value, difference, group.low - value, group.high - value, group.method, delta, needed, False, "")
+    return _verdict(moved, f"n = {group.n}")
+
+
+def _verdict(difference: Difference, runs: str) -> Difference:
+    """``difference`` with its verdict: resolved where its interval leaves out 0."""
+    difference.resolved = difference.low > 0 or difference.high < 0
+    difference.verdict = "resolved" if difference.resolved else f"not resolved at {runs}"
+    return difference
 
 
 def error_bars(rows: list[dict], by: str, metric: str, at: str | None = None, where: dict | None = None,
