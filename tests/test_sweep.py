@@ -300,9 +300,12 @@ def test_shipped_large_pile_list_and_collision_are_valid():
 
 
 @pytest.mark.parametrize(
-    "folder, sweeps", [("fig3", ["fig3_validation", "realizations"]), ("fig9", ["fig9_spin"]), ("causes", ["size_change_causes"]), ("spin_friction", ["spin_friction"])]
-)
-def test_committed_results_are_runs_of_the_shipped_sweeps(folder, sweeps):
+    "folder, sweeps, overrides",
+    [("fig3", ["fig3_validation", "realizations"], None), ("fig9", ["fig9_spin"], None), ("causes", ["size_change_causes"], None),
+     ("spin_friction", ["spin_friction"], None), ("fig9_statistics", ["fig9_statistics"], None), ("fig6_statistics", ["fig6_statistics"], None),
+     ("fig6_clock", ["fig6_clock"], None), ("resolution/x4", ["resolution_auto"], {"resolution": 4.0})],
+)  # fmt: skip
+def test_committed_results_are_runs_of_the_shipped_sweeps(folder, sweeps, overrides):
     """Every run kept under runs/results/ is, name and set-up (piles, collision with its orientation
     seed, Params, steps), a run of the shipped sweep files: so `decco-warp sweep` over that folder
     skips it, and the same files repeat it."""
@@ -313,7 +316,7 @@ def test_committed_results_are_runs_of_the_shipped_sweeps(folder, sweeps):
     root = Path(__file__).parent.parent
     planned = {}
     for name in sweeps:
-        for run in load_sweep(root / "runs" / "paper" / f"{name}.toml")[1]:
+        for run in load_sweep(root / "runs" / "paper" / f"{name}.toml", overrides)[1]:
             planned[run["run"]["name"]] = run
     kept = sorted((root / "runs" / "results" / folder).glob("*/spec.toml"))
     assert kept

@@ -24,6 +24,7 @@ import decco_warp as dw  # noqa: E402
 from decco_warp.analysis import scaling  # noqa: E402
 from decco_warp.analysis.figures import (  # noqa: E402
     ETA_LABELS,
+    RATIO_MARKERS,
     SIZE_LABELS,
     draw_points,
     draw_run,
@@ -158,34 +159,71 @@ def spins():
 
 
 def spin_statistics():
-    """Fig. 9 with statistics (runs/results/fig9_statistics): per eta, each kind's realizations
-    (dots), mean and 95 % interval of the mean (bar); right, each kind's difference to no spin
-    with its 95 % interval: the numbers of ``decco-warp compare ... --by spin_kind --at eta``."""
+    """Fig. 9 with statistics (runs/results/fig9_statistics): per eta a panel of each kind's
+    realizations (dots), mean and 95 % interval of the mean (bar); right, each kind's difference to
+    no spin with its 95 % interval (thick) and at 98.3 % (thin: the three kinds together at 95 %,
+    Bonferroni): the numbers of ``decco-warp compare ... --by spin_kind --at eta [--confidence 0.983]``."""
     from decco_warp.analysis.compare import compare, read_rows
 
-    comparison = compare(read_rows([RESULTS / "fig9_statistics"]), "spin_kind", "largest_mass_ratio", at="eta")
+    rows = read_rows([RESULTS / "fig9_statistics"])
+    comparison = compare(rows, "spin_kind", "largest_mass_ratio", at="eta")
+    family = compare(rows, "spin_kind", "largest_mass_ratio", at="eta", confidence=1 - 0.05 / 3)
     colours = {kind: f"C{k}" for k, kind in enumerate(KINDS)}
-    fig, (ax, diff) = plt.subplots(1, 2, figsize=(11.0, 4.4))
-    ticks = []
-    for e, point in enumerate(comparison.points):
-        place = {kind: e * (len(KINDS) + 1) + k for k, kind in enumerate(KINDS)}
-        ticks.append(e * (len(KINDS) + 1) + 1.5)
-        for g in point.groups:
-            x, values = place[g.group], np.array(g.values)
-            ax.plot(np.full(len(values), x) + np.linspace(-0.15, 0.15, len(values)), values, ".", color=colours[g.group], alpha=0.5)
-            ax.errorbar([x], [g.mean], yerr=[[g.mean - g.low], [g.high - g.mean]], marker="o", color=colours[g.group], capsize=4,
-                        label=(f"{g.group} (n = {g.n})" if e == 0 else None))  # fmt: skip
-        for d in point.differences:
-            diff.errorbar([place[d.group]], [d.difference], yerr=[[d.difference - d.low], [d.high - d.difference]], marker="o",
-                          color=colours[d.group], capsize=4)  # fmt: skip
-    for a in (ax, diff):
-        a.set_xticks(ticks, [f"eta {point.at:g}" for point in comparison.points])
-    ax.set_ylabel("m_lf / m_t")
-    ax.set_title("equal masses head-on, spins at half breakup: realizations,\nmean and its 95 % interval", fontsize=10)
-    ax.legend(fontsize=8)
+    fig, axes = plt.subplots(1, len(comparison.points) + 1, figsize=(4.0 * (len(comparison.points) + 1), 4.4))
+    diff = axes[-1]
+    for e, (point, wide) in enumerate(zip(comparison.points, family.points)):
+        ax = axes[e]
+        for k, g in enumerate(sorted(point.groups, key=lambda g: KINDS.index(g.group))):
+            values = np.array(g.values)
+            ax.plot(np.full(len(values), k) + np.linspace(-0.15, 0.15, len(values)), values, ".", color=colours[g.group], alpha=0.5)
+            ax.errorbar([k], [g.mean], yerr=[[g.mean - g.low], [g.high - g.mean]], marker="o", color=colours[g.group], capsize=4)
+        ax.set_xticks(range(len(KINDS)), [f"{kind}\n(n = {next(g.n for g in point.groups if g.group == kind)})" for kind in KINDS], fontsize=8)
+        ax.set_title(f"eta = {point.at:g}: realizations, mean, 95 % interval", fontsize=10)
+        ax.set_ylabel("m_lf / m_t")
+        x0 = e * (len(KINDS) + 1)
+        for d, d_wide in zip(point.differences, wide.differences):
+            x = x0 + KINDS.index(d.group)
+            diff.errorbar([x], [d.difference], yerr=[[d.difference - d_wide.low], [d_wide.high - d.difference]], color=colours[d.group], linewidth=0.8, capsize=2)
+            diff.errorbar([x], [d.difference], yerr=[[d.difference - d.low], [d.high - d.difference]], marker="o", color=colours[d.group],
+                          linewidth=2.2, capsize=4, label=(d.group if e == 0 else None))  # fmt: skip
+    diff.set_xticks([e * (len(KINDS) + 1) + 2 for e in range(len(comparison.points))], [f"eta {p.at:g}" for p in comparison.points])
     diff.axhline(0.0, color="0.6", linewidth=0.6)
     diff.set_ylabel("m_lf / m_t, kind minus no spin")
-    diff.set_title("difference to no spin, 95 % interval (Welch's t)", fontsize=10)
+    diff.set_title("difference to no spin: 95 % (thick), 98.3 % (thin)", fontsize=10)
+    diff.legend(fontsize=8)
+    fig.suptitle("Fig. 9 with statistics: equal masses head-on, spins at half the breakup rate", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def size_change_statistics():
+    """Fig. 6 with statistics (runs/results/fig6_statistics): per mass ratio and eta the late-window
+    particle-size change of each realization (dots), its mean and the mean's 95 % interval (bar), per
+    particle (left) and by mass (right): ``decco-warp compare ... --by mass_ratio --at eta --against 0``."""
+    from decco_warp.analysis.compare import compare, read_rows
+
+    rows = read_rows([RESULTS / "fig6_statistics"])
+    fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.4), sharey=True)
+    metrics = (("size_change_late", "per particle"), ("size_change_mass_weighted_late", "by mass"))
+    for ax, (metric, title) in zip(axes, metrics):
+        comparison = compare(rows, "eta", metric, at="mass_ratio", against=0.0)
+        for k, point in enumerate(comparison.points):
+            ratio = round(point.at, 2)
+            shift = (k - 1) * 0.5  # the ratios side by side at each eta
+            colour, marker = f"C{k}", RATIO_MARKERS[ratio]
+            for g in point.groups:
+                ax.plot(np.full(len(g.values), g.group + shift) + np.linspace(-0.1, 0.1, len(g.values)), g.values, ".", color=colour, alpha=0.4)
+            groups = point.groups
+            ax.errorbar([g.group + shift for g in groups], [g.mean for g in groups], yerr=[[g.mean - g.low for g in groups], [g.high - g.mean for g in groups]],
+                        marker=marker, color=colour, linestyle="", capsize=3, label=f"m_p/m_t = {dict(RATIOS)[ratio]} (n = 5 a point)")  # fmt: skip
+        ax.axhline(0.0, color="0.6", linewidth=0.6)
+        ax.set_xticks([p.group for p in comparison.points[0].groups])
+        ax.set_xlabel("eta = KE / |U|")
+        ax.set_title(f"largest fragment's mean grain mass change, {title}", fontsize=10)
+    axes[0].set_ylabel("change over the last 10 % of the run [%]")
+    axes[0].legend(fontsize=8)
+    fig.suptitle("Fig. 6 with statistics: head-on, five realizations a point, mean and its 95 % interval", fontsize=10)
+    fig.tight_layout()
     return fig
 
 
@@ -244,42 +282,48 @@ LADDER_ETAS = (3.0, 6.0, 9.0)
 
 
 def ladder_points() -> list[dict]:
-    """The resolution ladder's runs (1/4 head-on): particles, eta, m_lf/m_t and whether it is a
-    settled analysed value (False: not settled, or the last checkpoint's alone, x4/final_frame.csv)."""
+    """The resolution ladder's runs (1/4 head-on): particles, eta, m_lf/m_t, the late-window size
+    change (None where unknown) and whether it is a settled analysed value (False: not settled, or the
+    last checkpoint's alone, x4/final_frame.csv)."""
     points = []
-    for run in runs("resolution") + runs("fig3", 0.25):
+    for run in runs("resolution") + runs("resolution/x4") + runs("fig3", 0.25):
         s = run["summary"]
         if s["theta_deg"] == 0.0 and round(s["eta"], 6) in LADDER_ETAS:
-            points.append({"n": s["n_particles"], "eta": round(s["eta"], 6), "value": s["largest_mass_ratio"], "firm": s.get("settled") is not False})
+            points.append({"n": s["n_particles"], "eta": round(s["eta"], 6), "value": s["largest_mass_ratio"],
+                           "size_change": s.get("size_change_late"), "firm": s.get("settled") is not False})  # fmt: skip
     final = RESULTS / "resolution" / "x4" / "final_frame.csv"
     if final.exists():
         for row in csv.DictReader(final.open()):
-            points.append({"n": int(row["n_particles"]), "eta": float(row["eta"]), "value": float(row["largest_mass_ratio_final"]), "firm": False})
+            points.append({"n": int(row["n_particles"]), "eta": float(row["eta"]), "value": float(row["largest_mass_ratio_final"]),
+                           "size_change": None, "firm": False})  # fmt: skip
     return points
 
 
 def resolution():
-    """m_lf/m_t of the 1/4 head-on collision against the particle count, per eta: every run (hollow:
-    not settled, or the last frame alone), the mean of each rung with its spread (one standard deviation)."""
+    """m_lf/m_t (left) and the late-window particle-size change (right) of the 1/4 head-on collision
+    against the particle count, per eta: every run (hollow: not settled, or the last frame alone), the
+    mean of each rung with its spread (one standard deviation)."""
     points = ladder_points()
-    fig, ax = plt.subplots(figsize=(6.4, 4.4))
-    for k, eta in enumerate(LADDER_ETAS):
-        colour = f"C{k}"
-        mine = [p for p in points if p["eta"] == eta]
-        for p in mine:
-            ax.plot(p["n"], p["value"], "o", color=colour, alpha=0.5, markersize=4, markerfacecolor=colour if p["firm"] else "none")
-        counts = sorted({p["n"] for p in mine})
-        means = [np.mean([p["value"] for p in mine if p["n"] == n]) for n in counts]
-        spreads = [np.std([p["value"] for p in mine if p["n"] == n], ddof=1) if sum(p["n"] == n for p in mine) > 1 else 0.0 for n in counts]
-        ax.errorbar(counts, means, yerr=spreads, color=colour, marker="s", capsize=3, label=f"eta = {eta:g}")
-    ax.set_xscale("log")
-    counts = sorted({p["n"] for p in points})
-    ax.set_xticks(counts, [f"{n:,}".replace(",", " ") for n in counts])
-    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-    ax.set_xlabel("particles (target + projectile)")
-    ax.set_ylabel("m_lf / m_t")
-    ax.set_title("1/4 head-on: the same bodies at 1/4, 1 and 4 times the paper's particles\n(k_in and dt x N^(-1/3))", fontsize=9)
-    ax.legend(fontsize=8)
+    fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.4))
+    for ax, key, ylabel in ((axes[0], "value", "m_lf / m_t"), (axes[1], "size_change", "particle-size change, late mean [%]")):
+        for k, eta in enumerate(LADDER_ETAS):
+            colour = f"C{k}"
+            mine = [p for p in points if p["eta"] == eta and p[key] is not None]
+            for p in mine:
+                ax.plot(p["n"], p[key], "o", color=colour, alpha=0.5, markersize=4, markerfacecolor=colour if p["firm"] else "none")
+            counts = sorted({p["n"] for p in mine})
+            rungs = [[p[key] for p in mine if p["n"] == n] for n in counts]
+            spreads = [np.std(r, ddof=1) if len(r) > 1 else 0.0 for r in rungs]
+            ax.errorbar(counts, [np.mean(r) for r in rungs], yerr=spreads, color=colour, marker="s", capsize=3, label=f"eta = {eta:g}")
+        ax.set_xscale("log")
+        counts = sorted({p["n"] for p in points})
+        ax.set_xticks(counts, [f"{n:,}".replace(",", " ") for n in counts])
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        ax.set_xlabel("particles (target + projectile)")
+        ax.set_ylabel(ylabel)
+        ax.legend(fontsize=8)
+    fig.suptitle("1/4 head-on: the same bodies at 1/4, 1 and 4 times the paper's particles (k_in and dt x N^(-1/3))", fontsize=10)
+    fig.tight_layout()
     return fig
 
 
@@ -302,6 +346,7 @@ def main() -> None:
         ("validation-size-change", size_change()),
         ("validation-spins", spins()),
         ("validation-spin-statistics", spin_statistics()),
+        ("validation-size-change-statistics", size_change_statistics()),
         ("validation-stress-shares", stress_shares()),
         ("validation-conservation", conservation()),
         ("validation-overlaps", overlaps()),
