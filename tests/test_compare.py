@@ -248,6 +248,8 @@ def bad_inputs(sweep, tmp_path):
     return {
         "unknown column": ([str(sweep), "--by", "spin_kind", "--metric", "largest_mass"], ["--metric largest_mass: no such column", "spin_kind"]),
         "unknown --at": ([str(sweep), *base, "--at", "etta"], ["--at etta: no such column", "eta"]),
+        "a sweep's column of run folders": ([str(sweep / "parallel_eta6_r0"), *base, "--where", "realization=0"],
+                                            ["--where realization: no such column (realization is a column of a sweep's summary.csv"]),
         "not numeric": ([str(sweep), "--by", "spin_kind", "--metric", "eta_potential"], ["--metric eta_potential is not numeric", "'self'"]),
         "group of one": ([str(lone), *base], ["1 group(s) of one run", "parallel", "--allow-single"]),
         "mixed set-ups": ([str(mixed), *base], ["differ in mass_ratio (0.25, 1)", "--allow-mixed"]),

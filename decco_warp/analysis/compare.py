@@ -58,6 +58,9 @@ WHERE_TOLERANCE = 0.01
 SETUP_COLUMNS = ("mass_ratio", "theta_deg", "k_in", "dt", "gravity_every", "eta_potential", "n_particles", "restitution", "mu_k", "mu_r")
 #: The group that ``spin_kind`` is compared against by default, where present.
 NO_SPIN = "none"
+#: Columns that a sweep's summary.csv gives each run beside its summary.json's (a run folder alone
+#: does not know its realization number, say).
+SWEEP_COLUMNS = ("status", "reason", "realization", "wall_seconds", "stepping_seconds", "device", "device_name", "ensemble")
 
 
 class CompareError(InputError):
@@ -413,7 +416,8 @@ def _check_columns(rows: list[dict], columns: dict[str, str]) -> None:
     known = set().union(*(row.keys() for row in rows))
     for option, column in columns.items():
         if column not in known:
-            raise UnknownColumn(f"{option} {column}: no such column; the runs have: {', '.join(sorted(known))}")
+            sheet = f" ({column} is a column of a sweep's summary.csv: give that file instead of its run folders)" if column in SWEEP_COLUMNS else ""
+            raise UnknownColumn(f"{option} {column}: no such column{sheet}; the runs have: {', '.join(sorted(known))}")
 
 
 def _check_setups(point, rows: list[dict], by: str, at: str | None) -> None:
