@@ -8,7 +8,7 @@ from typing import List, Optional
 import typer
 
 from ._version import __version__
-from .folder import RunFolder
+from .folder import RunFolder, missing
 from .spec import pile_defaults
 from .errors import EXIT_BLOW_UP, EXIT_INPUT, EXIT_NOT_SETTLED, EXIT_OUTPUT, EXIT_STOPPED, DeccoError  # noqa: F401
 # (The exit codes, README "When things go wrong", live in errors.py beside the errors that carry them.)
@@ -32,11 +32,6 @@ def fail(message: str, code: int = EXIT_INPUT) -> None:
     stop (exit 3: SIGINT or SIGTERM, a checkpoint written) is no error, and its line says so."""
     typer.echo(f"decco-warp: {'' if code == EXIT_STOPPED else 'error: '}{message}", err=True)
     raise typer.Exit(code)
-
-
-def missing(path: Path, what: str = "run folder") -> str:
-    """The line for a path that is not a ``what``: "does not exist" when nothing is there."""
-    return f"{path} does not exist" if not path.exists() else f"{path} is not a {what}"
 
 
 def write_failed(error: OSError, kept: str) -> None:
@@ -582,7 +577,8 @@ def resume(
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Continue a stopped or killed run from its last checkpoint (or extend it, with --steps or --until-settled)."""
-    from .run import prepare_resume
+    from .errors import FileFormatError, NotSettled, RunError
+    from .run import prepare_resume, resume_until_settled
 
     if not until_settled:
         if max_steps is not None:
@@ -594,43 +590,14 @@ def resume(
         fail("give --steps or --until-settled, not both")
     if min_members < 1 or (max_steps is not None and max_steps < 1):
         fail("--min-members and --max-steps must be >= 1")
-    _resume_until_settled(run_dir, max_steps, min_members, device, rerun, rerun_every)
 
+    def advance(total: int | None) -> None:
+        _report(_run_with_progress(prepare_resume, run_dir, steps=total, device=device, rerun=rerun, rerun_every=rerun_every))
 
-#: ``resume --until-settled`` extends a run by this fraction of its steps at a time.
-SETTLE_EXTENSION = 0.25
-
-
-def _resume_until_settled(run_dir: Path, max_steps: int | None, min_members: int, device, rerun, rerun_every) -> None:
-    """Finish the run, then judge its late window; while not settled, extend it by SETTLE_EXTENSION
-    of its steps (at most to ``max_steps``) and judge again."""
-    from .analysis.runs import late_verdict
-    from .io import FileFormatError
-    from .run import prepare_resume
-
-    def verdict() -> dict:
-        try:
-            return late_verdict(run_dir, min_members=min_members, device=device)
-        except (FileFormatError, OSError) as error:
-            fail(f"{run_dir}: cannot judge whether the run is settled: {error}")
-
-    if not RunFolder(run_dir).trajectory.is_file():
-        fail(f"{run_dir} holds no {RunFolder.TRAJECTORY}" if run_dir.is_dir() else missing(run_dir))
-    result = _run_with_progress(prepare_resume, run_dir, device=device, rerun=rerun, rerun_every=rerun_every)  # its own steps first
-    _report(result)
-    judged = verdict()
-    limit = max_steps if max_steps is not None else 4 * judged["steps"]
-    while not judged["settled"]:
-        typer.echo(f"{run_dir}: not settled at step {judged['steps']} (t {judged['time']:.6g} s): {judged['settled_note']}")
-        if judged["steps"] >= limit:
-            fail(f"{run_dir} is not settled at step {judged['steps']}, the limit; raise --max-steps to run it on", code=EXIT_NOT_SETTLED)
-        target = min(limit, judged["steps"] + max(1, int(SETTLE_EXTENSION * judged["steps"])))
-        typer.echo(f"{run_dir}: extending to step {target}")
-        result = _run_with_progress(prepare_resume, run_dir, steps=target, device=device, rerun=rerun, rerun_every=rerun_every)
-        _report(result)
-        judged = verdict()
-    typer.echo(f"{run_dir}: settled at step {judged['steps']} (t {judged['time']:.6g} s): {judged['settled_note']}; "
-               f"decco-warp analyze {run_dir} analyses it whole")  # fmt: skip
+    try:
+        resume_until_settled(run_dir, advance, max_steps, min_members, device, say=typer.echo)
+    except (RunError, FileFormatError, NotSettled) as error:
+        fail(str(error), error.exit_code)
 
 
 # --- bench -------------------------------------------------------------------------------

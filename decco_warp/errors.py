@@ -92,6 +92,12 @@ class OutputError(DeccoError, RuntimeError):
     exit_code = EXIT_OUTPUT
 
 
+class NotSettled(DeccoError, RuntimeError):
+    """A run extended until settled reached its step limit with its outcome still changing; the run is whole."""
+
+    exit_code = EXIT_NOT_SETTLED
+
+
 # --- stopped on request: resumable (exit 3) --------------------------------------------------------
 
 

@@ -71,3 +71,8 @@ class RunFolder:
         """Whether the run has made every step its spec.toml asks for."""
         progress = self.progress()
         return progress is not None and progress[0] >= progress[1]
+
+
+def missing(path, what: str = "run folder") -> str:
+    """The line for a path that is not a ``what``: "does not exist" when nothing is there."""
+    return f"{path} does not exist" if not Path(path).exists() else f"{path} is not a {what}"

@@ -20,7 +20,7 @@ from . import spec as specs
 from .checks import MAX_REST_OVERLAP, InputError, check_destination
 from .diagnostics import energy_ledger, energy_scale, ledger_closure, stress_shares
 from .durable import describe_write_error, pause_point, write_atomic, write_point
-from .folder import RunFolder
+from .folder import RunFolder, missing
 from .io import BackgroundFrames, FileFormatError, Trajectory, read_checkpoint, read_frame, write_checkpoint
 from .lock import RunFolderLock
 from .plan import Plan, RunError, builtin_pile, pile_path, plan_resume, plan_start, run_dir_of  # noqa: F401 (run's names)
@@ -28,7 +28,7 @@ from .simulation import Simulation, graph_steps
 from .stops import StopRequests
 from .stability import MIN_TIME_STEP_MARGIN, StabilityReport
 from .xdmf import write_xdmf
-from .errors import BlowUp, OutputError, RunStopped  # noqa: F401 (re-exported: the error lives in errors.py)
+from .errors import BlowUp, NotSettled, OutputError, RunStopped  # noqa: F401 (re-exported: the error lives in errors.py)
 
 #: Seconds of stepping between two looks at the stop requests (Ctrl-C, SIGTERM), whatever the pace.
 STOP_LATENCY = 2.0
@@ -421,6 +421,57 @@ def start_run(spec: dict, overwrite: bool = False, device: str | None = None, pr
 def resume_run(run_dir, steps: int | None = None, device: str | None = None, progress=None) -> RunResult:
     """Continue a stopped or killed run from its checkpoint."""
     return execute(prepare_resume(run_dir, steps, device), progress)
+
+
+#: :func:`resume_until_settled` extends a run by this fraction of its steps at a time.
+SETTLE_EXTENSION = 0.25
+
+
+def resume_until_settled(
+    run_dir,
+    advance: Callable[[int | None], object] | None = None,
+    max_steps: int | None = None,
+    min_members: int = 50,
+    device: str | None = None,
+    say: Callable[[str], None] | None = None,
+) -> dict:
+    """Finish a run, then judge its late window (``analysis.runs.late_verdict``); while it is not
+    settled, extend it by SETTLE_EXTENSION of its steps, at most to ``max_steps`` (default: 4 times
+    its steps once finished), and judge again.  Returns the settled verdict.
+
+    ``advance(steps)`` runs the run on to ``steps`` in all (None: to those it asks for already);
+    default :func:`resume_run` (``decco-warp resume --until-settled`` passes its own, with a
+    progress bar).  ``say`` hears a line per verdict and per extension.  Raises RunError for a
+    folder without a trajectory, FileFormatError for a run that cannot be judged and NotSettled at
+    the limit (the run is whole)."""
+    from .analysis.runs import late_verdict  # SciPy and the cluster finder, only when a run is judged
+
+    run_dir = Path(run_dir)
+    advance = advance or (lambda steps: resume_run(run_dir, steps, device))
+    say = say or (lambda line: None)
+
+    def verdict() -> dict:
+        try:
+            return late_verdict(run_dir, min_members=min_members, device=device)
+        except (FileFormatError, OSError) as error:
+            raise FileFormatError(f"{run_dir}: cannot judge whether the run is settled: {error}") from None
+
+    if not RunFolder(run_dir).trajectory.is_file():
+        raise RunError(f"{run_dir} holds no {RunFolder.TRAJECTORY}" if run_dir.is_dir() else missing(run_dir))
+    advance(None)  # its own steps first
+    judged = verdict()
+    limit = max_steps if max_steps is not None else 4 * judged["steps"]
+    while not judged["settled"]:
+        say(f"{run_dir}: not settled at step {judged['steps']} (t {judged['time']:.6g} s): {judged['settled_note']}")
+        if judged["steps"] >= limit:
+            raise NotSettled(f"{run_dir} is not settled at step {judged['steps']}, the limit; raise --max-steps to run it on")
+        target = min(limit, judged["steps"] + max(1, int(SETTLE_EXTENSION * judged["steps"])))
+        say(f"{run_dir}: extending to step {target}")
+        advance(target)
+        judged = verdict()
+    say(f"{run_dir}: settled at step {judged['steps']} (t {judged['time']:.6g} s): {judged['settled_note']}; "
+        f"decco-warp analyze {run_dir} analyses it whole")  # fmt: skip
+    return judged
 
 
 def _parse_toml(text: str) -> dict:
