@@ -720,17 +720,11 @@ def analyze(
     """Fragments, the paper's metrics, conservation and energy of runs: analysis.h5, summary.json, figures.
 
     A run still being written is analysed as far as its frames go (its writer is never touched)."""
-    import csv
-    import io
-    import time
-
-    from .analysis.figures import draw_run, write_cross_run
-    from .analysis.runs import analyse_run
-    from .checks import InputError, check_destination
+    from .analysis.runs import outcome_text
+    from .checks import InputError
     from .device import DeviceError, resolve_device
-    from .durable import json_text, write_atomic
     from .io import FileFormatError
-    from .lock import AnalysisLock, RunFolderBusy, ensure_not_analysed
+    from .watch import analyse_runs, check_analysable, find_runs, write_cross_run_results
 
     if min_members < 1 or every < 1 or not poll > 0:
         fail("--min-members and --every must be >= 1, --poll > 0")
@@ -738,84 +732,45 @@ def analyze(
         device = resolve_device(device)
     except DeviceError as error:
         fail(str(error))
-    if RunFolder(path).trajectory.is_file():
-        runs = [path]
-    elif path.is_dir():
-        runs = sorted(p.parent for p in path.glob(f"*/{RunFolder.TRAJECTORY}"))
-        if not runs:
-            fail(f"{path} holds no {RunFolder.TRAJECTORY} and no run folders with one")
-    else:
-        fail(missing(path))
+    try:
+        runs = find_runs(path)
+    except InputError as error:
+        fail(str(error))
     if follow and len(runs) > 1:
         fail("--follow follows one run folder")
     try:  # every destination, and no other analysis of these runs, before the first analysis
-        for run_dir in runs:
-            check_destination(run_dir, "run folder", folder=True)
-            ensure_not_analysed(run_dir)
-        if len(runs) > 1:
-            check_destination(path / "summary.csv", "cross-run table")
+        check_analysable(path, runs)
     except InputError as error:
         fail(str(error))
-    end_time = _planned_end(runs) if len(runs) > 1 else None  # the same time axis for every run of the set
-
-    def analyse(run_dir: Path, task) -> tuple[dict, bool]:
-        """One analysis of a run, and whether the run was still being written."""
-        writer = RunFolder(run_dir).lock()
-        try:  # a finished run: held, so that no run starts writing there meanwhile
-            writer.acquire()
-        except RunFolderBusy:
-            writer = None  # a running one: its frames so far, read as a SWMR reader
-        try:
-            analysis = analyse_run(
-                run_dir,
-                min_members=min_members,
-                every=every,
-                progress=lambda done, total: bar.update(task, total=total, completed=done, frames=f"{done}/{total} frames"),
-                device=device,
-            )
-            draw_run(analysis, run_dir, end_time)
-        finally:
-            if writer is not None:
-                writer.release()
-        return analysis, writer is None
-
-    summaries, states = [], []
+    results = []
     failed = None
     bar = _progress_bar("analysing", "frames")
     with bar:
-        for run_dir in runs:
+
+        def frames_of(run_dir: Path):
             task = bar.add_task(run_dir.name, total=None, frames="")
-            try:
-                with AnalysisLock(run_dir):
-                    analysis, live = analyse(run_dir, task)
-                    while follow and live:
-                        seen = analysis["summary"]["steps"]
-                        bar.console.print(f"{run_dir}: analysed to step {seen}; following the run", soft_wrap=True, highlight=False)
-                        while _running(run_dir) and _last_step(run_dir) == seen:
-                            time.sleep(poll)
-                        analysis, live = analyse(run_dir, task)
-            except (FileFormatError, InputError) as error:
-                fail(str(error))
-            except OSError as error:
-                failed = error
-                break
-            summaries.append(analysis["summary"])
-            frames = len(analysis["conservation"]["time"])
-            states.append(f" (still running: the {frames} frames written so far, to step {analysis['summary']['steps']})" if live else "")
-    if failed is not None:
-        done = f"the analyses of {len(summaries)} run(s) before it are whole, " if summaries else ""
-        write_failed(failed, f"{done}each output file is whole or absent and the runs are untouched: free space, then decco-warp analyze {path} again")
-    for run_dir, summary, state in zip(runs, summaries, states):
-        typer.echo(f"{run_dir}: {_outcome(summary)}{state}; analysis.h5, summary.json and figures/ written")
-    if len(runs) > 1:
-        table = io.StringIO()
-        writer = csv.DictWriter(table, fieldnames=list(summaries[0]))
-        writer.writeheader()
-        writer.writerows(summaries)
+            return lambda done, total: bar.update(task, total=total, completed=done, frames=f"{done}/{total} frames")
+
+        def following(run_dir: Path, step: int) -> None:
+            bar.console.print(f"{run_dir}: analysed to step {step}; following the run", soft_wrap=True, highlight=False)
+
         try:
-            write_atomic(path / "summary.csv", table.getvalue())
-            write_cross_run(path, summaries)
-            write_atomic(path / "summaries.json", json_text(summaries))
+            runs_analysed = analyse_runs(runs, min_members, every, device, follow=follow, poll=poll, on_run=frames_of, on_follow=following)
+            for result in runs_analysed:  # each kept as it comes, so that a failed write can say how many are whole
+                results.append(result)
+        except (FileFormatError, InputError) as error:
+            fail(str(error))
+        except OSError as error:
+            failed = error
+    if failed is not None:
+        done = f"the analyses of {len(results)} run(s) before it are whole, " if results else ""
+        write_failed(failed, f"{done}each output file is whole or absent and the runs are untouched: free space, then decco-warp analyze {path} again")
+    for result in results:
+        state = f" (still running: the {result.frames} frames written so far, to step {result.summary['steps']})" if result.live else ""
+        typer.echo(f"{result.run_dir}: {outcome_text(result.summary)}{state}; analysis.h5, summary.json and figures/ written")
+    if len(runs) > 1:
+        try:
+            write_cross_run_results(path, [result.summary for result in results])
         except OSError as error:
             write_failed(error, f"every run's own analysis is whole; the cross-run files are whole or absent: free space, then decco-warp analyze {path} again")
         typer.echo(f"{path}: summary.csv and cross-run figures in {path / 'figures'}")
@@ -960,55 +915,6 @@ def compare(
         typer.echo(f"wrote {json_out}")
 
 
-def _outcome(summary: dict) -> str:
-    """A run's result in one line: m_lf/m_t, the size change over the late window, the clusters,
-    and whether the result is final (settled) or not, with the numbers that say so."""
-    text = f"m_lf/m_t {summary['largest_mass_ratio']:.4g}"
-    change, spread = summary.get("size_change_late"), summary.get("size_change_late_std")
-    if change is not None:
-        text += f", particle size change {change:+.3g} %" + (f" (+- {spread:.2g}, late mean)" if spread is not None else "")
-    text += f", {summary['clusters']} cluster(s)"
-    if "settled" in summary:
-        text += ", settled" if summary["settled"] else f", NOT SETTLED ({summary['settled_note']})"
-    return text
-
-
-def _planned_end(runs: list[Path]) -> float | None:
-    """The latest simulated time [s] the runs' own spec.toml files plan to reach (None if none reads)."""
-    from .spec import SpecError, load_spec_file, resolve_spec
-
-    ends = []
-    for run_dir in runs:
-        try:
-            spec = resolve_spec(load_spec_file(RunFolder(run_dir).spec))
-        except SpecError:
-            continue  # analysed all the same; its figures keep their own scale
-        if isinstance(spec["params"]["dt"], float) and "steps" in spec["run"]:
-            ends.append(spec["run"]["steps"] * spec["params"]["dt"])
-    return max(ends) if ends else None
-
-
-def _running(run_dir: Path) -> bool:
-    """Whether a process is writing ``run_dir`` (holds its lock)."""
-    from .lock import RunFolderBusy, ensure_free
-
-    try:
-        ensure_free(run_dir)
-    except RunFolderBusy:
-        return True
-    return False
-
-
-def _last_step(run_dir: Path) -> int:
-    """The step of the last whole frame of a run's trajectory (-1 while none can be read)."""
-    from .io import FileFormatError, last_frame_step
-
-    try:
-        return last_frame_step(RunFolder(run_dir).trajectory)
-    except FileFormatError:
-        return -1
-
-
 # --- view --------------------------------------------------------------------------------
 
 
@@ -1120,6 +1026,7 @@ def sweep(
     import time
 
     from .analysis.figures import write_cross_run
+    from .analysis.runs import outcome_text
     from .checks import InputError, check_destination
     from .device import DeviceError, gpus_to_use
     from .lock import RunFolderLock
@@ -1181,7 +1088,7 @@ def sweep(
             finished.append(row)
             write_summary(folder, finished)  # as runs finish, so that a stopped sweep keeps its table
             outcome = row["status"] if row["status"] != "failed" else f"FAILED: {row.get('reason', '')}"
-            detail = f", {_outcome(row)}" if isinstance(row.get("largest_mass_ratio"), float) else ""
+            detail = f", {outcome_text(row)}" if isinstance(row.get("largest_mass_ratio"), float) else ""
             depth = row.get("deepest_overlap")
             detail += f", deepest overlap {depth:.2f}" if isinstance(depth, float) else ""
             together = f", {row['ensemble']} runs together" if (row.get("ensemble") or 1) > 1 else ""

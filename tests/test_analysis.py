@@ -320,10 +320,10 @@ def test_the_runs_of_a_set_share_their_time_axis(sweep, monkeypatch):
     """draw_run with the set's end time sets every time axis from 0 to it (the clusters' map has no
     time axis); analyze of a folder takes the latest end its runs' spec.toml plan."""
     from decco_warp.analysis import figures
-    from decco_warp.cli import _planned_end
+    from decco_warp.watch import planned_end
 
     out, _ = sweep
-    assert _planned_end([out / "eta0.5", out / "eta1"]) == pytest.approx(400 * 0.04)
+    assert planned_end([out / "eta0.5", out / "eta1"]) == pytest.approx(400 * 0.04)
     limits = {}
     monkeypatch.setattr(figures, "save", lambda fig, folder, name: limits.setdefault(name, [ax.get_xlim() for ax in fig.axes]) and [])
     figures.draw_run(read_analysis(out / "eta1" / "analysis.h5"), out / "eta1", end_time=7200.0)

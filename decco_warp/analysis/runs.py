@@ -111,6 +111,20 @@ def settled_verdict(ratio: np.ndarray, fragments: np.ndarray, kind: str, since: 
     return {"settled": True, "settled_note": f"m_lf/m_t {ratio.min():.4g} to {ratio.max():.4g} (within {SETTLED_TOLERANCE:g}) and {shown} {window}"}
 
 
+def outcome_text(summary: dict) -> str:
+    """A run's result in one line (as ``analyze`` and ``sweep`` print it): m_lf/m_t, the size change
+    over the late window, the clusters, and whether the result is final (settled) or not, with the
+    numbers that say so."""
+    text = f"m_lf/m_t {summary['largest_mass_ratio']:.4g}"
+    change, spread = summary.get("size_change_late"), summary.get("size_change_late_std")
+    if change is not None:
+        text += f", particle size change {change:+.3g} %" + (f" (+- {spread:.2g}, late mean)" if spread is not None else "")
+    text += f", {summary['clusters']} cluster(s)"
+    if "settled" in summary:
+        text += ", settled" if summary["settled"] else f", NOT SETTLED ({summary['settled_note']})"
+    return text
+
+
 def eta_readings(collision: dict) -> dict:
     """Both readings of eq. 18 for a collision record (docs/model.md): ``eta_self`` (U of each pile's
     own pairs) and ``eta_all`` (U of every pair at set-up), with the reading the run was set up by
