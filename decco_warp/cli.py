@@ -776,23 +776,6 @@ def analyze(
         typer.echo(f"{path}: summary.csv and cross-run figures in {path / 'figures'}")
 
 
-def _run_check(spec: dict) -> str:
-    """One line of ``sweep --check`` for a run still to make: its set-up's margins, its predicted
-    deepest overlap and its cost on this machine's device, or why it would be refused."""
-    from .costs import run_cost
-    from .plan import plan_start
-
-    try:
-        plan = plan_start(spec)
-    except ValueError as error:  # bad input: each input error of errors.py is a ValueError, as are Params' checks
-        return f"REFUSED: {error}"
-    stability = plan.stability
-    refused = "" if stability.stable or plan.allow_unstable else f"; REFUSED: {'; '.join(stability.problems())}"
-    return (f"eta {plan.state.metadata['eta']:.3g}, margins: stiffness {stability.stiffness_margin:.3g} (>= 1), time step "
-            f"{stability.time_step_margin:.3g} (>= 10); predicted deepest overlap {plan.forecast.fraction:.2g}; "
-            f"{run_cost(plan.state.n, plan.params.gravity, plan.device, plan.steps, plan.params.gravity_every)}{refused}")  # fmt: skip
-
-
 # --- extract -------------------------------------------------------------------------------
 
 
@@ -1022,17 +1005,10 @@ def sweep(
     ),
 ) -> None:
     """Run a grid of collisions with Dask (skipping finished runs), analysing each as it finishes."""
-    import signal
-    import time
-
-    from .analysis.figures import write_cross_run
-    from .analysis.runs import outcome_text
-    from .checks import InputError, check_destination
+    from .checks import InputError
     from .device import DeviceError, gpus_to_use
-    from .lock import RunFolderLock
     from .spec import SpecError
-    from .run import OUTPUT_FAILURE
-    from .sweep import load_sweep, run_state, run_sweep, select_runs, write_record, write_summary
+    from .sweep import AGAIN, SweepJob, check_lines, finished_line, load_sweep, select_runs
 
     try:
         settings, runs = load_sweep(spec_file, {"resolution": resolution})
@@ -1043,15 +1019,8 @@ def sweep(
     for repeat, original in settings["same_as"].items():
         typer.echo(f"  {repeat} is the same set-up as {original}: run once")
     if check:
-        states = [run_state(run) for run in runs]
-        counts = {kind: sum(s.startswith(kind) for s in states) for kind in ("complete", "resumes", "to run")}
-        typer.echo(f"sweep {settings['name']}: {len(runs)} runs into {Path(settings['out']) / settings['name']} "
-                   f"({counts['complete']} complete, {counts['resumes']} to resume, {counts['to run']} to run)")  # fmt: skip
-        width = max(len(run["run"]["name"]) for run in runs)
-        for run, state in zip(runs, states):
-            typer.echo(f"  {run['run']['name']:<{width}}  {state}")
-            if not state.startswith("complete"):
-                typer.echo(f"  {'':<{width}}  {_run_check(run)}")
+        for line in check_lines(settings, runs):
+            typer.echo(line)
         return
     if workers is not None and workers < 1 or analysis_workers is not None and analysis_workers < 1:
         fail("--workers and --analysis-workers must be >= 1")
@@ -1061,82 +1030,42 @@ def sweep(
         gpus_to_use(gpus)
     except DeviceError as error:
         fail(str(error))
-    started = time.perf_counter()
-    folder = Path(settings["out"]) / settings["name"]
+    job = SweepJob(settings, runs)
     try:
-        check_destination(folder, "sweep folder", folder=True)
-        folder.mkdir(parents=True, exist_ok=True)
-        lock = RunFolderLock(folder).acquire()  # one sweep per folder: a second one started is refused
+        job.claim()  # one sweep per folder: a second one started is refused
     except InputError as error:
-        fail(str(error).replace("run folder", "sweep folder"))
-    typer.echo(f"sweep {settings['name']}: {len(runs)} runs into {folder}")
+        fail(str(error))
+    typer.echo(f"sweep {settings['name']}: {len(runs)} runs into {job.folder}")
     bar = _progress_bar("sweep", "runs")
-    finished = []
-    stepped = [0.0]  # runs' worth of steps made (sweep.run_sweep's on_progress)
     with bar:
         task = bar.add_task(settings["name"], total=len(runs), runs="")
 
         def show() -> None:
-            runs_field = f"{len(finished)}/{len(runs)} runs, {100 * stepped[0] / len(runs):.0f} % of the steps made"
-            bar.update(task, completed=max(stepped[0], len(finished)), runs=runs_field)
+            bar.update(task, completed=job.completed, runs=job.progress_text())
 
-        def progress(made: float) -> None:
-            stepped[0] = made
-            show()
+        def report(row: dict) -> None:
+            bar.console.print(finished_line(row))
 
-        def report(row):
-            finished.append(row)
-            write_summary(folder, finished)  # as runs finish, so that a stopped sweep keeps its table
-            outcome = row["status"] if row["status"] != "failed" else f"FAILED: {row.get('reason', '')}"
-            detail = f", {outcome_text(row)}" if isinstance(row.get("largest_mass_ratio"), float) else ""
-            depth = row.get("deepest_overlap")
-            detail += f", deepest overlap {depth:.2f}" if isinstance(depth, float) else ""
-            together = f", {row['ensemble']} runs together" if (row.get("ensemble") or 1) > 1 else ""
-            bar.console.print(f"{row['run']}: {outcome}{detail} ({row.get('wall_seconds') or 0:.1f} s on {row.get('device')}{together})")
-            show()
-
-        previous = signal.signal(signal.SIGTERM, signal.default_int_handler)  # a batch scheduler's stop, as Ctrl-C
         try:
-            rows = run_sweep(settings, runs, scheduler, workers, report, analysis_workers=analysis_workers, gpus=gpus, on_progress=progress)
-        except KeyboardInterrupt:
-            rows = None
+            job.run(scheduler, workers, analysis_workers, gpus, on_row=report, on_progress=show)
         except OSError as error:  # summary.csv could not be written: the runs' own folders are whole
-            write_failed(error, f"the finished runs' folders and the last summary.csv are whole; {_AGAIN}")
-        finally:
-            signal.signal(signal.SIGTERM, previous)
+            write_failed(error, f"the finished runs' folders and the last summary.csv are whole; {AGAIN}")
     try:
-        write_record(folder, settings, rows or finished, time.perf_counter() - started)
+        job.save_record()
     except OSError as error:
-        write_failed(error, f"the runs' folders and summary.csv are whole; {_AGAIN}")
-    lock.release()
-    if rows is None and len(finished) == len(runs):  # stopped while its workers shut down: nothing to continue
-        fail(f"sweep stopped after its {len(runs)} runs had finished (summary.csv holds them), before its figures: "
-             "run it again to draw them (every run is skipped)", code=EXIT_STOPPED)  # fmt: skip
-    if rows is None:
-        fail(
-            f"sweep stopped after {len(finished)} of {len(runs)} runs (summary.csv holds them); run it again to "
-            "continue: finished runs are skipped, the stopped one resumes from its checkpoint",
-            code=EXIT_STOPPED,
-        )
+        write_failed(error, f"the runs' folders and summary.csv are whole; {AGAIN}")
+    job.release()
+    if job.stopped:
+        fail(job.stopped_line(), code=EXIT_STOPPED)
     try:
-        summary = write_summary(folder, rows)
-        write_cross_run(folder, [r for r in rows if r.get("status") != "failed"])
+        summary = job.finish()
     except OSError as error:
-        write_failed(error, f"the runs' folders are whole, and summary.csv and each figure whole or absent; {_AGAIN}")
-    failed = [r for r in rows if r.get("status") == "failed"]
-    typer.echo(f"summary: {summary}, sweep.json; figures in {folder / 'figures'}; {len(failed)} failed")
-    unsettled = [r for r in rows if r.get("status") != "failed" and r.get("settled") is False]
-    if unsettled:
-        typer.echo(f"{len(unsettled)} run(s) NOT SETTLED (their m_lf/m_t is not final; decco-warp resume RUN --steps N runs them on):")
-        for row in unsettled:
-            typer.echo(f"  {row['run']}: {row.get('settled_note', '')}")
-    unwritten = [r for r in failed if OUTPUT_FAILURE in r.get("reason", "") or "No space left" in r.get("reason", "")]
+        write_failed(error, f"the runs' folders are whole, and summary.csv and each figure whole or absent; {AGAIN}")
+    for line in job.summary_lines(summary):
+        typer.echo(line)
+    unwritten = job.unwritten_line()
     if unwritten:
-        fail(f"{len(unwritten)} run(s) could not write their folder ({unwritten[0]['run']}: {unwritten[0]['reason']}); {_AGAIN}", EXIT_OUTPUT)
-
-
-#: What a sweep stopped by a failed write says to do.
-_AGAIN = "free space, then run the sweep again: finished runs are skipped, a stopped one resumes from its checkpoint"
+        fail(unwritten, EXIT_OUTPUT)
 
 
 # --- piles (a list of piles from a TOML file) ------------------------------------------------

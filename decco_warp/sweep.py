@@ -342,6 +342,38 @@ def run_state(spec: dict) -> str:
     return "to run"
 
 
+def check_lines(settings: dict, runs: list[dict]) -> list[str]:
+    """``sweep --check``: the sweep's runs and where each stands (:func:`run_state`), with, for each
+    one still to make, :func:`run_check`'s line."""
+    states = [run_state(run) for run in runs]
+    counts = {kind: sum(s.startswith(kind) for s in states) for kind in ("complete", "resumes", "to run")}
+    lines = [f"sweep {settings['name']}: {len(runs)} runs into {Path(settings['out']) / settings['name']} "
+             f"({counts['complete']} complete, {counts['resumes']} to resume, {counts['to run']} to run)"]  # fmt: skip
+    width = max(len(run["run"]["name"]) for run in runs)
+    for run, state in zip(runs, states):
+        lines.append(f"  {run['run']['name']:<{width}}  {state}")
+        if not state.startswith("complete"):
+            lines.append(f"  {'':<{width}}  {run_check(run)}")
+    return lines
+
+
+def run_check(spec: dict) -> str:
+    """A line on a run still to make: its set-up's margins, its predicted deepest overlap and its
+    cost on this machine's device, or why it would be refused."""
+    from .costs import run_cost
+    from .plan import plan_start
+
+    try:
+        plan = plan_start(spec)
+    except ValueError as error:  # bad input: each input error of errors.py is a ValueError, as are Params' checks
+        return f"REFUSED: {error}"
+    stability = plan.stability
+    refused = "" if stability.stable or plan.allow_unstable else f"; REFUSED: {'; '.join(stability.problems())}"
+    return (f"eta {plan.state.metadata['eta']:.3g}, margins: stiffness {stability.stiffness_margin:.3g} (>= 1), time step "
+            f"{stability.time_step_margin:.3g} (>= 10); predicted deepest overlap {plan.forecast.fraction:.2g}; "
+            f"{run_cost(plan.state.n, plan.params.gravity, plan.device, plan.steps, plan.params.gravity_every)}{refused}")  # fmt: skip
+
+
 def select_runs(runs: list[dict], patterns: list[str]) -> list[dict]:
     """The runs whose names match any of the glob ``patterns``, and every run already complete (only
     reported, so that the sweep's table and figures stay whole).  A pattern that matches no run is
@@ -642,3 +674,145 @@ def write_record(folder: Path, settings: dict, rows: list[dict], wall_seconds: f
     }
     path = folder / "sweep.json"
     return write_atomic(path, json_text(record))
+
+
+# --- a sweep into its folder: progress, stops, the end ----------------------------------------
+
+#: What a sweep stopped by a failed write says to do.
+AGAIN = "free space, then run the sweep again: finished runs are skipped, a stopped one resumes from its checkpoint"
+
+
+def finished_line(row: dict) -> str:
+    """A run's line as the sweep reports it finished: its status (or why it failed), outcome and
+    deepest overlap, and its time on its device."""
+    from .analysis.runs import outcome_text
+
+    outcome = row["status"] if row["status"] != "failed" else f"FAILED: {row.get('reason', '')}"
+    detail = f", {outcome_text(row)}" if isinstance(row.get("largest_mass_ratio"), float) else ""
+    depth = row.get("deepest_overlap")
+    detail += f", deepest overlap {depth:.2f}" if isinstance(depth, float) else ""
+    together = f", {row['ensemble']} runs together" if (row.get("ensemble") or 1) > 1 else ""
+    return f"{row['run']}: {outcome}{detail} ({row.get('wall_seconds') or 0:.1f} s on {row.get('device')}{together})"
+
+
+class SweepJob:
+    """A sweep made into its folder: the folder claimed (one sweep at a time), the runs made and
+    analysed (:func:`run_sweep`; summary.csv rewritten as each finishes, so that a stopped sweep
+    keeps its table), sweep.json, then the whole table and the cross-run figures.
+
+        job = SweepJob(settings, runs).claim()
+        job.run(on_row=print, on_progress=redraw)   # False: stopped (Ctrl-C, SIGTERM)
+        job.save_record(); job.release()
+        if not job.stopped:
+            job.finish()
+    """
+
+    def __init__(self, settings: dict, runs: list[dict]):
+        self.settings, self.runs = settings, runs
+        self.folder = Path(settings["out"]) / settings["name"]
+        self.started = time.perf_counter()
+        self.finished: list[dict] = []  # the runs' rows as they finish
+        self.stepped = 0.0  # runs' worth of steps made (run_sweep's on_progress)
+        self.rows: list[dict] | None = None  # every run's row, in grid order, once the sweep has run whole
+        self.stopped = False
+        self.lock = None
+
+    def claim(self) -> "SweepJob":
+        """Create the folder and take its lock: InputError for one that cannot be written or that
+        another sweep holds."""
+        from .checks import InputError, check_destination
+        from .lock import RunFolderLock
+
+        try:
+            check_destination(self.folder, "sweep folder", folder=True)
+            self.folder.mkdir(parents=True, exist_ok=True)
+            self.lock = RunFolderLock(self.folder).acquire()
+        except InputError as error:
+            raise InputError(str(error).replace("run folder", "sweep folder")) from None
+        return self
+
+    def release(self) -> None:
+        self.lock.release()
+
+    @property
+    def completed(self) -> float:
+        """Runs' worth of work done, for a progress bar to len(runs): the steps made, or the runs finished if more."""
+        return max(self.stepped, len(self.finished))
+
+    def progress_text(self) -> str:
+        return f"{len(self.finished)}/{len(self.runs)} runs, {100 * self.stepped / len(self.runs):.0f} % of the steps made"
+
+    def run(self, scheduler=None, workers=None, analysis_workers=None, gpus=None, on_row=None, on_progress=None) -> bool:
+        """:func:`run_sweep` (its arguments), with SIGTERM (a batch scheduler's stop) taken as Ctrl-C.
+        Each finished run's row is added to summary.csv, then told to ``on_row(row)``; ``on_progress()``
+        hears of each change of :attr:`completed`.  Returns False when stopped (the rows so far in
+        :attr:`finished`); OSError when summary.csv could not be written."""
+        import signal
+
+        on_row, on_progress = on_row or (lambda row: None), on_progress or (lambda: None)
+
+        def report(row: dict) -> None:
+            self.finished.append(row)
+            write_summary(self.folder, self.finished)  # as runs finish, so that a stopped sweep keeps its table
+            on_row(row)
+            on_progress()
+
+        def progress(made: float) -> None:
+            self.stepped = made
+            on_progress()
+
+        previous = signal.signal(signal.SIGTERM, signal.default_int_handler)  # a batch scheduler's stop, as Ctrl-C
+        try:
+            self.rows = run_sweep(
+                self.settings, self.runs, scheduler, workers, report, analysis_workers=analysis_workers, gpus=gpus, on_progress=progress
+            )
+        except KeyboardInterrupt:
+            self.stopped = True
+        finally:
+            signal.signal(signal.SIGTERM, previous)
+        return not self.stopped
+
+    def save_record(self) -> Path:
+        """sweep.json (:func:`write_record`) of the rows so far."""
+        return write_record(self.folder, self.settings, self.rows or self.finished, time.perf_counter() - self.started)
+
+    def stopped_line(self) -> str:
+        """What a stopped sweep kept, and how to go on."""
+        if len(self.finished) == len(self.runs):  # stopped while its workers shut down: nothing to continue
+            return (f"sweep stopped after its {len(self.runs)} runs had finished (summary.csv holds them), before its figures: "
+                    "run it again to draw them (every run is skipped)")  # fmt: skip
+        return (
+            f"sweep stopped after {len(self.finished)} of {len(self.runs)} runs (summary.csv holds them); run it again to "
+            "continue: finished runs are skipped, the stopped one resumes from its checkpoint"
+        )
+
+    def finish(self) -> Path:
+        """Every run's summary.csv, in grid order, and the cross-run figures of those that did not fail."""
+        from .analysis.figures import write_cross_run
+
+        summary = write_summary(self.folder, self.rows)
+        write_cross_run(self.folder, [r for r in self.rows if r.get("status") != "failed"])
+        return summary
+
+    @property
+    def failed(self) -> list[dict]:
+        """The rows of the runs that failed (once the sweep has run whole)."""
+        return [r for r in self.rows if r.get("status") == "failed"]
+
+    def summary_lines(self, summary: Path) -> list[str]:
+        """The sweep's end: where its table and figures are, the runs that failed, and those not settled."""
+        lines = [f"summary: {summary}, sweep.json; figures in {self.folder / 'figures'}; {len(self.failed)} failed"]
+        unsettled = [r for r in self.rows if r.get("status") != "failed" and r.get("settled") is False]
+        if unsettled:
+            lines.append(f"{len(unsettled)} run(s) NOT SETTLED (their m_lf/m_t is not final; decco-warp resume RUN --steps N runs them on):")
+            lines += [f"  {row['run']}: {row.get('settled_note', '')}" for row in unsettled]
+        return lines
+
+    def unwritten_line(self) -> str | None:
+        """For runs that could not write their folder (a full disk), the line that says so, else None."""
+        from .run import OUTPUT_FAILURE
+
+        unwritten = [r for r in self.failed if OUTPUT_FAILURE in r.get("reason", "") or "No space left" in r.get("reason", "")]
+        if not unwritten:
+            return None
+        return f"{len(unwritten)} run(s) could not write their folder ({unwritten[0]['run']}: {unwritten[0]['reason']}); {AGAIN}"
