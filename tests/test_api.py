@@ -175,7 +175,7 @@ def test_every_error_is_a_decco_error_with_its_exit_code_and_the_builtin_it_was(
         errors.FileFormatError: (ValueError, 2), errors.DeviceError: (ValueError, 2), errors.StabilityError: (ValueError, 2),
         errors.RerunUnavailable: (RuntimeError, 2), errors.FormationError: (RuntimeError, 1), errors.BlowUp: (RuntimeError, 4),
         errors.OutputError: (RuntimeError, 5), errors.RunStopped: (RuntimeError, 3), errors.FormationStopped: (RuntimeError, 3),
-        CompareError: (ValueError, 2), RunFolderBusy: (ValueError, 2),
+        errors.NotSettled: (RuntimeError, 6), CompareError: (ValueError, 2), RunFolderBusy: (ValueError, 2),
     }  # fmt: skip
     for kind, (builtin, code) in expected.items():
         assert issubclass(kind, dw.DeccoError) and issubclass(kind, builtin) and kind.exit_code == code, kind
