@@ -40,6 +40,19 @@ def json_text(value) -> str:
     return json.dumps(json_ready(value), indent=2, allow_nan=False) + "\n"
 
 
+def write_table(path, rows: list[dict], fieldnames: list[str], ignore_extra: bool = False) -> Path:
+    """``rows`` as a CSV table with a header of ``fieldnames``, written atomically (:func:`write_atomic`:
+    a failed write leaves the previous table whole); ``ignore_extra``: keys of a row outside
+    ``fieldnames`` are left out instead of refused."""
+    import csv
+
+    table = _io.StringIO()
+    writer = csv.DictWriter(table, fieldnames=fieldnames, extrasaction="ignore" if ignore_extra else "raise")
+    writer.writeheader()
+    writer.writerows(rows)
+    return write_atomic(path, table.getvalue())
+
+
 def write_atomic(path, data: bytes | str, what: str | None = None) -> Path:
     """Replace ``path`` with ``data`` atomically: a temporary file beside it, fsync, rename.
 

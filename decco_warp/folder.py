@@ -21,6 +21,10 @@ def _file(name: str) -> property:
     return property(lambda folder: folder.path / name, doc=f"the folder's {name}")
 
 
+#: A folder of runs' table, a row per run (a sweep's, or ``decco-warp analyze`` of the folder).
+TABLE = "summary.csv"
+
+
 class RunFolder:
     """The files of one run folder (a path; nothing is read until asked)."""
 

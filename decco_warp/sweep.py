@@ -34,7 +34,6 @@ without stopping the others.
 
 from __future__ import annotations
 
-import csv
 import fnmatch
 import hashlib
 import itertools
@@ -638,17 +637,11 @@ PROGRESS_SECONDS = 10.0
 
 
 def write_summary(folder: Path, rows: list[dict]) -> Path:
-    path = folder / "summary.csv"
-    from io import StringIO
-
-    from .durable import write_atomic
+    from .durable import write_table
+    from .folder import TABLE
 
     folder.mkdir(parents=True, exist_ok=True)
-    table = StringIO()
-    writer = csv.DictWriter(table, fieldnames=SUMMARY_FIELDS, extrasaction="ignore")
-    writer.writeheader()
-    writer.writerows(rows)
-    return write_atomic(path, table.getvalue())  # a full disk leaves the previous table whole
+    return write_table(folder / TABLE, rows, SUMMARY_FIELDS, ignore_extra=True)  # a full disk leaves the previous table whole
 
 
 def write_record(folder: Path, settings: dict, rows: list[dict], wall_seconds: float) -> Path:

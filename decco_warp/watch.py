@@ -11,21 +11,15 @@ folder of runs, which then share one time axis and get a cross-run table and fig
 
 from __future__ import annotations
 
-import csv
-import io
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator
 
 from .checks import InputError, check_destination
-from .durable import json_text, write_atomic
-from .folder import RunFolder, missing
+from .durable import json_text, write_atomic, write_table
+from .folder import TABLE, RunFolder, missing
 from .lock import AnalysisLock, RunFolderBusy, ensure_free, ensure_not_analysed
-
-#: The cross-run table of a folder of runs.
-CROSS_RUN_TABLE = "summary.csv"
-
 
 def find_runs(path) -> list[Path]:
     """The run folders at ``path``: ``path`` itself if it holds a trajectory, else the folders in it
@@ -49,7 +43,7 @@ def check_analysable(path, runs: list[Path]) -> None:
         check_destination(run_dir, "run folder", folder=True)
         ensure_not_analysed(run_dir)
     if len(runs) > 1:
-        check_destination(Path(path) / CROSS_RUN_TABLE, "cross-run table")
+        check_destination(Path(path) / TABLE, "cross-run table")
 
 
 def planned_end(runs: list[Path]) -> float | None:
@@ -171,10 +165,6 @@ def write_cross_run_results(path, summaries: list[dict]) -> None:
     from .analysis.figures import write_cross_run
 
     path = Path(path)
-    table = io.StringIO()
-    writer = csv.DictWriter(table, fieldnames=list(summaries[0]))
-    writer.writeheader()
-    writer.writerows(summaries)
-    write_atomic(path / CROSS_RUN_TABLE, table.getvalue())
+    write_table(path / TABLE, summaries, list(summaries[0]))
     write_cross_run(path, summaries)
     write_atomic(path / "summaries.json", json_text(summaries))
