@@ -285,3 +285,18 @@ def test_a_group_of_one_still_shows_the_rest_and_the_allow_options_accept(bad_in
     assert accepted.returncode == 0 and accepted.stdout == refused.stdout
     mixed, _ = bad_inputs["mixed set-ups"]
     assert cli_here("compare", *mixed, "--allow-mixed").returncode == 0
+
+
+def test_the_sweep_columns_are_those_a_sweep_adds_to_each_run_summary():
+    """compare's SWEEP_COLUMNS (named when run folders are asked for one) are exactly the columns of
+    a sweep's summary.csv that its runs' summary.json do not hold (a committed sweep's files)."""
+    from pathlib import Path
+
+    from decco_warp.sweep import SUMMARY_FIELDS
+
+    folder = Path(__file__).parent.parent / "runs" / "results" / "fig6_statistics"
+    run_keys = set().union(*(json.loads(p.read_text()) for p in folder.glob("*/summary.json")))
+    with (folder / "summary.csv").open(newline="") as f:
+        header = next(csv.reader(f))
+    assert set(header) == set(SUMMARY_FIELDS)
+    assert set(SUMMARY_FIELDS) - run_keys == set(cmp.SWEEP_COLUMNS)

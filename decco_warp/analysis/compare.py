@@ -535,7 +535,7 @@ def _difference(group: Group, reference: Group, resolve: float | None, resamples
         return Difference(group.group, reference.group, difference, None, None, None, delta, None, False, f"spread unknown: 1 run of {label(one)}")
     low, high, method = difference_interval(np.array(group.values), np.array(reference.values), confidence, resamples)
     needed = runs_needed(math.sqrt((group.std**2 + reference.std**2) / 2), delta, confidence)
-    return _verdict(Difference(group.group, reference.group, difference, low, high, method, delta, needed, False, ""), f"n = {group.n} and {reference.n}")
+    return Difference(group.group, reference.group, difference, low, high, method, delta, needed, *_verdict(low, high, f"n = {group.n} and {reference.n}"))
 
 
 def _against(group: Group, value: float, resolve: float | None, confidence: float) -> Difference:
@@ -545,15 +545,14 @@ def _against(group: Group, value: float, resolve: float | None, confidence: floa
     if group.n < 2:
         return Difference(group.group, value, difference, None, None, None, delta, None, False, f"spread unknown: 1 run of {label(group.group)}")
     needed = runs_needed(group.std, delta, confidence, samples=1)
-    moved = Difference(group.group, value, difference, group.low - value, group.high - value, group.method, delta, needed, False, "")
-    return _verdict(moved, f"n = {group.n}")
+    low, high = group.low - value, group.high - value
+    return Difference(group.group, value, difference, low, high, group.method, delta, needed, *_verdict(low, high, f"n = {group.n}"))
 
 
-def _verdict(difference: Difference, runs: str) -> Difference:
-    """``difference`` with its verdict: resolved where its interval leaves out 0."""
-    difference.resolved = difference.low > 0 or difference.high < 0
-    difference.verdict = "resolved" if difference.resolved else f"not resolved at {runs}"
-    return difference
+def _verdict(low: float, high: float, runs: str) -> tuple[bool, str]:
+    """(resolved, verdict) of an interval: resolved where it leaves out 0, else not at ``runs``."""
+    resolved = low > 0 or high < 0
+    return resolved, "resolved" if resolved else f"not resolved at {runs}"
 
 
 def error_bars(rows: list[dict], by: str, metric: str, at: str | None = None, where: dict | None = None,
