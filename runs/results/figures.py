@@ -281,48 +281,57 @@ def overlaps():
 LADDER_ETAS = (3.0, 6.0, 9.0)
 
 
-def ladder_points() -> list[dict]:
-    """The resolution ladder's runs (1/4 head-on): particles, eta, m_lf/m_t, the late-window size
-    change (None where unknown) and whether it is a settled analysed value (False: not settled, or the
-    last checkpoint's alone, x4/final_frame.csv)."""
+#: The ladder's two series: k_in and dt scaled with the radius (the same predicted compression at
+#: every rung), and the paper's k_in and dt at every rung; R = 1 (Fig. 3's runs) belongs to both.
+LADDER_SERIES = (("k_in, dt x N^(-1/3)", ("resolution", "resolution/x4")),
+                 ("the paper's k_in, dt", ("resolution_paper_contacts", "resolution_paper_contacts/x4")))  # fmt: skip
+
+
+def ladder_points(folders) -> list[dict]:
+    """A series of the resolution ladder (1/4 head-on) from its result folders and the paper's
+    runs: particles, eta, m_lf/m_t, the late-window size change and whether the run settled."""
     points = []
-    for run in runs("resolution") + runs("resolution/x4") + runs("fig3", 0.25):
+    for run in [r for folder in folders for r in runs(folder)] + runs("fig3", 0.25):
         s = run["summary"]
         if s["theta_deg"] == 0.0 and round(s["eta"], 6) in LADDER_ETAS:
             points.append({"n": s["n_particles"], "eta": round(s["eta"], 6), "value": s["largest_mass_ratio"],
                            "size_change": s.get("size_change_late"), "firm": s.get("settled") is not False})  # fmt: skip
-    final = RESULTS / "resolution" / "x4" / "final_frame.csv"
-    if final.exists():
-        for row in csv.DictReader(final.open()):
-            points.append({"n": int(row["n_particles"]), "eta": float(row["eta"]), "value": float(row["largest_mass_ratio_final"]),
-                           "size_change": None, "firm": False})  # fmt: skip
     return points
 
 
 def resolution():
     """m_lf/m_t (left) and the late-window particle-size change (right) of the 1/4 head-on collision
-    against the particle count, per eta: every run (hollow: not settled, or the last frame alone), the
-    mean of each rung with its spread (one standard deviation)."""
-    points = ladder_points()
-    fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.4))
-    for ax, key, ylabel in ((axes[0], "value", "m_lf / m_t"), (axes[1], "size_change", "particle-size change, late mean [%]")):
-        for k, eta in enumerate(LADDER_ETAS):
-            colour = f"C{k}"
-            mine = [p for p in points if p["eta"] == eta and p[key] is not None]
-            for p in mine:
-                ax.plot(p["n"], p[key], "o", color=colour, alpha=0.5, markersize=4, markerfacecolor=colour if p["firm"] else "none")
-            counts = sorted({p["n"] for p in mine})
-            rungs = [[p[key] for p in mine if p["n"] == n] for n in counts]
-            spreads = [np.std(r, ddof=1) if len(r) > 1 else 0.0 for r in rungs]
-            ax.errorbar(counts, [np.mean(r) for r in rungs], yerr=spreads, color=colour, marker="s", capsize=3, label=f"eta = {eta:g}")
+    against the particle count, per eta and series: every run (hollow: not settled), the mean of
+    each rung with its spread (one standard deviation); the paper's-contacts series dashed and
+    drawn a little to the right."""
+    fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.6))
+    every = set()
+    for series, (label, folders) in enumerate(LADDER_SERIES):
+        points = ladder_points(folders)
+        every |= {p["n"] for p in points}
+        shift = 1.08 if series else 1.0
+        for ax, key in ((axes[0], "value"), (axes[1], "size_change")):
+            for k, eta in enumerate(LADDER_ETAS):
+                colour = f"C{k}"
+                mine = [p for p in points if p["eta"] == eta and p[key] is not None]
+                for p in mine:
+                    ax.plot(p["n"] * shift, p[key], "o^"[series], color=colour, alpha=0.45, markersize=4,
+                            markerfacecolor=colour if p["firm"] else "none")  # fmt: skip
+                counts = sorted({p["n"] for p in mine})
+                rungs = [[p[key] for p in mine if p["n"] == n] for n in counts]
+                spreads = [np.std(r, ddof=1) if len(r) > 1 else 0.0 for r in rungs]
+                ax.errorbar([n * shift for n in counts], [np.mean(r) for r in rungs], yerr=spreads, color=colour,
+                            marker="s^"[series], linestyle="-" if series == 0 else "--", capsize=3,
+                            label=f"eta = {eta:g}, {label}")  # fmt: skip
+    counts = sorted(every)
+    for ax, ylabel in ((axes[0], "m_lf / m_t"), (axes[1], "particle-size change, late mean [%]")):
         ax.set_xscale("log")
-        counts = sorted({p["n"] for p in points})
         ax.set_xticks(counts, [f"{n:,}".replace(",", " ") for n in counts])
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set_xlabel("particles (target + projectile)")
         ax.set_ylabel(ylabel)
-        ax.legend(fontsize=8)
-    fig.suptitle("1/4 head-on: the same bodies at 1/4, 1 and 4 times the paper's particles (k_in and dt x N^(-1/3))", fontsize=10)
+    axes[0].legend(fontsize=7)
+    fig.suptitle("1/4 head-on: the same bodies at 1/4, 1 and 4 times the paper's particles, two contact series", fontsize=10)
     fig.tight_layout()
     return fig
 
