@@ -16,7 +16,7 @@ import warp as wp
 
 from .device import resolve_device
 from .forces import FORCE_PATHS, path_name
-from .layouts import Layout, choose_layout
+from .layouts import Layout, choose_layout, newton_layout, newton_scratch_bytes
 from .gravity_tree import walk_parts
 from .kernels import integrate, observables
 from .kernels.bodies import BODY_TYPES, PACK_KERNELS, PRECISIONS
@@ -380,9 +380,14 @@ CPU_SECONDS_PER_PAIR = 5e-9
 CPU_TREE_SECONDS_PER_PARTICLE = 7.5e-6
 
 
-def memory_estimate(n: int, gravity: str, device: str = "cpu", ledger: bool = True) -> int:
+def memory_estimate(
+    n: int, gravity: str, device: str = "cpu", ledger: bool = True, *, gravity_every: int = 1, layout: Layout | None = None,
+    precision: str = "mixed",
+) -> int:
     """Bytes a job of ``n`` particles needs on its device (and on the host), an upper estimate:
-    the arrays Engine and GravityTree allocate, taken as for the largest layout."""
+    the arrays Engine and GravityTree allocate, taken as for the largest layout, and the Newton
+    sweep's rows where all-pairs gravity takes it (``layout`` Newton, as CUDA's default is up to
+    NEWTON_MAX particles, or gravity on its own clock, ``gravity_every`` > 1, on any device)."""
     vec3d, f64, i32 = 24, 8, 4
     per = 3 * f64 + 5 * vec3d  # radius, mass, inertia; position, velocity, omega, force, torque
     per += (len(LEDGER_CHANNELS) * vec3d + 32) if ledger else 0  # channels, work
@@ -394,7 +399,13 @@ def memory_estimate(n: int, gravity: str, device: str = "cpu", ledger: bool = Tr
         # last, parent, escape; keys, order (2n); leaf positions, grid points; each walk part's field and potential
         per += 2 * (f64 + vec3d + 72 + 2 * vec3d + 2 * f64 + 16 + 5 * i32) + 4 * i32 + vec3d + 12
         per += walk_parts(n, device) * (vec3d + f64)
-    return int(n * (per + HOST_BYTES_PER_PARTICLE) + FIXED_BYTES)
+    scratch = 0
+    if gravity != "tree":
+        layout = layout or choose_layout(n, device)
+        if layout.newton or gravity_every > 1:
+            newton = layout if layout.newton else newton_layout(device)
+            scratch = newton_scratch_bytes(n, newton, 12 if precision == "mixed" else 24, listing=gravity_every == 1)
+    return int(n * (per + HOST_BYTES_PER_PARTICLE) + scratch + FIXED_BYTES)
 
 
 def cpu_step_seconds(n: int, gravity: str) -> float:
@@ -409,18 +420,20 @@ def cpu_step_seconds(n: int, gravity: str) -> float:
 LONG_ON_CPU = 3600.0
 
 
-def check_fits(n: int, gravity: str, device: str, steps: int, what: str) -> str | None:
+def check_fits(n: int, gravity: str, device: str, steps: int, what: str, **layout) -> str | None:
     """Refuse (InputError) a job whose memory estimate passes the device's free memory; for one that
-    fits but would take hours on the CPU, the line that says so (else None)."""
+    fits but would take hours on the CPU, the line that says so (else None).  ``layout``: the
+    keywords of :func:`memory_estimate` that say how its forces are summed."""
     from .checks import InputError
     from .device import free_memory
 
-    need = memory_estimate(n, gravity, device)
+    need = memory_estimate(n, gravity, device, **layout)
     free = free_memory(device)
     if need > free:
+        tree = "" if gravity == "tree" else ", gravity = \"tree\" (its memory grows as N, all-pairs' as N^2 here)"
         raise InputError(
             f"{what} of {n} particles needs about {need / 2**30:.3g} GiB on {device}, which has {free / 2**30:.3g} GiB free; "
-            "use fewer particles or a device with more memory"
+            f"use fewer particles{tree} or a device with more memory"
         )
     if device.startswith("cuda"):
         return None

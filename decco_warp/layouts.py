@@ -110,6 +110,22 @@ def newton_layout(device: str) -> Layout:
     return Layout(block_dim=1, particles_per_block=4, newton=True)
 
 
+#: Host bytes per tile pair while the Newton tables are built (forces.newton_tiles: the index pairs
+#: and six columns in int64, then the int32 table that goes to the device).
+NEWTON_TABLE_BYTES = 2 * 8 + 6 * 8 + 6 * 4
+
+
+def newton_scratch_bytes(n: int, layout: Layout, vector_bytes: int, listing: bool) -> int:
+    """Bytes the Newton sweep keeps for a system of ``n`` particles (forces.NewtonGravity): for each
+    of its (n / tile)^2 rows a field sum per particle of a tile (``vector_bytes``: 12 in mixed
+    precision, 24 in double) and, where it lists contact candidates, a 64-bit word; the tile-pair
+    table as it is built; each particle's gather entry.  O(N^2 / tile): the CPU's tiles of 4 make
+    it the largest array of an all-pairs run there."""
+    tiles = -(-n // layout.particles_per_block)
+    rows = tiles * tiles * layout.particles_per_block * (vector_bytes + (8 if listing else 0))
+    return rows + tiles * (tiles + 1) // 2 * NEWTON_TABLE_BYTES + 16 * n
+
+
 def layout_for(choice: str, n: int, device: str) -> Layout | None:
     """The :class:`Layout` a run's ``layout`` choice names for ``n`` particles on ``device``
     (None for "auto": the engine's own choice)."""

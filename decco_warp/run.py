@@ -163,7 +163,7 @@ def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None
     lock = RunFolder(run_dir).lock().acquire() if run_dir.is_dir() else None
     try:
         plan = plan_start(spec, device)
-        note = _check_fits(plan, plan.state.n, plan.steps)
+        note = plan_fits(plan, plan.state.n, plan.steps)
         sim = Simulation(
             plan.state,
             plan.params,
@@ -188,12 +188,16 @@ def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None
     return PreparedRun(sim, plan, extra, resume=False, lock=lock, note=note)
 
 
-def _check_fits(plan: Plan, n: int, steps: int) -> str | None:
-    """Refuse (RunError) a run that its device has no memory for; a line for one that takes hours on the CPU."""
+def plan_fits(plan: Plan, n: int, steps: int) -> str | None:
+    """Refuse (RunError) a run of ``n`` particles that its device has no memory for, its force path
+    counted (the Newton sweep's rows, O(N^2 / tile)); a line for one that takes hours on the CPU."""
     from .engine import check_fits
 
     try:
-        return check_fits(n, plan.params.gravity, plan.device, steps, "a run")
+        return check_fits(
+            n, plan.params.gravity, plan.device, steps, "a run",
+            gravity_every=plan.params.gravity_every, layout=plan.layout, precision=plan.precision,
+        )  # fmt: skip
     except InputError as error:
         raise RunError(str(error)) from None
 
@@ -238,7 +242,7 @@ def _prepare_resume(run_dir, spec_path, checkpoint_path, trajectory_path, steps,
     if steps is not None and steps < int(snapshot["step"]):
         raise RunError(f"steps {steps} is below the {int(snapshot['step'])} already taken")
     plan = plan_resume(spec, static, run_dir, device, steps)
-    note = _check_fits(plan, static.n, max(0, plan.steps - int(snapshot["step"])))
+    note = plan_fits(plan, static.n, max(0, plan.steps - int(snapshot["step"])))
     sim = Simulation.from_snapshot(static, plan.params, snapshot, device=plan.device, precision=plan.precision, layout=plan.layout)
     return PreparedRun(sim, plan, extra, resume=True, lock=lock, note=note)
 

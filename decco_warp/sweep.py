@@ -361,9 +361,11 @@ def run_check(spec: dict) -> str:
     cost on this machine's device, or why it would be refused."""
     from .costs import run_cost
     from .plan import plan_start
+    from .run import plan_fits
 
     try:
         plan = plan_start(spec)
+        plan_fits(plan, plan.state.n, plan.steps)  # refused where its device has not the memory
     except ValueError as error:  # bad input: each input error of errors.py is a ValueError, as are Params' checks
         return f"REFUSED: {error}"
     stability = plan.stability

@@ -45,6 +45,40 @@ def test_the_memory_estimate_bounds_the_engines_arrays(gravity):
     assert held <= device_part <= 3 * held, (held, device_part)
 
 
+def test_the_memory_estimate_counts_the_newton_sweeps_rows_where_gravity_takes_it():
+    """Gravity on its own clock sums all-pairs gravity with the Newton sweep on every device, whose
+    rows grow as N^2 / tile (the CPU's tiles of 4): the estimate bounds what the engine holds, and
+    the rows dominate it at a few thousand particles."""
+    from scenes import overlapping_cloud
+
+    state = overlapping_cloud(2000, seed=3)
+    held = {}
+    for every in (1, 10):
+        sim = dw.Simulation(state, dw.Params(gravity_every=every), device="cpu", ledger=True)
+        held[every] = _array_bytes(sim.engine)
+        estimate = engines.memory_estimate(state.n, "all-pairs", gravity_every=every) - engines.FIXED_BYTES
+        estimate -= state.n * engines.HOST_BYTES_PER_PARTICLE
+        assert held[every] <= estimate <= 3 * held[every], (every, held[every], estimate)
+    rows = 2000**2 // 4 * 12  # a float32 vec3 per particle of a tile, for each of the (N / 4)^2 rows
+    assert held[10] - held[1] > 0.9 * rows
+
+
+def test_an_all_pairs_run_whose_newton_rows_do_not_fit_is_refused_before_it_starts(monkeypatch):
+    """100 000 particles at gravity_every = 10 on a CPU hold ~30 GiB of Newton rows: a machine with
+    less is told so and pointed to the tree, instead of the kernel killing the run."""
+    import decco_warp.device as devices
+
+    from decco_warp.errors import InputError
+
+    monkeypatch.setattr(devices, "free_memory", lambda device: 16 << 30)
+    assert engines.check_fits(100_000, "tree", "cpu", 1_000_000, "a run", gravity_every=10).startswith("note: a run")  # days, but it fits
+    assert engines.check_fits(2_000, "all-pairs", "cpu", 10, "a run", gravity_every=10) is None
+    with pytest.raises(InputError, match=r"a run of 100000 particles needs about \d+(\.\d+)? GiB on cpu, which has 16 GiB free; .*gravity = \"tree\""):
+        engines.check_fits(100_000, "all-pairs", "cpu", 10, "a run", gravity_every=10)
+    assert engines.memory_estimate(100_000, "all-pairs", "cpu", gravity_every=10) > 25 * 2**30
+    assert engines.memory_estimate(100_000, "all-pairs", "cpu") < 1 * 2**30  # the CPU's fused layout keeps no rows
+
+
 def test_the_cpu_time_estimate_follows_the_benchmarks_two_core_steps(monkeypatch):
     monkeypatch.setattr(engines.os, "cpu_count", lambda: 2)
     # docs/benchmarks.md, 2-core CPU: all-pairs 8 000: 308 to 341 ms; tree (piles) 8 000: 60.6 ms.
