@@ -16,7 +16,7 @@ import warp as wp
 
 from .device import resolve_device
 from .forces import FORCE_PATHS, path_name
-from .layouts import Layout, choose_layout, newton_layout, newton_scratch_bytes
+from .layouts import Layout, choose_layout, newton_scratch_bytes, newton_sweep_layout
 from .gravity_tree import walk_parts
 from .kernels import integrate, observables
 from .kernels.bodies import BODY_TYPES, PACK_KERNELS, PRECISIONS
@@ -399,12 +399,8 @@ def memory_estimate(
         # last, parent, escape; keys, order (2n); leaf positions, grid points; each walk part's field and potential
         per += 2 * (f64 + vec3d + 72 + 2 * vec3d + 2 * f64 + 16 + 5 * i32) + 4 * i32 + vec3d + 12
         per += walk_parts(n, device) * (vec3d + f64)
-    scratch = 0
-    if gravity != "tree":
-        layout = layout or choose_layout(n, device)
-        if layout.newton or gravity_every > 1:
-            newton = layout if layout.newton else newton_layout(device)
-            scratch = newton_scratch_bytes(n, newton, 12 if precision == "mixed" else 24, listing=gravity_every == 1)
+    newton = newton_sweep_layout(gravity, gravity_every, layout or choose_layout(n, device), device)
+    scratch = newton_scratch_bytes(n, newton, 12 if precision == "mixed" else 24, listing=gravity_every == 1) if newton else 0
     return int(n * (per + HOST_BYTES_PER_PARTICLE) + scratch + FIXED_BYTES)
 
 
@@ -420,14 +416,14 @@ def cpu_step_seconds(n: int, gravity: str) -> float:
 LONG_ON_CPU = 3600.0
 
 
-def check_fits(n: int, gravity: str, device: str, steps: int, what: str, **layout) -> str | None:
+def check_fits(n: int, gravity: str, device: str, steps: int, what: str, **forces) -> str | None:
     """Refuse (InputError) a job whose memory estimate passes the device's free memory; for one that
-    fits but would take hours on the CPU, the line that says so (else None).  ``layout``: the
+    fits but would take hours on the CPU, the line that says so (else None).  ``forces``: the
     keywords of :func:`memory_estimate` that say how its forces are summed."""
     from .checks import InputError
     from .device import free_memory
 
-    need = memory_estimate(n, gravity, device, **layout)
+    need = memory_estimate(n, gravity, device, **forces)
     free = free_memory(device)
     if need > free:
         tree = "" if gravity == "tree" else ", gravity = \"tree\" (its memory grows as N, all-pairs' as N^2 here)"

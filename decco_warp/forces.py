@@ -19,7 +19,7 @@ import numpy as np
 import warp as wp
 
 from .gravity_tree import GravityTree
-from .layouts import NEWTON_MAX, newton_layout
+from .layouts import NEWTON_MAX, newton_sweep_layout
 from .kernels import observables as observable_kernels
 from .kernels.bodies import BODY_TYPES
 from .kernels.contacts import CANDIDATES, contact_pass
@@ -432,7 +432,8 @@ class RespaForces(ForcePath):
                     f"gravity_every > 1 sums all-pairs gravity with the Newton sweep, which holds systems of up to "
                     f"{NEWTON_MAX} particles; this one has {largest}: use gravity = \"tree\""
                 )
-            layout = engine.layout if engine.layout.newton else newton_layout(engine.device)
+            params = engine.params
+            layout = newton_sweep_layout(params.gravity, params.gravity_every, engine.layout, engine.device)
             self.body = _bodies(engine, engine.count)
             self.gravity = NewtonGravity(engine, layout, self.body)
         self.gravity_force = wp.zeros(engine.count, dtype=wp.vec3d, device=engine.device)
