@@ -182,8 +182,13 @@ def _alone(x: np.ndarray, v: np.ndarray, m: np.ndarray, radii: np.ndarray, conta
     n = m.size
     alone = contacts.getnnz(axis=1) == 0
     near = NEAR_RADII * float(radii.max())
-    # Only the particles touching nobody are looked at: in a compact remnant every particle has
-    # thousands within NEAR_RADII (1e8 pairs at 25 000 particles), and none of them can be alone.
+    slow = math.sqrt(2.0 * G * float(m.max()) / near)
+    # Another particle within ``slow`` in velocity space (itself is the nearest, at 0): the second
+    # nearest, found or not, rather than counting every particle of a co-moving remnant.  Tested
+    # first: it is cheap, and it clears the particles of a compact remnant that touch nobody (each
+    # has thousands within NEAR_RADII: 2.5e7 pairs in a 100 000-particle remnant otherwise).
+    second, _ = cKDTree(v).query(v, k=2, distance_upper_bound=np.nextafter(slow, np.inf))
+    alone &= ~np.isfinite(second[:, 1])
     seeds = np.flatnonzero(alone)
     if seeds.size:
         around = cKDTree(x).query_ball_point(x[seeds], r=near)
@@ -195,11 +200,6 @@ def _alone(x: np.ndarray, v: np.ndarray, m: np.ndarray, radii: np.ndarray, conta
         binds = np.zeros(n, dtype=bool)
         binds[s[reach < 2.0 * G * m[s]]] = True
         alone &= ~binds
-    slow = math.sqrt(2.0 * G * float(m.max()) / near)
-    # Another particle within ``slow`` in velocity space (itself is the nearest, at 0): the second
-    # nearest, found or not, rather than counting every particle of a co-moving remnant.
-    second, _ = cKDTree(v).query(v, k=2, distance_upper_bound=np.nextafter(slow, np.inf))
-    alone &= ~np.isfinite(second[:, 1])
     return alone
 
 
