@@ -250,3 +250,80 @@ def test_screening_lone_seeds_changes_no_cluster(piles, monkeypatch):
     plain = dw.find_clusters(state, min_members=20)
     assert [c.members.tolist() for c in screened] == [c.members.tolist() for c in plain]
     assert len(plain) >= 2
+
+
+def _clumps(centre, spread, count, size, speed, seed):
+    """``count`` clumps of ``size`` touching grains each (a row 1.99 radii apart), scattered within
+    ``spread`` of ``centre`` with random velocities of ~``speed`` (add a bulk velocity with _moved):
+    debris that falls short of 20."""
+    rng = np.random.default_rng(seed)
+    radius = 1e5
+    parts = []
+    for _ in range(count):
+        start = np.asarray(centre) + rng.uniform(-spread, spread, size=3)
+        row = start + 1.99 * radius * np.arange(size)[:, None] * np.array([1.0, 0.0, 0.0])
+        parts.append(_grains(row, rng.normal(scale=speed, size=3), radius))
+    return _combine(*parts)
+
+
+def test_escape_speed_screen_changes_no_cluster(piles, monkeypatch):
+    """A small group's escape-speed test asks k-d trees which free particles could pass it (those
+    within the reach of its 64th nearest, or slower than escape from there); the finder with that
+    screen on every test finds the same clusters, member for member, as with every free particle
+    scanned, on a pile with slow and fast escapers, a sparse cluster behind a dense group, and 60
+    small clumps of debris (each a failed seed)."""
+    from decco_warp.analysis import clusters as finder
+
+    target, projectile = piles
+    distance = 3 * (pile_radius(target) + pile_radius(projectile))
+    state = _combine(
+        target,
+        _escapers(target, 60, 2.0, seed=3),
+        _escapers(target, 60, 0.7, seed=5),
+        _moved(_sparse_and_dense(offset=(4e7, 0, 0), velocity=(45.0, 0, 0)), (50 * distance, 0, 0),
+               (3 * _escape_speed(target, 50 * distance), 0, 0)),
+        _moved(_clumps(target.centre_of_mass + np.array([0.0, 20 * distance, 0.0]), 5 * distance, 60, 4, 30.0, seed=7),
+               (0, 0, 0), (0, 3 * _escape_speed(target, 15 * distance), 0)),
+    )
+    screened_groups = []
+    could_bind = finder._FreeParticles.could_bind
+
+    def counted(self, *args):
+        found = could_bind(self, *args)
+        screened_groups.append(found is not None)
+        return found
+
+    monkeypatch.setattr(finder._FreeParticles, "could_bind", counted)
+    monkeypatch.setattr(finder, "_SCAN_BELOW", 0)
+    screened = dw.find_clusters(state, min_members=20)
+    assert sum(screened_groups) >= 60  # the screen answered for every clump at least
+    monkeypatch.setattr(finder, "_SCAN_BELOW", 10**9)
+    plain = dw.find_clusters(state, min_members=20)
+    assert [c.members.tolist() for c in screened] == [c.members.tolist() for c in plain]
+    sizes = [c.members.size for c in plain]
+    assert sizes == [target.n + 60, 100, 20]  # pile + slow escapers, sparse, dense (45 cm/s apart, moving off): the clumps make none
+
+
+def test_escape_speed_screen_holds_every_particle_a_group_binds():
+    """could_bind returns a superset of the free particles that pass |v - V|^2 |x - X| < 2 G M,
+    checked in float64 for groups from a grain's mass to a pile's, at random centres."""
+    from decco_warp.analysis import clusters as finder
+
+    rng = np.random.default_rng(11)
+    n = 6000
+    x = rng.normal(scale=1e8, size=(n, 3))
+    v = rng.normal(scale=50.0, size=(n, 3))
+    free = finder._FreeParticles(x, v, np.ones(n, dtype=bool))
+    answered = binding = 0
+    for mass in np.geomspace(1e16, 1e22, 13):
+        for _ in range(5):
+            com, velocity = x[rng.integers(n)] + rng.normal(scale=1e6, size=3), rng.normal(scale=50.0, size=3)
+            bound = np.flatnonzero(((v - velocity) ** 2).sum(axis=1) * np.linalg.norm(x - com, axis=1) < 2 * dw.G_CGS * mass)
+            found = free.could_bind(com, velocity, mass, dw.G_CGS)
+            if found is None:
+                continue
+            answered += 1
+            binding += bound.size > 0
+            assert np.isin(bound, found).all()
+            assert found.size <= n // 2
+    assert answered >= 20 and binding >= 10  # most groups screened, many of them binding someone
