@@ -306,7 +306,8 @@ def test_shipped_large_pile_list_and_collision_are_valid():
      ("fig6_clock", ["fig6_clock"], None), ("resolution", ["resolution"], {"resolution": 0.25}),
      ("resolution/x4", ["resolution_auto"], {"resolution": 4.0}),
      ("resolution_paper_contacts", ["resolution_paper_contacts"], {"resolution": 0.25}),
-     ("resolution_paper_contacts/x4", ["resolution_paper_contacts"], {"resolution": 4.0})],
+     ("resolution_paper_contacts/x4", ["resolution_paper_contacts"], {"resolution": 4.0}),
+     ("fig3_auto", ["fig3_headon_auto"], None)],
 )  # fmt: skip
 def test_committed_results_are_runs_of_the_shipped_sweeps(folder, sweeps, overrides):
     """Every run kept under runs/results/ is, name and set-up (piles, collision with its orientation
