@@ -283,14 +283,22 @@ LADDER_ETAS = (3.0, 6.0, 9.0)
 
 #: The ladder's two series: k_in and dt scaled with the radius (the same predicted compression at
 #: every rung), and the paper's k_in and dt at every rung; R = 1 (Fig. 3's runs) belongs to both.
-LADDER_SERIES = (("k_in, dt x N^(-1/3)", ("resolution", "resolution/x4")),
+LADDER_SERIES = (("k_in, dt x N^(-1/3)", ("resolution", "resolution/x4", "resolution/x16")),
                  ("the paper's k_in, dt", ("resolution_paper_contacts", "resolution_paper_contacts/x4")))  # fmt: skip
 
 
 def ladder_points(folders) -> list[dict]:
     """A series of the resolution ladder (1/4 head-on) from its result folders and the paper's
-    runs: particles, eta, m_lf/m_t, the late-window size change and whether the run settled."""
+    runs: particles, eta, m_lf/m_t, the late-window size change and whether the run settled.  A
+    folder's final_states.csv (runs/results/final_state.py: runs whose frames were not analysed)
+    adds its runs' last states, m_lf/m_t only, drawn as not known to be settled."""
     points = []
+    for folder in folders:
+        table = RESULTS / folder / "final_states.csv"
+        if table.is_file():
+            for row in csv.DictReader(table.open()):
+                points.append({"n": int(row["n_particles"]), "eta": round(float(row["eta"]), 6),
+                               "value": float(row["largest_mass_ratio"]), "size_change": None, "firm": False})  # fmt: skip
     for run in [r for folder in folders for r in runs(folder)] + runs("fig3", 0.25):
         s = run["summary"]
         if s["theta_deg"] == 0.0 and round(s["eta"], 6) in LADDER_ETAS:
@@ -301,7 +309,7 @@ def ladder_points(folders) -> list[dict]:
 
 def resolution():
     """m_lf/m_t (left) and the late-window particle-size change (right) of the 1/4 head-on collision
-    against the particle count, per eta and series: every run (hollow: not settled), the mean of
+    against the particle count, per eta and series: every run (hollow: not settled, or its last state only), the mean of
     each rung with its spread (one standard deviation); the paper's-contacts series dashed and
     drawn a little to the right."""
     fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.6))
@@ -331,7 +339,7 @@ def resolution():
         ax.set_xlabel("particles (target + projectile)")
         ax.set_ylabel(ylabel)
     axes[0].legend(fontsize=7)
-    fig.suptitle("1/4 head-on: the same bodies at 1/4, 1 and 4 times the paper's particles, two contact series", fontsize=10)
+    fig.suptitle("1/4 head-on: the same bodies at 1/4 to 16 times the paper's particles, two contact series", fontsize=10)
     fig.tight_layout()
     return fig
 
