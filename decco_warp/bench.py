@@ -22,6 +22,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import warp as wp
 
+from . import forces
 from .engine import Engine
 from .layouts import Layout, choose_layout
 from .params import Params
@@ -71,6 +72,10 @@ class BenchRow:
     """Neighbour-list builds per step while the full step was timed (K > 1)."""
     versus_every_step: float | None = None
     """The K = 1 step time over this row's, at the same N in the same call (K > 1 rows)."""
+    particle_block: int | None = None
+    """Threads a block of the kernels of one thread a particle, where a row sets it (forces.PARTICLE_BLOCK otherwise)."""
+    versus_default_block: float | None = None
+    """The step time at the default PARTICLE_BLOCK over this row's, same N, K and call."""
 
 
 #: The test systems of :func:`bench_size`.
@@ -186,6 +191,7 @@ def bench_size(
     systems: int = 1,
     system: str = "lattice",
     gravity_every: int = 1,
+    particle_block: int | None = None,
 ) -> BenchRow:
     """One row: the force evaluation and the full step at ``n`` (pairs/s counts N^2 pairs; a tree row
     gives none, only its times and particles/s), beside the one-thread-per-particle kernel.
@@ -193,7 +199,20 @@ def bench_size(
     A call is ``steps`` rounded up to whole recorded graphs (simulation.graph_steps: 50 steps, or
     whole outer steps of K), as a run steps: steps left over are launched one by one, and at K > 1
     each of those reads the list's stale flag on the host.  With ``gravity_every`` K > 1 the row
-    counts the neighbour list's builds per step."""
+    counts the neighbour list's builds per step.  ``particle_block``: the threads a block of the
+    kernels of one thread a particle, in place of forces.PARTICLE_BLOCK for this row."""
+    if particle_block is None:
+        return _bench_size(n, device, precision, layout, budget, steps, baseline, gravity, systems, system, gravity_every)
+    default, forces.PARTICLE_BLOCK = forces.PARTICLE_BLOCK, particle_block
+    try:
+        row = _bench_size(n, device, precision, layout, budget, steps, baseline, gravity, systems, system, gravity_every)
+    finally:
+        forces.PARTICLE_BLOCK = default
+    row.particle_block = particle_block
+    return row
+
+
+def _bench_size(n, device, precision, layout, budget, steps, baseline, gravity, systems, system, gravity_every) -> BenchRow:
     state = bench_system(system, n, systems)
     sizes = [n] * systems
     params = Params(gravity=gravity, gravity_every=gravity_every)
@@ -243,27 +262,37 @@ def bench_size(
 
 def bench_rows(
     sizes, kinds, device: str, precision: str = "mixed", budget: float = 1.0, steps: int = 100, solvers=("all-pairs",),
-    layouts=(), ensembles=(), clocks=(),
+    layouts=(), ensembles=(), clocks=(), particle_blocks=(),
 ):  # fmt: skip
     """Every row of ``decco-warp bench``, in order, as each is measured: per size and test system, the
     default all-pairs layout (beside the one-thread-per-particle baseline) and ``layouts``, the tree,
     ensembles of ``ensembles`` systems (against one at a time), and gravity every K of ``clocks``
-    (against K = 1 with the same solver); each comparison is added to the row's layout text."""
+    (against K = 1 with the same solver), and the default layout at K = 1 and each K of ``clocks``
+    with ``particle_blocks`` threads a block for the kernels of one thread a particle (against
+    forces.PARTICLE_BLOCK); each comparison is added to the row's layout text."""
     for size, kind in itertools.product(sizes, kinds):
         runs = [("all-pairs", layout) for layout in [None, *layouts]] if "all-pairs" in solvers else []
         runs += [("tree", None)] if "tree" in solvers else []
-        runs = [(solver, layout, 1, 1) for solver, layout in runs]
-        runs += [("all-pairs", None, k, 1) for k in ensembles]
-        runs += [(solver, None, 1, every) for every in clocks for solver in solvers]
-        alone, every_step = None, {}
-        for solver, layout, systems, every in runs:
-            first = (solver, layout, systems, every) == runs[0]
+        runs = [(solver, layout, 1, 1, None) for solver, layout in runs]
+        runs += [("all-pairs", None, k, 1, None) for k in ensembles]
+        runs += [(solver, None, 1, every, None) for every in clocks for solver in solvers]
+        runs += [(solver, None, 1, every, block) for block in particle_blocks for every in [1, *clocks] for solver in solvers]
+        alone, every_step, default_block = None, {}, {}
+        for solver, layout, systems, every, block in runs:
+            first = (solver, layout, systems, every, block) == runs[0]
             row = bench_size(
                 size, device, precision, layout, budget, steps, baseline=first, gravity=solver, systems=systems, system=kind,
-                gravity_every=every,
+                gravity_every=every, particle_block=block,
             )  # fmt: skip
             if len(kinds) > 1:
                 row.layout += f", {kind}"
+            if systems == 1 and layout is None and block is None:
+                default_block[(solver, every)] = row
+            if block is not None:  # against the default block, same solver and clock
+                row.versus_default_block = default_block[(solver, every)].step_seconds / row.step_seconds
+                row.layout += f", {block} threads a block for the per-particle kernels: {row.versus_default_block:.2f}x {forces.PARTICLE_BLOCK}"
+                yield row
+                continue
             if systems == 1 and layout is None and every == 1:
                 every_step[solver] = row
                 alone = row if solver == "all-pairs" else alone

@@ -631,6 +631,9 @@ def bench(
     gravity_every: str = typer.Option(
         "", "--gravity-every", help="Also time gravity on its own clock at these K, e.g. 5,10,20 (gravity every K steps, contacts from a neighbour list), against the K = 1 step of the same call; 1 in the list is the default row."
     ),
+    particle_blocks: str = typer.Option(
+        "", "--particle-blocks", help="Also time the step with these threads a block for the kernels of one thread a particle (kicks, drift, gather, list build), e.g. 32,64, at K = 1 and each --gravity-every K, against the default (decco_warp.forces.PARTICLE_BLOCK); the motion is the same at any."
+    ),
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Pairs/s of the force kernel and of the full step, beside a one-thread-per-particle baseline."""
@@ -663,6 +666,9 @@ def bench(
     if any(k < 1 for k in clocks):
         fail(f"--gravity-every must list integers >= 1, e.g. 5,10,20; got {gravity_every!r}")
     clocks = [k for k in dict.fromkeys(clocks) if k > 1]
+    blocks = _integer_list(particle_blocks)
+    if any(b < 1 or b > 1024 for b in blocks):
+        fail(f"--particle-blocks must list threads a block from 1 to 1024, e.g. 32,64; got {particle_blocks!r}")
     kinds = [k.strip() for k in system.split(",") if k.strip()]
     if not kinds or any(k not in benchmarks.TEST_SYSTEMS for k in kinds):
         fail(f"--system must list {' and/or '.join(benchmarks.TEST_SYSTEMS)}; got {system!r}")
@@ -681,7 +687,7 @@ def bench(
     header = f"{'N':>8} {'force pairs/s':>14} {'step pairs/s':>13} {'step ms':>9} {'particles/s':>12} {'of limit':>9} {'baseline pairs/s':>17} {'speed-up':>9}  layout"
     typer.echo(header)
     rows = []
-    for row in benchmarks.bench_rows(sizes, kinds, chosen, precision, budget, steps, solvers, extra_layouts, ensembles, clocks):
+    for row in benchmarks.bench_rows(sizes, kinds, chosen, precision, budget, steps, solvers, extra_layouts, ensembles, clocks, blocks):
         rows.append(row)
         baseline = not math.isnan(row.baseline_seconds)
         fraction = f"{100 * row.fraction_of_limit:8.1f}%" if row.fraction_of_limit is not None else f"{'n/a':>9}"

@@ -15,7 +15,7 @@ import numpy as np
 import warp as wp
 
 from .device import resolve_device
-from .forces import FORCE_PATHS, path_name
+from .forces import FORCE_PATHS, particle_block, path_name
 from .layouts import Layout, choose_layout, newton_scratch_bytes, newton_sweep_layout
 from .gravity_tree import walk_parts
 from .kernels import integrate, observables
@@ -159,6 +159,7 @@ class Engine:
                 inputs=[wp.float64(self.params.G), self.radius, self.mass, self.position],
                 outputs=[self.path.body],
                 device=self.device,
+            block_dim=particle_block(),
             )
 
     def eval_forces(self) -> None:
@@ -183,6 +184,7 @@ class Engine:
                     self.force, self.torque, self.channels, close_step],
             outputs=[self.position, self.velocity, self.omega, self.work, self.path.body if pack else self._no_body],
             device=self.device,
+            block_dim=particle_block(),
         )  # fmt: skip
 
     def kick(self) -> None:
@@ -193,6 +195,7 @@ class Engine:
             inputs=[wp.float64(self.params.dt), self.mass, self.inertia, self.force, self.torque, self.channels],
             outputs=[self.velocity, self.omega, self.work],
             device=self.device,
+            block_dim=particle_block(),
         )
 
     # Gravity on its own clock (K = gravity_every > 1, docs/model.md): the path is RespaForces.
@@ -206,6 +209,7 @@ class Engine:
                     self.force, self.torque, self.channels, self.path.gravity_force, close_step],
             outputs=[self.velocity, self.omega, self.work],
             device=self.device,
+            block_dim=particle_block(),
         )  # fmt: skip
 
     def kick_drift_inner(self, close_step: bool = False, gravity_kicks: int = 0, pack: bool = False) -> None:
@@ -223,6 +227,7 @@ class Engine:
             outputs=[self.position, self.velocity, self.omega, self.work, neighbours.stale,
                      self.path.body if pack else self._no_body],
             device=self.device,
+            block_dim=particle_block(),
         )  # fmt: skip
 
     def step(self) -> None:

@@ -35,6 +35,16 @@ OBSERVABLES_BLOCK = 128
 #: CPU): ~8 listed candidates a particle, one a lane (kernels/contacts.py ``contact_pass``).
 CONTACT_LANES = 8
 CONTACT_PARTICLES = 4
+#: Threads a block for the kernels of one thread a particle (the packing, the kicks and drifts, the
+#: Newton sweep's gather, the neighbour list's build).  A thread's arithmetic is the same at any
+#: block size, and so is the motion; Warp's default, 256, puts 6 250 particles in 25 blocks, on 25 of
+#: a GPU's 132 SMs (docs/benchmarks.md, "The device limit").
+PARTICLE_BLOCK = 256
+
+
+def particle_block() -> int:
+    """``block_dim`` of a launch of one thread a particle: :data:`PARTICLE_BLOCK`, read at launch."""
+    return PARTICLE_BLOCK
 
 
 def tiled_blocks(starts: np.ndarray, ends: np.ndarray, per_block: int) -> np.ndarray:
@@ -264,6 +274,7 @@ class NewtonGravity:
             inputs=[self.gather, e.mass, self.tile_field, self.tile_near],
             outputs=[force_out, self.candidate_count, self.candidates],
             device=e.device,
+            block_dim=particle_block(),
         )
 
 
@@ -394,17 +405,20 @@ class NeighbourList:
         """List every particle's neighbours at the current positions."""
         e = self.engine
         width = wp.float64(self.cell_width)
-        wp.launch(cell_keys, dim=e.count, inputs=[self.system, width, e.position], outputs=[self.keys, self.order], device=e.device)
+        wp.launch(cell_keys, dim=e.count, inputs=[self.system, width, e.position], outputs=[self.keys, self.order], device=e.device,
+                  block_dim=particle_block())  # fmt: skip
         wp.utils.radix_sort_pairs(self.keys, self.order, e.count)
         self.cell_start.zero_()
         self.cell_end.zero_()
-        wp.launch(cell_ranges, dim=e.count, inputs=[self.keys, e.count], outputs=[self.cell_start, self.cell_end], device=e.device)
+        wp.launch(cell_ranges, dim=e.count, inputs=[self.keys, e.count], outputs=[self.cell_start, self.cell_end], device=e.device,
+                  block_dim=particle_block())  # fmt: skip
         wp.launch(
             build_neighbour_list,
             dim=e.count,
             inputs=[self.system, e.radius, wp.float64(self.skin), width, self.order, self.cell_start, self.cell_end, e.position],
             outputs=[self.reference, self.candidate_count, self.candidates, self.stale, self.builds],
             device=e.device,
+            block_dim=particle_block(),
         )
 
     def refresh(self) -> None:

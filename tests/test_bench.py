@@ -150,3 +150,28 @@ def test_bench_times_gravity_on_its_own_clock_beside_the_k1_step(tmp_path):
         result = cli("bench", "--device", "cpu", "--gravity-every", bad)
         assert result.returncode == 2 and "--gravity-every must list integers >= 1" in result.stderr
         assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_bench_times_the_per_particle_block_beside_the_default(tmp_path):
+    """``--particle-blocks 32`` with ``--gravity-every 5``: rows at K = 1 and K = 5 with 32 threads a
+    block for the kernels of one thread a particle, each with its ratio to the default row of its K;
+    the module's setting is as it was after the call; a bad list is refused with one line."""
+    from decco_warp import bench as benchmarks
+    from decco_warp import forces
+
+    out = tmp_path / "bench.json"
+    result = cli("bench", "--device", "cpu", "--n", "200", "--seconds", "0.02", "--steps", "5", "--system", "piles",
+                 "--gravity-every", "5", "--particle-blocks", "32", "--json", str(out))  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    rows = json.loads(out.read_text())["rows"]
+    assert [(r["gravity_every"], r["particle_block"]) for r in rows] == [(1, None), (5, None), (1, 32), (5, 32)]
+    for default, blocked in zip(rows[:2], rows[2:]):
+        assert np.isclose(blocked["versus_default_block"], default["step_seconds"] / blocked["step_seconds"])
+        assert f"32 threads a block for the per-particle kernels: {blocked['versus_default_block']:.2f}x" in blocked["layout"]
+    before = forces.PARTICLE_BLOCK
+    row = benchmarks.bench_size(100, "cpu", budget=0.01, steps=2, baseline=False, particle_block=before // 2)
+    assert row.particle_block == before // 2 and forces.PARTICLE_BLOCK == before
+    for bad in ("0", "2000", "x"):
+        result = cli("bench", "--device", "cpu", "--particle-blocks", bad)
+        assert result.returncode == 2 and "--particle-blocks must list threads a block" in result.stderr
+        assert len(result.stderr.strip().splitlines()) == 1
