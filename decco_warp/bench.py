@@ -201,9 +201,8 @@ def bench_size(
     each of those reads the list's stale flag on the host.  With ``gravity_every`` K > 1 the row
     counts the neighbour list's builds per step.  ``particle_block``: the threads a block of the
     kernels of one thread a particle, in place of forces.PARTICLE_BLOCK for this row."""
-    if particle_block is None:
-        return _bench_size(n, device, precision, layout, budget, steps, baseline, gravity, systems, system, gravity_every)
-    default, forces.PARTICLE_BLOCK = forces.PARTICLE_BLOCK, particle_block
+    default = forces.PARTICLE_BLOCK
+    forces.PARTICLE_BLOCK = particle_block or default
     try:
         row = _bench_size(n, device, precision, layout, budget, steps, baseline, gravity, systems, system, gravity_every)
     finally:

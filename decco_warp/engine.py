@@ -159,7 +159,7 @@ class Engine:
                 inputs=[wp.float64(self.params.G), self.radius, self.mass, self.position],
                 outputs=[self.path.body],
                 device=self.device,
-            block_dim=particle_block(),
+                block_dim=particle_block(),
             )
 
     def eval_forces(self) -> None:
