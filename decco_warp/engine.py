@@ -223,8 +223,8 @@ class Engine:
             dim=self.count,
             inputs=[wp.float64(self.params.dt), wp.float64(self.gravity_every * self.params.dt), wp.float64(self.params.G),
                     self.radius, self.mass, self.inertia, self.force, self.torque, self.channels, self.path.gravity_force,
-                    close_step, gravity_kicks, neighbours.reference, wp.float64(0.5 * neighbours.skin)],
-            outputs=[self.position, self.velocity, self.omega, self.work, neighbours.stale,
+                    close_step, gravity_kicks, neighbours.reference, wp.float64(0.5 * neighbours.skin), neighbours.system],
+            outputs=[self.position, self.velocity, self.omega, self.work, neighbours.stale, neighbours.stale_system,
                      self.path.body if pack else self._no_body],
             device=self.device,
             block_dim=particle_block(),
@@ -319,7 +319,7 @@ class Engine:
     def snapshot(self) -> dict[str, np.ndarray]:
         """Every array the next step depends on: enough to continue bit for bit.  With gravity on its
         own clock ``force`` is the contact force; gravity, a function of the positions alone, is
-        evaluated anew on :meth:`restore`."""
+        evaluated anew on :meth:`restore`, and the neighbour lists are kept (forces.py ``NeighbourList.arrays``)."""
         positions, velocities, omegas = self.read()
         return {
             "positions": positions,
@@ -330,6 +330,7 @@ class Engine:
             "channels": self.channels.numpy().copy(),
             "work": self.work.numpy().copy(),
             "deepest_contact": self.deepest_contact.numpy().copy(),
+            **self.path.arrays(),
         }
 
     def restore(self, snapshot: dict[str, np.ndarray]) -> None:
@@ -352,7 +353,7 @@ class Engine:
         if records.shape != (self.count,):
             raise InputError(f"snapshot deepest_contact has shape {records.shape}; expected {(self.count,)}")
         self.deepest_contact.assign(wp.array(records, dtype=wp.int64, device=self.device))
-        self.path.restored()
+        self.path.restored(snapshot)
 
 
 def smoothed_density(sources: np.ndarray, norm: np.ndarray, inv_two_var: np.ndarray, targets: np.ndarray, device: str) -> np.ndarray:
@@ -398,7 +399,8 @@ def memory_estimate(
     per += (len(LEDGER_CHANNELS) * vec3d + 32) if ledger else 0  # channels, work
     per += 8 + 32 + 8  # deepest contact, packed body, system range
     per += i32 * (1 + CANDIDATES)  # the contact candidates of the Newton layout, the tree or the neighbour list
-    per += 2 * vec3d + 5 * i32  # gravity on its own clock: gravity, the list's build positions; system, cell keys and order (2 N)
+    per += 3 * vec3d + f64 + 5 * i32  # gravity on its own clock: gravity, the list's build positions, the build's sorted
+    # positions and radii; system, cell keys and order (2 N)
     per += len(PAIR_OBSERVABLES) * f64  # a frame's pair observables
     if gravity == "tree":  # nodes (2n): mass, centre, quadrupole, box, size, offset, links (16), child, first,
         # last, parent, escape; keys, order (2n); leaf positions, grid points; each walk part's field and potential

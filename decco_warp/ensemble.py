@@ -14,6 +14,7 @@ from dataclasses import replace
 import numpy as np
 
 from .diagnostics import state_diagnostics
+from .forces import NEIGHBOUR_ARRAYS
 from .simulation import Simulation
 from .stability import StabilityReport
 from .state import State
@@ -48,6 +49,8 @@ class Ensemble:
         starts = ends - sizes
         joined = {key: np.concatenate([snap[key] for snap in snapshots]) for key in _ARRAYS}
         joined["deepest_contact"] = np.concatenate([_partners_moved(snap["deepest_contact"], first) for snap, first in zip(snapshots, starts)])
+        if all(key in snap for snap in snapshots for key in NEIGHBOUR_ARRAYS):  # each system's lists as alone
+            joined.update(_joined_lists(snapshots, starts))
         state = State.from_arrays(
             joined["positions"], joined["velocities"], joined["omegas"],
             np.concatenate([s.radii for s in statics]), np.concatenate([s.masses for s in statics]),
@@ -60,8 +63,8 @@ class Ensemble:
         )  # fmt: skip
         self.sim.engine.restore(joined)
         self.views = [
-            SystemView(self, int(start), int(end), sim.static, snap, sim.stability)
-            for sim, snap, start, end in zip(members, snapshots, starts, ends)
+            SystemView(self, system, int(start), int(end), sim.static, snap, sim.stability)
+            for system, (sim, snap, start, end) in enumerate(zip(members, snapshots, starts, ends))
         ]
         self._cache: dict = {}
 
@@ -99,11 +102,32 @@ def _partners_moved(records: np.ndarray, offset: int) -> np.ndarray:
     return np.where(records > 0, records + offset, records)
 
 
+def _lists_moved(count: np.ndarray, listed: np.ndarray, offset: int) -> np.ndarray:
+    """Neighbour lists (forces.py ``NeighbourList.arrays``) with each listed index moved by ``offset``."""
+    used = np.arange(listed.shape[1])[None, :] < count[:, None]
+    return np.where(used, listed + offset, 0).astype(np.int32)
+
+
+def _joined_lists(snapshots: list[dict], starts: np.ndarray) -> dict[str, np.ndarray]:
+    """The members' neighbour lists in the ensemble's numbering, as wide as the widest."""
+    width = max(snap["neighbour_list"].shape[1] for snap in snapshots)
+    rows = []
+    for snap, first in zip(snapshots, starts):
+        listed = np.zeros((len(snap["neighbour_count"]), width), dtype=np.int32)
+        listed[:, : snap["neighbour_list"].shape[1]] = snap["neighbour_list"]
+        rows.append(_lists_moved(snap["neighbour_count"], listed, int(first)))
+    return {
+        "neighbour_reference": np.concatenate([snap["neighbour_reference"] for snap in snapshots]),
+        "neighbour_count": np.concatenate([snap["neighbour_count"] for snap in snapshots]),
+        "neighbour_list": np.concatenate(rows),
+    }
+
+
 class SystemView:
     """One system of an :class:`Ensemble`, with the reading side of a :class:`Simulation`."""
 
-    def __init__(self, ensemble: Ensemble, first: int, end: int, static: State, snapshot: dict, stability: StabilityReport):
-        self._ensemble, self.first, self.end = ensemble, first, end
+    def __init__(self, ensemble: Ensemble, system: int, first: int, end: int, static: State, snapshot: dict, stability: StabilityReport):
+        self._ensemble, self.system, self.first, self.end = ensemble, system, first, end
         self._static = static.copy()
         self._time_origin = float(snapshot["time_origin"])
         self.params = ensemble.sim.params
@@ -155,13 +179,21 @@ class SystemView:
         return self._ensemble.sim.engine.candidate_overflows(self.first, self.end)
 
     def neighbour_list_builds(self) -> int | None:
-        """The ensemble's (one list for all its systems)."""
-        return self._ensemble.sim.neighbour_list_builds()
+        """This system's (each system's lists are rebuilt when its own particles have moved)."""
+        return self._ensemble.sim.neighbour_list_builds(self.system)
 
     def snapshot(self) -> dict:
         """This system's part of the ensemble's snapshot: what a Simulation stepped alone would give."""
         whole = self._ensemble.sim.engine.snapshot()
         snap = {key: whole[key][self.first : self.end].copy() for key in _ARRAYS}
         snap["deepest_contact"] = _partners_moved(snap["deepest_contact"], -self.first)
+        if all(key in whole for key in NEIGHBOUR_ARRAYS):
+            count = whole["neighbour_count"][self.first : self.end].copy()
+            width = int(min(count.max(initial=0), whole["neighbour_list"].shape[1]))
+            snap.update(
+                neighbour_reference=whole["neighbour_reference"][self.first : self.end].copy(),
+                neighbour_count=count,
+                neighbour_list=_lists_moved(count, whole["neighbour_list"][self.first : self.end, :width], -self.first),
+            )
         snap.update(step=self.step_count, time_origin=self._time_origin, ledger=True, energy_start=dict(self.energy_start))
         return snap

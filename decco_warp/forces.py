@@ -24,7 +24,7 @@ from .kernels import observables as observable_kernels
 from .kernels.bodies import BODY_TYPES
 from .kernels.contacts import CANDIDATES, contact_pass
 from .kernels.fused import pair_forces_tiled
-from .kernels.neighbours import GRID_CELLS, REACH_MARGIN, build_neighbour_list, cell_keys, cell_ranges
+from .kernels.neighbours import GRID_CELLS, REACH_MARGIN, build_neighbour_list, cell_keys, cell_ranges, lists_built
 from .kernels.newton import GatherRows, TilePair, gather_newton, pair_gravity_newton
 from .kernels.reference import pair_forces_reference
 from .errors import InputError
@@ -148,9 +148,14 @@ class ForcePath:
         """The force on every particle at the last evaluation [dyne], a host copy."""
         return self.engine.force.numpy().copy()
 
-    def list_builds(self) -> int | None:
-        """Builds of a neighbour list since the engine began (None: the path keeps none)."""
+    def list_builds(self, system: int | None = None) -> int | None:
+        """Builds of a system's neighbour lists since the engine began or was restored (``system``
+        None: the most of any system; None: the path keeps none)."""
         return None
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Per-particle arrays beside the engine's that a snapshot must hold for the path to go on bit for bit."""
+        return {}
 
     def observables(self, outputs: dict) -> None:
         """Per particle, into ``outputs`` (engine.PAIR_OBSERVABLES): over every pair of its system,
@@ -173,8 +178,8 @@ class ForcePath:
             return 0
         return int((self.candidate_count.numpy()[first:end] > self.candidates.shape[1]).sum())
 
-    def restored(self) -> None:
-        """Called after the engine's arrays were loaded from a snapshot."""
+    def restored(self, snapshot: dict) -> None:
+        """Called after the engine's arrays were loaded from ``snapshot``."""
 
 
 class ReferenceForces(ForcePath):
@@ -375,12 +380,17 @@ SKIN_FRACTION = 0.5
 
 class NeighbourList:
     """Each particle's neighbours within R_i + R_j + skin, in increasing j (kernels/neighbours.py),
-    in the candidate arrays; rebuilt on the device once any particle has moved skin / 2 since the
-    last build (``stale``, set by the inner drift: kernels/integrate.py ``kick_drift_inner``).  The
-    grid's cell tables take 8 bytes per cell, GRID_CELLS^3 cells per system (2 MiB)."""
+    in the candidate arrays; a system's lists are rebuilt on the device once any of its particles has
+    moved skin / 2 since their last build (``stale_system``, with ``stale`` [0] for any system: set by
+    the inner drift, kernels/integrate.py ``kick_drift_inner``).  Which superset of the touching pairs
+    a list holds sets how the contact pass's lanes share a particle's contacts (and so the rounding of
+    their sum): each system of an ensemble keeps the lists it would keep alone, and a snapshot holds
+    them (:meth:`arrays`), so that a restart goes on with the same lists.  The grid's cell tables take
+    8 bytes per cell, GRID_CELLS^3 cells per system (2 MiB)."""
 
     def __init__(self, engine, min_radius: float):
         device, count = engine.device, engine.count
+        systems = len(engine.systems)
         self.engine = engine
         self.skin = SKIN_FRACTION * min_radius
         """[cm]"""
@@ -388,21 +398,27 @@ class NeighbourList:
         self.reference = wp.zeros(count, dtype=wp.vec3d, device=device)
         """The positions of the last build."""
         self.stale = wp.zeros(1, dtype=wp.int32, device=device)
-        """[0] = 1 once a particle has moved past skin / 2 since the last build."""
-        self.builds = wp.zeros(1, dtype=wp.int64, device=device)
-        """[0]: builds since the engine began."""
+        """[0] = 1 once a particle has moved past skin / 2 since its list was built."""
+        self.stale_system = wp.zeros(systems, dtype=wp.int32, device=device)
+        """[s] = 1 once one of system s's particles has."""
+        self.builds = wp.zeros(systems, dtype=wp.int64, device=device)
+        """[s]: builds of system s's lists since the engine began or was restored."""
         # The grid: a cell as wide as the farthest reach, 2 R_max + skin; its keys hold each particle's
         # system, so that the systems of an ensemble never meet.
-        self.system = wp.array(np.repeat(np.arange(len(engine.systems)), engine.systems).astype(np.int32), device=device)
+        self.system = wp.array(np.repeat(np.arange(systems), engine.systems).astype(np.int32), device=device)
         self.cell_width = (2.0 * engine.max_radius + self.skin) * REACH_MARGIN
         self.keys = wp.zeros(2 * count, dtype=wp.int32, device=device)  # radix_sort_pairs needs room for 2 N
         self.order = wp.zeros(2 * count, dtype=wp.int32, device=device)
-        cells = len(engine.systems) * GRID_CELLS**3
+        cells = systems * GRID_CELLS**3
         self.cell_start = wp.zeros(cells, dtype=wp.int32, device=device)
         self.cell_end = wp.zeros(cells, dtype=wp.int32, device=device)
+        # Radii and positions in key order: a cell's particles side by side for the build's scans.
+        self.sorted_radius = wp.zeros(count, dtype=wp.float64, device=device)
+        self.sorted_position = wp.zeros(count, dtype=wp.vec3d, device=device)
 
-    def build(self) -> None:
-        """List every particle's neighbours at the current positions."""
+    def build(self, everything: bool = False) -> None:
+        """List the neighbours of every particle of a stale system (``everything``: of every system) at
+        the current positions."""
         e = self.engine
         width = wp.float64(self.cell_width)
         wp.launch(cell_keys, dim=e.count, inputs=[self.system, width, e.position], outputs=[self.keys, self.order], device=e.device,
@@ -410,20 +426,62 @@ class NeighbourList:
         wp.utils.radix_sort_pairs(self.keys, self.order, e.count)
         self.cell_start.zero_()
         self.cell_end.zero_()
-        wp.launch(cell_ranges, dim=e.count, inputs=[self.keys, e.count], outputs=[self.cell_start, self.cell_end], device=e.device,
-                  block_dim=particle_block())  # fmt: skip
         wp.launch(
-            build_neighbour_list,
+            cell_ranges,
             dim=e.count,
-            inputs=[self.system, e.radius, wp.float64(self.skin), width, self.order, self.cell_start, self.cell_end, e.position],
-            outputs=[self.reference, self.candidate_count, self.candidates, self.stale, self.builds],
+            inputs=[self.keys, e.count, self.order, e.radius, e.position],
+            outputs=[self.cell_start, self.cell_end, self.sorted_radius, self.sorted_position],
             device=e.device,
             block_dim=particle_block(),
         )
+        wp.launch(
+            build_neighbour_list,
+            dim=e.count,
+            inputs=[self.system, wp.float64(self.skin), width, self.order, self.cell_start, self.cell_end, self.sorted_radius,
+                    self.sorted_position, self.stale_system, everything],
+            outputs=[self.reference, self.candidate_count, self.candidates],
+            device=e.device,
+            block_dim=particle_block(),
+        )
+        wp.launch(lists_built, dim=len(e.systems), inputs=[everything], outputs=[self.stale, self.stale_system, self.builds], device=e.device)
 
     def refresh(self) -> None:
-        """Rebuild the list if it is stale, decided on the device (a conditional graph node on CUDA)."""
+        """Rebuild the stale systems' lists if there are any, decided on the device (a conditional graph node on CUDA)."""
         wp.capture_if(self.stale, self.build)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The lists as a snapshot holds them, per particle: the positions of their build, the count
+        of neighbours and the neighbours (as many columns as the longest list uses)."""
+        count = self.candidate_count.numpy().copy()
+        width = int(min(count.max(initial=0), self.candidates.shape[1]))
+        return {
+            "neighbour_reference": self.reference.numpy().copy(),
+            "neighbour_count": count,
+            "neighbour_list": self.candidates.numpy()[:, :width].copy(),
+        }
+
+    def load(self, arrays: dict[str, np.ndarray]) -> None:
+        """Lists from :meth:`arrays` (the stale flags clear: a snapshot is taken between steps, after
+        the last contact evaluation rebuilt whatever was stale)."""
+        count = np.asarray(arrays["neighbour_count"], dtype=np.int32)
+        listed = np.asarray(arrays["neighbour_list"], dtype=np.int32)
+        reference = np.asarray(arrays["neighbour_reference"], dtype=np.float64)
+        if count.shape != (self.engine.count,) or reference.shape != (self.engine.count, 3) or listed.ndim != 2 \
+                or listed.shape[0] != self.engine.count or listed.shape[1] > self.candidates.shape[1]:  # fmt: skip
+            raise InputError(f"snapshot neighbour lists have shapes {count.shape}, {listed.shape}, {reference.shape}; "
+                             f"expected ({self.engine.count},), ({self.engine.count}, <= {self.candidates.shape[1]}), ({self.engine.count}, 3)")  # fmt: skip
+        rows = np.zeros(self.candidates.shape, dtype=np.int32)
+        rows[:, : listed.shape[1]] = listed
+        device = self.engine.device
+        self.candidates.assign(wp.array(rows, dtype=wp.int32, device=device))
+        self.candidate_count.assign(wp.array(count, dtype=wp.int32, device=device))
+        self.reference.assign(wp.array(reference, dtype=wp.vec3d, device=device))
+        self.stale.zero_()
+        self.stale_system.zero_()
+
+
+#: The snapshot keys of the neighbour lists (NeighbourList.arrays), per particle.
+NEIGHBOUR_ARRAYS = ("neighbour_reference", "neighbour_count", "neighbour_list")
 
 
 class RespaForces(ForcePath):
@@ -457,9 +515,9 @@ class RespaForces(ForcePath):
         self.contact_pass = ContactPass(engine, accumulate=False)
 
     def evaluate(self) -> None:
-        """Gravity and the contacts at the current state, the neighbour list built afresh."""
+        """Gravity and the contacts at the current state, the neighbour lists built afresh."""
         self.gravity.evaluate(self.gravity_force)
-        self.neighbours.build()
+        self.neighbours.build(everything=True)
         _contact_pass(self)
 
     def gravity_step(self) -> None:
@@ -471,19 +529,28 @@ class RespaForces(ForcePath):
         self.neighbours.refresh()
         _contact_pass(self)
 
-    def restored(self) -> None:
+    def restored(self, snapshot: dict) -> None:
         """Gravity at the restored positions (what the uninterrupted run holds, bit for bit: the same
-        kernels on the same positions) and the list built afresh; the contact force is the snapshot's."""
+        kernels on the same positions) and the snapshot's neighbour lists (a snapshot without them,
+        of decco-warp 0.2, has them built afresh: the run goes on as another realization would); the
+        contact force is the snapshot's."""
         self.engine.pack_bodies()
         self.gravity.evaluate(self.gravity_force)
-        self.neighbours.build()
+        if all(key in snapshot for key in NEIGHBOUR_ARRAYS):
+            self.neighbours.load(snapshot)
+        else:
+            self.neighbours.build(everything=True)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return self.neighbours.arrays()
 
     def total_force(self) -> np.ndarray:
         """Gravity plus the contact force [dyne], both at the current positions."""
         return self.engine.force.numpy() + self.gravity_force.numpy()
 
-    def list_builds(self) -> int:
-        return int(self.neighbours.builds.numpy()[0])
+    def list_builds(self, system: int | None = None) -> int:
+        builds = self.neighbours.builds.numpy()
+        return int(builds.max() if system is None else builds[system])
 
     def observables(self, outputs: dict) -> None:
         if not isinstance(self.gravity, TreeGravity):

@@ -193,10 +193,11 @@ class Simulation:
         pairs = self.pair_observables() if pairs is None else pairs
         return state_diagnostics(state, pairs)
 
-    def neighbour_list_builds(self) -> int | None:
-        """Builds of the contacts' neighbour list since this simulation was made or restored
-        (gravity_every > 1; None otherwise: no list is kept)."""
-        return self.engine.path.list_builds()
+    def neighbour_list_builds(self, system: int | None = None) -> int | None:
+        """Builds of the contacts' neighbour lists since this simulation was made or restored
+        (gravity_every > 1; None otherwise: no list is kept), of one ``system`` of an ensemble or
+        the most of any."""
+        return self.engine.path.list_builds(system)
 
     def candidate_overflows(self) -> int:
         """Particles whose contact candidates overflowed their list at the last force evaluation."""

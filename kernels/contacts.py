@@ -10,9 +10,11 @@ Candidate lists are kept in increasing j as they are noted (``note_candidate``):
 hash grid (:mod:`.tree` ``grid_candidates``) and the neighbour list of gravity on its own clock
 (:mod:`.neighbours`), and the Newton layout's gather (:mod:`.newton`).  ``contact_pass`` (8 lanes a
 particle on a GPU, one on the CPU) walks a list in order and reduces its lanes in a fixed
-order, so its sums (and the ledger's channels) do not depend on scheduling, nor, since a listed
-pair that does not touch adds an exact zero, on which superset of the touching pairs the list
-holds; the observables walk the lists the same way (``candidates_walk``, ``candidate_at``).
+order, so its sums (and the ledger's channels) do not depend on scheduling.  A listed pair that does
+not touch adds an exact zero, but its slot decides which lane adds the contacts after it: with
+lanes, the rounding of a sum depends on which superset of the touching pairs the list holds (a
+neighbour list is part of the state: decco_warp/forces.py ``NeighbourList``).  The observables walk
+the lists the same way (``candidates_walk``, ``candidate_at``).
 """
 
 import functools

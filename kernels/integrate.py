@@ -257,6 +257,7 @@ def kick_drift_inner(
     gravity_kicks: int,  # then gravity half kicks: 1 opens an outer step, 2 also closes the one before
     reference_in: wp.array(dtype=wp.vec3d),  # the positions of the neighbour list's build
     half_skin: wp.float64,
+    system_in: wp.array(dtype=wp.int32),  # per particle: its system (of an ensemble)
     # Data in/out:
     position_inout: wp.array(dtype=wp.vec3d),
     velocity_inout: wp.array(dtype=wp.vec3d),
@@ -264,6 +265,7 @@ def kick_drift_inner(
     work_inout: wp.array(dtype=wp.vec4d),
     # Out:
     stale_out: wp.array(dtype=wp.int32),  # [0] = 1 when a particle is now past skin / 2 from its build position
+    stale_system_out: wp.array(dtype=wp.int32),  # [s] = 1 when one of system s's particles is
     body_out: wp.array(dtype=Any),  # the gravity sweep's packed bodies (the last inner step), or empty
 ):
     """A contact half kick, then a full drift, as ``kick_drift``; before them the kicks it closes and
@@ -282,6 +284,7 @@ def kick_drift_inner(
     moved = position - reference_in[i]
     if wp.dot(moved, moved) > half_skin * half_skin:
         stale_out[0] = 1  # every writer writes 1: no race on the value
+        stale_system_out[system_in[i]] = 1
     if body_out.shape[0] > 0:
         pack_body(G, radius_in[i], mass_in[i], position, body_out, i)
 

@@ -8,19 +8,21 @@ GRID_CELLS per axis, and its system: no system sees another), ``wp.utils.radix_s
 the particles by key and ``cell_ranges`` marks where each key's run begins and ends.  Only kernels,
 a sort and memsets: the whole build can be a branch of a CUDA graph (``wp.HashGrid`` cannot: its
 build copies its descriptor from host memory, which a conditional node's body may not).  A drift that
-takes any particle more than skin / 2 from its position at the build flags the list stale
-(kernels/integrate.py ``kick_drift_inner``), and the next contact evaluation rebuilds it first, a
+takes any particle more than skin / 2 from its position at the build flags its system's lists stale
+(kernels/integrate.py ``kick_drift_inner``), and the next contact evaluation rebuilds them first, a
 branch taken on the device (``wp.capture_if``): between two builds no pair that touches can be
-missing from the list.
+missing from a list.
 
 The contacts are then :mod:`.contacts` ``contact_pass`` over the list (increasing j, an exact zero
-for a listed pair that does not touch): their sums do not depend on which superset of the touching
-pairs the list holds, so a list built at another step (as after a restart) gives the same bits.
+for a listed pair that does not touch).  With its lanes, which superset of the touching pairs a list
+holds sets the rounding of the sums: the lists are part of the state (snapshots keep them), and a
+build lists only the particles of the systems whose particles moved (``stale_system``), so that each
+system of an ensemble keeps the lists it would keep alone.
 """
 
 import warp as wp
 
-from .contacts import note_candidate
+from .contacts import CANDIDATES
 
 wp.set_module_options({"enable_backward": False})
 
@@ -67,8 +69,13 @@ def cell_keys(
 def cell_ranges(
     keys_in: wp.array(dtype=wp.int32),  # sorted
     count: int,
+    order_in: wp.array(dtype=wp.int32),  # the particles in key order
+    radius_in: wp.array(dtype=wp.float64),
+    position_in: wp.array(dtype=wp.vec3d),
     start_out: wp.array(dtype=wp.int32),  # zeroed first: per key, where its run of sorted particles begins
     end_out: wp.array(dtype=wp.int32),  # zeroed first: and ends (empty cells: 0, 0)
+    sorted_radius_out: wp.array(dtype=wp.float64),  # radius and position of the k-th particle in key order
+    sorted_position_out: wp.array(dtype=wp.vec3d),
 ):
     k = wp.tid()
     key = keys_in[k]
@@ -76,47 +83,84 @@ def cell_ranges(
         start_out[key] = wp.int32(k)
     if k == count - 1 or keys_in[k + 1] != key:
         end_out[key] = wp.int32(k + 1)
+    i = int(order_in[k])
+    sorted_radius_out[k] = radius_in[i]
+    sorted_position_out[k] = position_in[i]
+
+
+#: A particle's neighbours as the build meets them, kept in increasing j in the thread's own memory.
+NeighbourRow = wp.types.vector(length=CANDIDATES, dtype=wp.int32)
 
 
 @wp.kernel
 def build_neighbour_list(
     # Model:
     system_in: wp.array(dtype=wp.int32),  # per particle: its system
-    radius_in: wp.array(dtype=wp.float64),
     skin: wp.float64,
     cell_width: wp.float64,
     # In:
     order_in: wp.array(dtype=wp.int32),  # the particles sorted by cell key (cell_keys, then the sort)
     start_in: wp.array(dtype=wp.int32),  # per key, its run in order_in (cell_ranges)
     end_in: wp.array(dtype=wp.int32),
-    # State in:
-    position_in: wp.array(dtype=wp.vec3d),
+    sorted_radius_in: wp.array(dtype=wp.float64),  # radii and positions in key order (cell_ranges)
+    sorted_position_in: wp.array(dtype=wp.vec3d),
+    stale_system_in: wp.array(dtype=wp.int32),  # per system: whether its list is to be built
+    everything: bool,  # build every system's list, stale or not
     # Out:
     reference_out: wp.array(dtype=wp.vec3d),  # the positions of this build
     candidate_count: wp.array(dtype=wp.int32),  # neighbours met (past the list's width: an overflow)
     candidates: wp.array2d(dtype=wp.int32),  # the first of them, in increasing j
-    # In/out:
-    stale_inout: wp.array(dtype=wp.int32),  # [0] cleared: the list is fresh
-    builds_inout: wp.array(dtype=wp.int64),  # [0]: builds so far, one more
 ):
-    i = wp.tid()
-    x = position_in[i]
+    """Thread k lists the k-th particle in key order: the threads of a warp share cells, and a cell's
+    particles are read from the sorted copies one after another, not gathered from all over memory.
+    Only the systems whose list is stale are built: each system of an ensemble keeps the list it
+    would keep alone (which pairs it holds sets the order of a particle's contact sums)."""
+    k = wp.tid()
+    i = int(order_in[k])
+    system = int(system_in[i])
+    if not everything and stale_system_in[system] == 0:
+        return
+    x = sorted_position_in[k]
+    radius = sorted_radius_in[k]
     margin = wp.float64(REACH_MARGIN)
     own = cell_of(x, cell_width)
+    row = NeighbourRow()
     noted = int(0)
     for neighbour in range(27):  # the 3 x 3 x 3 cells around its own
         cell = own + wp.vec3i(neighbour % 3 - 1, (neighbour // 3) % 3 - 1, neighbour // 9 - 1)
-        key = cell_key(cell, int(system_in[i]))
-        for k in range(int(start_in[key]), int(end_in[key])):
-            j = int(order_in[k])
-            if j != i:
-                reach = (radius_in[i] + radius_in[j] + skin) * margin
-                r = position_in[j] - x
+        key = cell_key(cell, system)
+        for m in range(int(start_in[key]), int(end_in[key])):
+            if m != k:
+                reach = (radius + sorted_radius_in[m] + skin) * margin
+                r = sorted_position_in[m] - x
                 if wp.dot(r, r) < reach * reach:
-                    noted = note_candidate(candidates, i, noted, j)
+                    j = int(order_in[m])
+                    if noted < wp.static(CANDIDATES):  # insert j (met once: a particle lies in one cell) in order
+                        s = noted
+                        while s > 0:
+                            if row[s - 1] < j:
+                                break
+                            row[s] = row[s - 1]
+                            s -= 1
+                        row[s] = wp.int32(j)
+                    noted += 1  # past the row's width only counted: an overflow
+    for s in range(wp.min(noted, wp.static(CANDIDATES))):
+        candidates[i, s] = row[s]
     candidate_count[i] = wp.int32(noted)
     reference_out[i] = x
-    if i == 0:  # no thread of this launch reads either
-        stale_inout[0] = 0
-        builds_inout[0] = builds_inout[0] + wp.int64(1)
 
+
+@wp.kernel
+def lists_built(
+    everything: bool,
+    stale_inout: wp.array(dtype=wp.int32),  # [0] cleared: every list is fresh
+    stale_system_inout: wp.array(dtype=wp.int32),  # per system: cleared
+    builds_inout: wp.array(dtype=wp.int64),  # per system: its builds so far, one more where built
+):
+    """After a build (a launch of its own: the build reads the flags that this clears)."""
+    system = wp.tid()
+    if everything or stale_system_inout[system] != 0:
+        builds_inout[system] = builds_inout[system] + wp.int64(1)
+    stale_system_inout[system] = 0
+    if system == 0:
+        stale_inout[0] = 0
