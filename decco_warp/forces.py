@@ -408,6 +408,9 @@ class NeighbourList:
         self.system = wp.array(np.repeat(np.arange(systems), engine.systems).astype(np.int32), device=device)
         self.cell_width = (2.0 * engine.max_radius + self.skin) * REACH_MARGIN
         self.keys = wp.zeros(2 * count, dtype=wp.int32, device=device)  # radix_sort_pairs needs room for 2 N
+        # The keys' bits (kernels/neighbours.py cell_key): the sort passes over these alone (3 of
+        # CUB's 8-bit passes for one system, not 4).
+        self.key_bits = 3 * (GRID_CELLS - 1).bit_length() + max(0, (systems - 1).bit_length())
         self.order = wp.zeros(2 * count, dtype=wp.int32, device=device)
         cells = systems * GRID_CELLS**3
         self.cell_start = wp.zeros(cells, dtype=wp.int32, device=device)
@@ -423,7 +426,7 @@ class NeighbourList:
         width = wp.float64(self.cell_width)
         wp.launch(cell_keys, dim=e.count, inputs=[self.system, width, e.position], outputs=[self.keys, self.order], device=e.device,
                   block_dim=particle_block())  # fmt: skip
-        wp.utils.radix_sort_pairs(self.keys, self.order, e.count)
+        wp.utils.radix_sort_pairs(self.keys, self.order, e.count, end_bit=self.key_bits)
         self.cell_start.zero_()
         self.cell_end.zero_()
         wp.launch(

@@ -192,17 +192,17 @@ def test_elastic_frictionless_clump_dissipates_nothing_on_two_clocks():
 
 
 @pytest.mark.parametrize("precision", ["mixed", "float64"])
-def test_a_restart_from_a_snapshot_is_bit_identical(precision):
+def test_a_restart_from_a_snapshot_is_bit_identical(precision, device):
     """Stopped at step 60 and restored (gravity evaluated anew at the restored positions, the
     neighbour lists and the positions of their build from the snapshot), then stepped to 150: every
     array the next step depends on, bit for bit."""
     clump, params = _fast_clump(), dw.Params(gravity_every=5)
-    straight = dw.Simulation(clump, params, device="cpu", precision=precision, ledger=True, allow_unstable=True)
+    straight = dw.Simulation(clump, params, device=device, precision=precision, ledger=True, allow_unstable=True)
     straight.step(150)
-    first = dw.Simulation(clump, params, device="cpu", precision=precision, ledger=True, allow_unstable=True)
+    first = dw.Simulation(clump, params, device=device, precision=precision, ledger=True, allow_unstable=True)
     first.step(60)
     snap = first.snapshot()
-    second = dw.Simulation.from_snapshot(clump, params, snap, device="cpu", precision=precision)
+    second = dw.Simulation.from_snapshot(clump, params, snap, device=device, precision=precision)
     assert second.step_count == 60
     second.step(90)
     a, b = straight.snapshot(), second.snapshot()
@@ -247,7 +247,7 @@ def test_steps_sharing_launches_equal_the_launches_of_an_outer_step(precision):
     assert_fused_steps_equal_one_step_at_a_time(make, pieces=(every, 0, 10 * every + every))
 
 
-def test_an_ensemble_on_two_clocks_moves_each_system_as_alone():
+def test_an_ensemble_on_two_clocks_moves_each_system_as_alone(device):
     """Three clumps centred on the same point (the neighbour list's hash grid groups each system
     apart) stepped together at K = 4: each moves bit for bit as it would alone."""
     sizes = (37, 64, 23)
@@ -255,12 +255,12 @@ def test_an_ensemble_on_two_clocks_moves_each_system_as_alone():
     joined = dw.State.from_arrays(*[np.concatenate([getattr(s, name) for s in states])
                                     for name in ("positions", "velocities", "omegas", "radii", "masses")])  # fmt: skip
     params = dw.Params(gravity_every=4)
-    ensemble = dw.Simulation(joined, params, device="cpu", systems=sizes, ledger=True, allow_unstable=True)
+    ensemble = dw.Simulation(joined, params, device=device, systems=sizes, ledger=True, allow_unstable=True)
     ensemble.step(60)
     cuts = np.cumsum((0, *sizes))
     force, torque = ensemble.forces()
     for k, state in enumerate(states):
-        alone = dw.Simulation(state, params, device="cpu", ledger=True, allow_unstable=True)
+        alone = dw.Simulation(state, params, device=device, ledger=True, allow_unstable=True)
         alone.step(60)
         part = slice(cuts[k], cuts[k + 1])
         assert np.array_equal(ensemble.state.positions[part], alone.state.positions)
