@@ -25,6 +25,7 @@ from .kernels.bodies import BODY_TYPES
 from .kernels.contacts import CANDIDATES, contact_pass
 from .kernels.fused import pair_forces_tiled
 from .kernels.neighbours import GRID_CELLS, REACH_MARGIN, build_neighbour_list, cell_keys, cell_ranges, lists_built
+from .kernels import newton
 from .kernels.newton import GatherRows, TilePair, gather_newton, pair_gravity_newton
 from .kernels.reference import pair_forces_reference
 from .errors import InputError
@@ -260,7 +261,7 @@ class NewtonGravity:
         self.tile_field = wp.zeros((rows, layout.particles_per_block), dtype=vector, device=device)
         self.tile_near = wp.zeros((rows if listing else 0, layout.particles_per_block), dtype=wp.uint64, device=device)
         self.sweep = pair_gravity_newton(layout.particles_per_block // layout.block_dim, engine.precision, layout.max_registers, listing)
-        self.gather_kernel = gather_newton(engine.precision, listing)
+        self.gather_kernel = gather_newton(engine.precision, listing, newton.GATHER_AHEAD)
 
     def evaluate(self, force_out: wp.array) -> None:
         """``force_out`` = gravity on every particle (the bodies packed), and its candidates listed."""

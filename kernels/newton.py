@@ -238,20 +238,22 @@ def pair_gravity_newton(particles_per_lane: int, precision: str = "mixed", max_r
     return pair_gravity_newton_kernel
 
 
-#: Tiles whose rows the gather loads at once.
-GATHER_AHEAD = 8
+#: Tiles whose rows the gather loads at once (their waits overlap; the adds keep the tiles' order,
+#: so the sums are the same at any number).  At the Fig. 8 impact on an H100, 8, 16 and 32 stepped
+#: in 78.1, 77.0 and 80.1 us at K = 1 and 32.1, 31.3 and 31.1 us at K = 10 (docs/benchmarks.md).
+GATHER_AHEAD = 16
 
 
 @functools.cache
-def gather_newton(precision: str = "mixed", listing: bool = True):
+def gather_newton(precision: str = "mixed", listing: bool = True, ahead: int = GATHER_AHEAD):
     """Build the kernel that gives each particle what the Newton sweep found for it, one thread per
     particle (launch with ``dim=N``): its gravity (its field sums from every tile of its system, added
     in float64 in the tiles' order) and, with ``listing``, its contact candidates, listed in
     increasing j (the bits of each tile's word, tile after tile), with their count.  The threads of
     a warp read neighbouring columns of each row: whole lines of memory."""
     real, vec_real = real_types(precision)
-    Fields = wp.types.matrix(shape=(GATHER_AHEAD, 3), dtype=real)
-    Words = wp.types.vector(length=GATHER_AHEAD, dtype=wp.uint64)
+    Fields = wp.types.matrix(shape=(ahead, 3), dtype=real)
+    Words = wp.types.vector(length=ahead, dtype=wp.uint64)
 
     @wp.kernel(module="unique", enable_backward=False)
     def gather_newton_kernel(
@@ -272,16 +274,16 @@ def gather_newton(precision: str = "mixed", listing: bool = True):
         size = field_in.shape[1]
         field = wp.vec3d()
         noted = int(0)
-        for start in range(0, tiles, wp.static(GATHER_AHEAD)):
+        for start in range(0, tiles, wp.static(ahead)):
             # The loads of several tiles first, so that their waits overlap (tiles past the end add zeros).
             fields = Fields()
             words = Words()
-            for k in range(wp.static(GATHER_AHEAD)):
+            for k in range(wp.static(ahead)):
                 if start + k < tiles:
                     fields[k] = field_in[row + start + k, column]
                     if wp.static(listing):
                         words[k] = near_in[row + start + k, column]
-            for k in range(wp.static(GATHER_AHEAD)):
+            for k in range(wp.static(ahead)):
                 field += wp.vec3d(fields[k])
                 if wp.static(listing):
                     bits = words[k]

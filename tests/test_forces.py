@@ -310,3 +310,22 @@ def test_gpu_layouts_run_lane_by_lane_on_the_cpu_equal_the_reference_kernel(tmp_
     done = subprocess.run([sys.executable, "-c", CPU_BLOCK_LAYOUTS, str(tmp_path / "cache"), tests],
                           capture_output=True, text=True, timeout=900)  # fmt: skip
     assert done.returncode == 0 and "SAME" in done.stdout, (done.stdout + done.stderr)[-3000:]
+
+
+def test_the_newton_gathers_rows_loaded_ahead_leave_the_forces_unchanged(monkeypatch):
+    """The Newton gather loads several tiles' rows at once (kernels/newton.py GATHER_AHEAD) so that
+    their waits overlap; it adds them in the tiles' order whatever the number, so the forces and the
+    candidate lists are the same bit for bit at 16 (the default), 8 and 5 (a number that does not
+    divide the tiles), in both precisions."""
+    from decco_warp.kernels import newton
+
+    state = overlapping_cloud(401, seed=3)  # 7 tiles of 64
+    for precision in ("mixed", "float64"):
+        got = {}
+        for ahead in (16, 8, 5):
+            monkeypatch.setattr(newton, "GATHER_AHEAD", ahead)
+            engine = Engine(state, dw.Params(), "cpu", precision, layout=dw.Layout(1, 64, newton=True))
+            engine.eval_forces()
+            got[ahead] = (engine.force.numpy().copy(), engine.candidate_count.numpy().copy())
+        for ahead in (8, 5):
+            assert np.array_equal(got[ahead][0], got[16][0]) and np.array_equal(got[ahead][1], got[16][1]), (precision, ahead)
