@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 
 from .diagnostics import state_diagnostics
-from .forces import NEIGHBOUR_ARRAYS
+from .forces import NEIGHBOUR_ARRAYS, neighbour_arrays
 from .simulation import Simulation
 from .stability import StabilityReport
 from .state import State
@@ -188,12 +188,7 @@ class SystemView:
         snap = {key: whole[key][self.first : self.end].copy() for key in _ARRAYS}
         snap["deepest_contact"] = _partners_moved(snap["deepest_contact"], -self.first)
         if all(key in whole for key in NEIGHBOUR_ARRAYS):
-            count = whole["neighbour_count"][self.first : self.end].copy()
-            width = int(min(count.max(initial=0), whole["neighbour_list"].shape[1]))
-            snap.update(
-                neighbour_reference=whole["neighbour_reference"][self.first : self.end].copy(),
-                neighbour_count=count,
-                neighbour_list=_lists_moved(count, whole["neighbour_list"][self.first : self.end, :width], -self.first),
-            )
+            reference, count, listed = (whole[key][self.first : self.end] for key in NEIGHBOUR_ARRAYS)
+            snap.update(neighbour_arrays(reference, count, _lists_moved(count, listed, -self.first)))
         snap.update(step=self.step_count, time_origin=self._time_origin, ledger=True, energy_start=dict(self.energy_start))
         return snap

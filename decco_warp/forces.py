@@ -454,15 +454,8 @@ class NeighbourList:
         wp.capture_if(self.stale, self.build)
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """The lists as a snapshot holds them, per particle: the positions of their build, the count
-        of neighbours and the neighbours (as many columns as the longest list uses)."""
-        count = self.candidate_count.numpy().copy()
-        width = int(min(count.max(initial=0), self.candidates.shape[1]))
-        return {
-            "neighbour_reference": self.reference.numpy().copy(),
-            "neighbour_count": count,
-            "neighbour_list": self.candidates.numpy()[:, :width].copy(),
-        }
+        """The lists as a snapshot holds them (:func:`neighbour_arrays`)."""
+        return neighbour_arrays(self.reference.numpy(), self.candidate_count.numpy(), self.candidates.numpy())
 
     def load(self, arrays: dict[str, np.ndarray]) -> None:
         """Lists from :meth:`arrays` (the stale flags clear: a snapshot is taken between steps, after
@@ -486,6 +479,13 @@ class NeighbourList:
 
 #: The snapshot keys of the neighbour lists (NeighbourList.arrays), per particle.
 NEIGHBOUR_ARRAYS = ("neighbour_reference", "neighbour_count", "neighbour_list")
+
+
+def neighbour_arrays(reference: np.ndarray, count: np.ndarray, listed: np.ndarray) -> dict[str, np.ndarray]:
+    """Neighbour lists as a snapshot holds them, per particle (host copies): the positions of their
+    build, the count of neighbours and the neighbours, as many columns as the longest list uses."""
+    width = int(min(count.max(initial=0), listed.shape[1]))
+    return {"neighbour_reference": reference.copy(), "neighbour_count": count.copy(), "neighbour_list": listed[:, :width].copy()}
 
 
 class RespaForces(ForcePath):

@@ -6,9 +6,10 @@ contact is then evaluated here, in float64 from the state arrays, with the pair 
 :mod:`.pair`: positions are ~1e7 cm and overlaps ~1e2 cm.  Contacts are few, so this code is kept
 out of the hot loops.
 
-Candidate lists are kept in increasing j as they are noted (``note_candidate``): the tree path's
-hash grid (:mod:`.tree` ``grid_candidates``) and the neighbour list of gravity on its own clock
-(:mod:`.neighbours`), and the Newton layout's gather (:mod:`.newton`).  ``contact_pass`` (8 lanes a
+Candidate lists are kept in increasing j: the tree path's hash grid notes them so
+(``note_candidate``, :mod:`.tree` ``grid_candidates``), the neighbour list of gravity on its own
+clock in each thread's own row before writing it out (:mod:`.neighbours`), and the Newton layout's
+gather tile after tile (:mod:`.newton`).  ``contact_pass`` (8 lanes a
 particle on a GPU, one on the CPU) walks a list in order and reduces its lanes in a fixed
 order, so its sums (and the ledger's channels) do not depend on scheduling.  A listed pair that does
 not touch adds an exact zero, but its slot decides which lane adds the contacts after it: with
