@@ -252,6 +252,71 @@ def test_screening_lone_seeds_changes_no_cluster(piles, monkeypatch):
     assert len(plain) >= 2
 
 
+def _debris_field(pile, seed, pairs=80):
+    """A debris cloud just after impact: ``pile`` spread 1.3-fold about its centre (nobody touching,
+    thousands within NEAR_RADII of each other) flying apart at ~30 m/s in random directions, and
+    ``pairs`` particles each set near one of the largest grains, at a distance from just past
+    touching to NEAR_RADII of the largest radius (log-uniform, so that every distance shell of the
+    screen is met), moving at 0.9 to 1.1 of that grain's escape speed at that distance relative to it."""
+    from decco_warp.analysis import clusters as finder
+
+    rng = np.random.default_rng(seed)
+    centre = pile.centre_of_mass
+    x = centre + 1.3 * (pile.positions - centre)
+    v = 1e-3 * (x - centre) + rng.normal(scale=3000.0, size=x.shape)
+    radii, m = pile.radii, pile.masses
+    largest = np.flatnonzero(m == m.max())
+    seeds = rng.choice(largest, size=pairs, replace=False)
+    others = rng.choice(np.setdiff1d(np.arange(pile.n), seeds), size=pairs, replace=False)
+    for s, j in zip(seeds, others):
+        direction, heading = np.eye(3)[rng.integers(3, size=2)] * rng.choice([-1.0, 1.0], size=(2, 1))
+        closest = 1.05 * (radii[s] + radii[j])
+        distance = math.exp(rng.uniform(math.log(closest), math.log(finder.NEAR_RADII * radii.max())))
+        x[j] = x[s] + distance * direction
+        v[j] = v[s] + rng.uniform(0.9, 1.1) * math.sqrt(2 * dw.G_CGS * m[s] / distance) * heading
+    return dw.State.from_arrays(x, v, pile.omegas, radii, m)
+
+
+def _alone_oracle(state):
+    """The lone-seed screen by its definition over every pair, in float64."""
+    from decco_warp.analysis import clusters as finder
+
+    x, v, m, radii = state.positions, state.velocities, state.masses, state.radii
+    d = np.linalg.norm(x[:, None] - x[None], axis=-1)
+    dv2 = ((v[:, None] - v[None]) ** 2).sum(axis=-1)
+    np.fill_diagonal(d, np.inf)
+    np.fill_diagonal(dv2, np.inf)
+    near = finder.NEAR_RADII * radii.max()
+    touching = (d <= radii[:, None] + radii[None]).any(axis=1)
+    binding = ((d <= near) & (dv2 * d < 2 * dw.G_CGS * m[:, None])).any(axis=1)
+    slow_partner = (dv2 <= 2 * dw.G_CGS * m.max() / near).any(axis=1)
+    return ~touching & ~binding & ~slow_partner
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_lone_seeds_of_a_debris_field_are_those_of_the_definition(seed):
+    """In a debris cloud just after impact (no contacts, thousands of particles within NEAR_RADII of
+    each seed, fast relative speeds; pairs bound near their threshold at every distance), the screen
+    finds exactly the particles of its definition, and the finder the same clusters with it as
+    without it."""
+    from decco_warp.analysis import clusters as finder
+
+    pile = dw.load_pile(builtin_pile("target"))
+    state = _combine(*(_moved(pile, (k * 8 * pile_radius(pile), 0, 0), (0, 0, 0)) for k in range(8)))
+    state = _debris_field(state, seed)
+    x, v, m, radii = state.positions, state.velocities, state.masses, state.radii
+    alone = finder._alone(x, v, m, radii, finder.contact_graph(x, radii), dw.G_CGS)
+    oracle = _alone_oracle(state)
+    assert np.array_equal(alone, oracle)
+    assert 200 < alone.sum() < state.n - 100  # most particles lone, the near-threshold pairs split between bound and not
+    screened = dw.find_clusters(state, min_members=2)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(finder, "_alone", lambda x, *rest: np.zeros(len(x), dtype=bool))
+        plain = dw.find_clusters(state, min_members=2)
+    assert [c.members.tolist() for c in screened] == [c.members.tolist() for c in plain]
+    assert len(plain) >= 20
+
+
 def _clumps(centre, spread, count, size, speed, seed):
     """``count`` clumps of ``size`` touching grains each (a row 1.99 radii apart), scattered within
     ``spread`` of ``centre`` with random velocities of ~``speed`` (add a bulk velocity with _moved):

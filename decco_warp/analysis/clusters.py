@@ -187,7 +187,8 @@ def _alone(x: np.ndarray, v: np.ndarray, m: np.ndarray, radii: np.ndarray, conta
     n = m.size
     alone = contacts.getnnz(axis=1) == 0
     near = NEAR_RADII * float(radii.max())
-    slow = math.sqrt(2.0 * G * float(m.max()) / near)
+    reach = 2.0 * G * float(m.max())
+    slow = math.sqrt(reach / near)
     # Another particle within ``slow`` in velocity space (itself is the nearest, at 0): the second
     # nearest, found or not, rather than counting every particle of a co-moving remnant.  Tested
     # first: it is cheap, and it clears the particles of a compact remnant that touch nobody (each
@@ -196,16 +197,42 @@ def _alone(x: np.ndarray, v: np.ndarray, m: np.ndarray, radii: np.ndarray, conta
     alone &= ~np.isfinite(second[:, 1])
     seeds = np.flatnonzero(alone)
     if seeds.size:
-        around = cKDTree(x).query_ball_point(x[seeds], r=near)
-        s = np.repeat(seeds, [len(a) for a in around])
-        j = np.concatenate([np.asarray(a, dtype=np.int64) for a in around])
-        other = j != s
-        s, j = s[other], j[other]
-        reach = ((v[j] - v[s]) ** 2).sum(axis=1) * np.linalg.norm(x[j] - x[s], axis=1)
+        s, j = _pairs_that_could_bind(x, v, seeds, 2.0 * float(radii.min()), near, reach)
+        distance = np.linalg.norm(x[j] - x[s], axis=1)
+        speed2 = ((v[j] - v[s]) ** 2).sum(axis=1)
         binds = np.zeros(n, dtype=bool)
-        binds[s[reach < 2.0 * G * m[s]]] = True
+        binds[s[(distance <= near) & (speed2 * distance < 2.0 * G * m[s])]] = True
         alone &= ~binds
     return alone
+
+
+def _pairs_that_could_bind(x: np.ndarray, v: np.ndarray, seeds: np.ndarray, closest: float, near: float, reach: float):
+    """Pairs (seed s, other j) holding every pair within ``near`` with |v_j - v_s|^2 |x_j - x_s| <
+    ``reach`` (2 G m_max), for seeds that touch nobody, so that no j lies closer than ``closest``
+    (the smallest sum of two radii).  A pair at a distance in [D, 2 D] can bind only below
+    sqrt(reach / D) in relative speed: each such shell is one box query of a k-d tree in
+    six dimensions, positions over 2 D and velocities over that speed (a debris cloud just after
+    impact has thousands of particles within ``near`` of a seed, but few that slow: the pairs
+    found are few, where all within ``near`` were ~1e7 a frame).  Pairs closer than ``closest``
+    (none where the contact graph is right) are found by position alone."""
+    pairs = [_ball_pairs(x, seeds, closest * _WIDEN)]
+    inner = closest / _WIDEN
+    while inner < near:
+        outer = 2.0 * inner
+        speed = math.sqrt(reach / inner)
+        pairs.append(_ball_pairs(np.hstack([x / outer, v / speed]), seeds, _WIDEN, p=np.inf))
+        inner = outer
+    s, j = np.concatenate(pairs, axis=1)
+    other = s != j
+    return s[other], j[other]
+
+
+def _ball_pairs(points: np.ndarray, seeds: np.ndarray, radius: float, p: float = 2.0) -> np.ndarray:
+    """(2, pairs): each seed s with every point j within ``radius`` of it (Minkowski ``p``-norm)."""
+    around = cKDTree(points).query_ball_point(points[seeds], r=radius, p=p)
+    s = np.repeat(seeds, [len(a) for a in around])
+    j = np.concatenate([np.asarray(a, dtype=np.int64) for a in around]) if len(around) else np.zeros(0, dtype=np.int64)
+    return np.stack([s.astype(np.int64), j])
 
 
 class _FreeParticles:
