@@ -908,6 +908,33 @@ def compare(
 
 
 @app.command()
+def threshold(
+    paths: List[Path] = typer.Argument(..., help="Run folders or folders of run folders (their summary.json) of head-on runs at one angle."),
+    where: Optional[List[str]] = typer.Option(
+        None, "--where", metavar="COLUMN=VALUE[,VALUE...]", help="Keep only the runs with one of these values in COLUMN (repeatable), e.g. --where theta_deg=0."
+    ),
+    confidence: float = typer.Option(0.95, "--confidence", metavar="LEVEL", help="Level of the intervals (two-sided)."),
+) -> None:
+    """The catastrophic disruption threshold Q*_RD per mass ratio (the Q_R at which the largest
+    remnant holds half the total mass, from a line through the runs in LS12's linear regime) with
+    its interval, and LS12's c* and mu_bar fitted to the thresholds of two or more mass ratios."""
+    from .analysis.compare import parse_where, read_rows, select
+    from .analysis.threshold import report, thresholds
+    from .checks import InputError
+
+    try:
+        if not 0 < confidence < 1:
+            raise InputError(f"--confidence must be in (0, 1); got {confidence}")
+        rows, _ = select(read_rows(paths), parse_where(where or []))
+        rows = [row for row in rows if row.get("status", "ok") in (None, "ok") or str(row.get("status")).startswith("skipped")]
+        lines = report(thresholds(rows, confidence))
+    except InputError as error:  # CompareError is one
+        fail(str(error))
+    for line in lines:
+        typer.echo(line)
+
+
+@app.command()
 def view(
     path: Path = typer.Argument(..., help="A run folder or its trajectory.h5 (finished or still running)."),
     save_to: Optional[Path] = typer.Option(None, "--save", help="Write a .rrd recording here instead of opening a viewer."),

@@ -307,7 +307,8 @@ def test_shipped_large_pile_list_and_collision_are_valid():
      ("resolution/x4", ["resolution_auto"], {"resolution": 4.0}),
      ("resolution_paper_contacts", ["resolution_paper_contacts"], {"resolution": 0.25}),
      ("resolution_paper_contacts/x4", ["resolution_paper_contacts"], {"resolution": 4.0}),
-     ("fig3_auto", ["fig3_headon_auto"], None), ("resolution/x16", ["resolution_fine"], {"resolution": 16.0})],
+     ("fig3_auto", ["fig3_headon_auto"], None), ("resolution/x16", ["resolution_fine"], {"resolution": 16.0}),
+     ("qstar_rd/x4", ["qstar_rd"], {"resolution": 4.0})],
 )  # fmt: skip
 def test_committed_results_are_runs_of_the_shipped_sweeps(folder, sweeps, overrides):
     """Every run kept under runs/results/ is, name and set-up (piles, collision with its orientation
@@ -318,8 +319,13 @@ def test_committed_results_are_runs_of_the_shipped_sweeps(folder, sweeps, overri
     from decco_warp.spec import resolve_spec
 
     root = Path(__file__).parent.parent
-    if overrides == {"resolution": 16.0} and not (root / "runs" / "paper" / "piles" / "target5000_x16.h5").is_file():
-        pytest.skip("the R = 16 piles are not shipped: decco-warp piles runs/paper/piles.toml --resolution 16 builds them")
+    if overrides and overrides.get("resolution", 1) != 1:
+        factor = f"{overrides['resolution']:g}"
+        missing = [f"{name}_x{factor}.h5" for name in ("target5000", "proj1250", "proj500", "equal5000")
+                   if f"{name}.h5" in "".join((root / "runs" / "paper" / f"{sweep}.toml").read_text() for sweep in sweeps)
+                   and not (root / "runs" / "paper" / "piles" / f"{name}_x{factor}.h5").is_file()]  # fmt: skip
+        if missing:
+            pytest.skip(f"piles not shipped ({', '.join(missing)}): decco-warp piles runs/paper/piles.toml --resolution {factor} builds them")
     planned = {}
     for name in sweeps:
         for run in load_sweep(root / "runs" / "paper" / f"{name}.toml", overrides)[1]:
