@@ -18,7 +18,7 @@ import numpy as np
 from .params import Params
 from .simulation import Simulation
 from .checks import DENSITY_RANGE, RADIUS_RANGE
-from .state import State
+from .state import State, remove_net_motion
 from .errors import FormationError, InputError  # noqa: F401 (re-exported: the error lives in errors.py)
 
 #: The paper's particle radii [cm] (Table 1) and density [g/cm^3].
@@ -110,22 +110,6 @@ def _uniform_in_ball(rng: np.random.Generator, radius: float) -> np.ndarray:
         point = rng.uniform(-1.0, 1.0, size=3)
         if point @ point <= 1.0:
             return radius * point
-
-
-def remove_net_motion(state: State) -> State:
-    """Centre the pile and remove its net momentum and rigid spin (orbital plus particle spins).
-
-    The spin removed is omega = I_pile^-1 L about the centre of mass, with I_pile
-    including the particles' own moments of inertia; afterwards the total
-    angular momentum about the centre is zero to round-off.
-    """
-    state = state.copy()
-    spin = state.spin()
-    state.positions -= state.centre_of_mass
-    state.velocities -= state.bulk_velocity
-    state.velocities -= np.cross(spin, state.positions)
-    state.omegas -= spin
-    return state
 
 
 class Formation:
