@@ -1,0 +1,144 @@
+"""Piles and runs to and from other codes: pkdgrav's .ss files (the format in ss.py).
+
+    pile = pile_from_ss("rubble.ss")                         # a pile (State) at rest, checked
+    export_ss("runs/out/default", "last.ss")                 # a run's last frame (or a pile file) as .ss
+
+Units: cgs here, pkdgrav's system units inside .ss files (ss.py).  Reads pile files and
+trajectories; no Warp.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .checks import check_pile
+from .errors import InputError
+from .folder import RunFolder
+from .io import PILE_FORMAT, frame_clock, load_pile, open_h5, read_frame
+from .sizes import size_classes
+from .ss import DEFAULT_UNITS, PROJECTILE_COLOR, TARGET_COLOR, SSParticles, SSUnits, read_ss, write_ss
+from .state import State, remove_net_motion
+
+#: The name of a run's frame exported as .ss: its step, ten digits (pkdgrav numbers its outputs so).
+FRAME_NAME = "frame_{step:010d}.ss"
+
+
+# --- pkdgrav .ss: piles in ------------------------------------------------------------------------
+
+
+def pile_from_ss(path, units: SSUnits = DEFAULT_UNITS) -> State:
+    """A pile from a .ss file: its particles in cgs, centred, their bulk motion and rigid spin removed
+    (a pile file is at rest), size classes from their radii (sizes.size_classes), and the checks
+    made on every pile file (radii from 1 cm to 1000 km, densities, no two spheres pressed deeper
+    than a quarter of the smaller radius).  InputError or FileFormatError: one line."""
+    path = Path(path)
+    particles = read_ss(path, units)
+    size_class, sizes = size_classes(particles.radius)
+    state = State.from_arrays(particles.position, particles.velocity, particles.spin, particles.radius, particles.mass, size_class=size_class)
+    centre, bulk, spin = state.centre_of_mass, state.bulk_velocity, state.spin()
+    pile = remove_net_motion(state)
+    check_pile(pile, f"{path}")
+    pile.metadata = {
+        "source": "pkdgrav .ss",
+        "ss_file": str(path.resolve()),
+        "ss_sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
+        "ss_format": "reduced" if particles.reduced else "standard",
+        "ss_units": units.name,
+        "ss_time": particles.time,
+        "ss_color": particles.color,
+        "ss_org_idx": particles.org_idx,
+        "removed_centre": centre,
+        "removed_velocity": bulk,
+        "removed_spin": spin,
+        "n_particles": pile.n,
+        "size_counts": np.bincount(size_class),
+        **sizes,
+    }
+    return pile
+
+
+# --- pkdgrav .ss: piles and frames out --------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Exported:
+    """One file written by :func:`export_ss`."""
+
+    path: Path
+    step: int
+    time: float
+    """[s]"""
+    n: int
+
+
+def is_pile_file(path) -> bool:
+    """Whether ``path`` is a decco-warp pile file (its format mark), not a trajectory."""
+    path = Path(path)
+    if not path.is_file():
+        return False
+    with open_h5(path, "file") as f:
+        return f.attrs.get("format") == PILE_FORMAT
+
+
+def export_ss(source, destination, frame: int | str | None = None, reduced: bool = False, units: SSUnits = DEFAULT_UNITS) -> list[Exported]:
+    """Write ``source`` as .ss: a pile file (colours and original indices as its .ss held them, if it
+    came from one), or a run folder's (or trajectory file's) frame ``frame`` (an index, negative from
+    the end; default the last; "all": every frame, into the folder ``destination`` as FRAME_NAME),
+    its target's grains in pkdgrav colour TARGET_COLOR, the projectile's PROJECTILE_COLOR, original
+    indices the particles' indices."""
+    source, destination = Path(source), Path(destination)
+    if is_pile_file(source):
+        if frame is not None:
+            raise InputError(f"{source} is a pile file: it has no frames (--frame is for runs)")
+        pile = load_pile(source)
+        meta = pile.metadata
+        color = _kept(meta.get("ss_color"), pile.n, np.full(pile.n, TARGET_COLOR))
+        org_idx = _kept(meta.get("ss_org_idx"), pile.n, np.arange(pile.n))
+        particles = SSParticles(0.0, pile.masses, pile.radii, pile.positions, pile.velocities, pile.omegas, color, org_idx, reduced)
+        write_ss(destination, particles, units)
+        return [Exported(destination, 0, 0.0, pile.n)]
+    trajectory = RunFolder(source).trajectory if source.is_dir() else source
+    if not trajectory.is_file():
+        raise InputError(f"{source} does not exist" if not source.exists() else f"{source} is neither a pile file, a run folder nor a trajectory")
+    steps, times = frame_clock(trajectory)
+    if frame == "all":
+        chosen = range(len(steps))
+    else:
+        chosen = [_frame_index(frame, len(steps), source)]
+    written = []
+    for index in chosen:
+        particles_of, _, static = read_frame(trajectory, index)
+        color = np.where(static["pile_id"] == 0, TARGET_COLOR, PROJECTILE_COLOR)
+        particles = SSParticles(float(times[index]), static["mass"], static["radius"], particles_of["position"], particles_of["velocity"],
+                                particles_of["omega"], color, np.arange(static["mass"].shape[0]), reduced)  # fmt: skip
+        path = destination / FRAME_NAME.format(step=int(steps[index])) if frame == "all" else destination
+        if frame == "all":
+            destination.mkdir(parents=True, exist_ok=True)
+        write_ss(path, particles, units)
+        written.append(Exported(path, int(steps[index]), float(times[index]), particles.n))
+    return written
+
+
+def _kept(values, n: int, otherwise: np.ndarray) -> np.ndarray:
+    """A pile's recorded per-particle values if there are ``n`` of them, else ``otherwise``."""
+    values = None if values is None else np.asarray(values)
+    return values.astype(np.int32) if values is not None and values.shape == (n,) else otherwise.astype(np.int32)
+
+
+def _frame_index(frame, frames: int, source) -> int:
+    """A frame's index among a trajectory's ``frames`` (None: the last; negative: from the end)."""
+    if frames == 0:
+        raise InputError(f"{source} has no whole frame yet")
+    if frame is None:
+        return frames - 1
+    try:
+        index = int(frame)
+    except (TypeError, ValueError):
+        raise InputError(f"--frame must be a frame's index (negative: from the end) or all; got {frame!r}") from None
+    if not -frames <= index < frames:
+        raise InputError(f"--frame {index}: {source} has {frames} frame(s), 0 to {frames - 1} (or -1 to -{frames})")
+    return index % frames
