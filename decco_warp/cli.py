@@ -1007,16 +1007,24 @@ def export(
         None, "--ss", help="Write pkdgrav's .ss here (its units: G = 1, M_sun, AU, yr/2pi): a frame of the run (--frame), every frame into this folder (--frame all), or the pile."
     ),
     reduced: bool = typer.Option(False, "--reduced", help="With --ss: pkdgrav's reduced format (float mass, radius and position; no velocities or spins)."),
-    frame: Optional[str] = typer.Option(None, "--frame", help="With --ss: the frame, its index (negative: from the end; default the last), or all."),
+    rebound: Optional[Path] = typer.Option(
+        None, "--rebound", help="Write an analysed frame's fragments (and the grains of none) as a REBOUND simulation file here, in cgs with sim.G in cgs (needs rebound)."
+    ),
+    frame: Optional[str] = typer.Option(
+        None, "--frame", help="The frame: its index (negative: from the end; default the last, for --rebound the last analysed), or all (--ss only)."
+    ),
 ) -> None:
-    """Write a run (or a pile) for other programs: an XDMF description for ParaView and VisIt, or pkdgrav .ss files."""
-    if not (xdmf or ss):
-        fail("say what to export: --xdmf or --ss FILE")
+    """Write a run (or a pile) for other programs: an XDMF description for ParaView and VisIt, pkdgrav
+    .ss files, or its fragments as a REBOUND simulation."""
+    if not (xdmf or ss or rebound):
+        fail("say what to export: --xdmf, --ss FILE or --rebound FILE")
     if frame not in (None, "all"):
         try:
             frame = int(frame)
         except ValueError:
             fail(f"--frame must be a frame's index (negative: from the end) or all; got {frame!r}")
+    if frame == "all" and rebound:
+        fail("--frame all goes with --ss alone: --rebound writes one frame")
     if reduced and not ss:
         fail("--reduced goes with --ss")
     if not path.exists():
@@ -1025,6 +1033,8 @@ def export(
         _export_xdmf(path)
     if ss:
         _export_ss(path, ss, frame, reduced)
+    if rebound:
+        _export_rebound(path, rebound, frame)
 
 
 def _export_xdmf(path: Path) -> None:
@@ -1079,6 +1089,28 @@ def _export_ss(path: Path, destination: Path, frame, reduced: bool) -> None:
     one = written[0]
     what = f"the pile {path}" if pile else f"step {one.step} (t = {one.time:.6g} s) of {path}"
     typer.echo(f"wrote {one.path}: {what}, {one.n} particles, pkdgrav {kind} .ss in pkdgrav's units (G = 1; M_sun, AU, yr/2pi: docs/data.md)")
+
+
+def _export_rebound(path: Path, destination: Path, frame) -> None:
+    """``export --rebound``: an analysed frame's fragments as a REBOUND simulation file."""
+    from .checks import check_destination
+    from .errors import FileFormatError, InputError
+    from .interchange import handoff_bodies, write_rebound
+
+    if not path.is_dir():
+        fail(f"--rebound takes a run folder (analysed: its analysis.h5 holds the fragments); {path} is not one")
+    try:
+        check_destination(destination, "REBOUND file")
+        bodies = handoff_bodies(path, frame)
+        write_rebound(destination, bodies)
+    except (InputError, FileFormatError) as error:
+        fail(str(error))
+    except OSError as error:
+        write_failed(error, f"{destination} is not written (any earlier one is as it was)")
+    typer.echo(
+        f"wrote {destination}: frame {bodies.frame} (step {bodies.step}, t = {bodies.time:.6g} s) of {path}, {bodies.fragments} fragment(s) "
+        f"and {bodies.grains} grain(s) of none as REBOUND particles in cgs (sim.G = {bodies.G:g}); open it with rebound.Simulation('{destination}')"
+    )
 
 
 # --- sweep ---------------------------------------------------------------------------------

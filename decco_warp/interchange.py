@@ -1,24 +1,31 @@
-"""Piles and runs to and from other codes: pkdgrav's .ss files (the format in ss.py).
+"""Piles and runs to and from other codes: pkdgrav's .ss files (the format in ss.py) and a run's
+fragments handed on to REBOUND.
 
     pile = pile_from_ss("rubble.ss")                         # a pile (State) at rest, checked
     export_ss("runs/out/default", "last.ss")                 # a run's last frame (or a pile file) as .ss
+    bodies = handoff_bodies("runs/out/default")              # the last analysed frame's fragments and loose grains
+    write_rebound("fragments.bin", bodies)                   # as a REBOUND simulation file (cgs, sim.G in cgs)
 
-Units: cgs here, pkdgrav's system units inside .ss files (ss.py).  Reads pile files and
-trajectories; no Warp.
+Units: cgs here, pkdgrav's system units inside .ss files (ss.py), cgs in the REBOUND file.  Reads
+pile files, trajectories and analysis.h5; no Warp.  rebound is imported only to write its file.
 """
 
 from __future__ import annotations
 
 import hashlib
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+import h5py
 import numpy as np
 
 from .checks import check_pile
-from .errors import InputError
+from .durable import write_atomic
+from .errors import FileFormatError, InputError
 from .folder import RunFolder
-from .io import PILE_FORMAT, frame_clock, load_pile, open_h5, read_frame
+from .io import PILE_FORMAT, frame_clock, load_pile, open_h5, open_trajectory, read_dict, read_frame
+from .params import G_CGS
 from .sizes import size_classes
 from .ss import DEFAULT_UNITS, PROJECTILE_COLOR, TARGET_COLOR, SSParticles, SSUnits, read_ss, write_ss
 from .state import State, remove_net_motion
@@ -142,3 +149,99 @@ def _frame_index(frame, frames: int, source) -> int:
     if not -frames <= index < frames:
         raise InputError(f"--frame {index}: {source} has {frames} frame(s), 0 to {frames - 1} (or -1 to -{frames})")
     return index % frames
+
+
+# --- REBOUND ----------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class HandoffBodies:
+    """A frame's bodies for an N-body code, in cgs: each fragment of the analysis as one body (its
+    mass, centre of mass, velocity, and radius of the sphere of its bulk volume: the volume of the
+    uniform ellipsoid with its mass and inertia, as the catalogue's bulk density), each grain in no
+    fragment as a body of its own."""
+
+    names: list[str]
+    mass: np.ndarray
+    """(K,) [g]"""
+    position: np.ndarray
+    """(K, 3) [cm], the run's frame (the collision's centre of mass at rest)"""
+    velocity: np.ndarray
+    """(K, 3) [cm s-1]"""
+    radius: np.ndarray
+    """(K,) [cm]"""
+    time: float
+    """[s]"""
+    step: int
+    frame: int
+    G: float
+    """The run's gravitational constant [cm3 g-1 s-2]."""
+    fragments: int
+    grains: int
+
+
+def handoff_bodies(run_dir, frame: int | None = None) -> HandoffBodies:
+    """The bodies of an analysed frame of a run (``frame``: a trajectory frame index, negative from the
+    end; default the last analysed frame): its catalogue's fragments and the grains of no fragment."""
+    folder = RunFolder(run_dir)
+    if not folder.analysis.is_file():
+        raise InputError(f"{run_dir} has no {RunFolder.ANALYSIS}: decco-warp analyze {run_dir} first (it finds the fragments)")
+    steps, times = frame_clock(folder.trajectory)
+    try:
+        with h5py.File(folder.analysis, "r") as f:
+            analysed = f["frames/step"][()]
+            if frame is None:
+                done = np.flatnonzero(np.isin(steps, analysed))
+                if done.size == 0:
+                    raise InputError(f"none of the analysed frames of {run_dir} is in its trajectory: analyse it again")
+                index = int(done[-1])
+            else:
+                index = _frame_index(frame, len(steps), run_dir)
+            step = int(steps[index])
+            row = np.flatnonzero(analysed == step)
+            if row.size == 0:
+                raise InputError(f"frame {index} (step {step}) of {run_dir} was not analysed: decco-warp analyze {run_dir} (--every 1 analyses every frame)")
+            label = f["frames/label"][row[0]]
+            mine = f["catalogue/step"][()] == step
+            catalogue = {name: f["catalogue"][name][()][mine] for name in ("mass", "com", "velocity", "semi_axes")}
+    except (OSError, KeyError) as error:
+        raise FileFormatError(f"{folder.analysis} is not a whole analysis of this version ({error}): analyse the run again") from None
+    particles, _, static = read_frame(folder.trajectory, index)
+    with open_trajectory(folder.trajectory) as f:
+        spec = read_dict(f["parameters/spec"]) if "parameters/spec" in f else {}
+    loose = np.flatnonzero(label < 0)
+    fragments = int(mine.sum())
+    return HandoffBodies(
+        names=[f"fragment_{k}" for k in range(fragments)] + [f"grain_{i}" for i in loose],
+        mass=np.concatenate([catalogue["mass"], static["mass"][loose]]),
+        position=np.concatenate([catalogue["com"].reshape(-1, 3), particles["position"][loose]]),
+        velocity=np.concatenate([catalogue["velocity"].reshape(-1, 3), particles["velocity"][loose]]),
+        radius=np.concatenate([np.cbrt(catalogue["semi_axes"].reshape(-1, 3).prod(axis=1)), static["radius"][loose]]),
+        time=float(times[index]),
+        step=step,
+        frame=index,
+        G=float(spec.get("params", {}).get("G", G_CGS)),
+        fragments=fragments,
+        grains=int(loose.size),
+    )
+
+
+def write_rebound(path, bodies: HandoffBodies) -> Path:
+    """``bodies`` as a REBOUND simulation file that ``rebound.Simulation(path)`` opens: one particle a
+    body (mass, position, velocity, radius; named fragment_K or grain_I), in cgs, with ``sim.units``
+    recorded as (s, cm, g), ``sim.G`` the run's G and ``sim.t`` the frame's time [s].  Written whole
+    or not at all; InputError without rebound."""
+    try:
+        import rebound
+    except ImportError:
+        raise InputError("--rebound needs REBOUND: pip install rebound (or: pip install -e \".[rebound]\")") from None
+    sim = rebound.Simulation()
+    sim.units = ("s", "cm", "g")
+    sim.G = bodies.G  # REBOUND's cgs G is CODATA 2014's; the run's is the one its fragments moved under
+    sim.t = bodies.time
+    for name, m, x, v, r in zip(bodies.names, bodies.mass, bodies.position, bodies.velocity, bodies.radius):
+        sim.add(m=float(m), x=float(x[0]), y=float(x[1]), z=float(x[2]), vx=float(v[0]), vy=float(v[1]), vz=float(v[2]), r=float(r), name=name)
+    with tempfile.TemporaryDirectory() as folder:
+        scratch = Path(folder) / "simulation.bin"
+        sim.save_to_file(str(scratch), delete_file=True)
+        return write_atomic(path, scratch.read_bytes())
