@@ -195,7 +195,11 @@ def pile(
     out: Path = typer.Option(..., "--out", "-o", help="Pile file to write (HDF5)."),
     particles: int = typer.Option(PILE_DEFAULTS["particles"], "--particles", "-n", help="Number of particles."),
     seed: int = typer.Option(PILE_DEFAULTS["seed"], "--seed", help="Random seed: the same seed gives the same pile."),
-    radii: str = typer.Option(PILE_DEFAULTS["radii"], "--radii", help="Particle radii of the size classes [cm]."),
+    radii: str = typer.Option(PILE_DEFAULTS["radii"], "--radii", help="Particle radii of the size classes [cm], equal mass per size."),
+    size_distribution: Optional[str] = typer.Option(
+        PILE_DEFAULTS["size_distribution"], "--size-distribution",
+        help="Radii drawn from a power law instead of --radii: power:q=Q:r_min=R_MIN:r_max=R_MAX[:classes=K] (dN/dR ~ R^q, radii in cm; K size classes of equal width in log R, default 3), e.g. power:q=-3.5:r_min=5e5:r_max=2.5e6.",
+    ),
     density: float = typer.Option(PILE_DEFAULTS["density"], "--density", help="Particle density [g/cm^3]."),
     ke_threshold: float = typer.Option(PILE_DEFAULTS["ke_threshold"], "--ke-threshold", help="Stop when kinetic energy < this x |U|."),
     fill: float = typer.Option(PILE_DEFAULTS["fill"], "--fill", help="Volume fraction of the seeding sphere."),
@@ -222,16 +226,20 @@ def pile(
             fail(f"--from takes the pile as the file holds it: {', '.join(forming)} {'does' if len(forming) == 1 else 'do'} not apply")
         _pile_from_ss(from_ss, out, overwrite, check)
         return
+    radii_given = context.get_parameter_source("radii")
+    if size_distribution is not None and radii_given is not None and radii_given.name == "COMMANDLINE":
+        fail("give --radii or --size-distribution, not both")
     _form_pile(
         out, overwrite, check, device, particles=particles, seed=seed, radii=radii, density=density, ke_threshold=ke_threshold,
         fill=fill, max_steps=max_steps, k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt, precision=precision, gravity=gravity,
+        size_distribution=size_distribution,
     )  # fmt: skip
 
 
 def _form_pile(
     out: Path, overwrite: bool, check: bool, device: Optional[str], *, particles: int, seed: int, radii: str, density: float,
     ke_threshold: float, fill: float, max_steps: int, k_in: float, restitution: float, mu_k: float, mu_r: float, dt: float,
-    precision: str, gravity: str,
+    precision: str, gravity: str, size_distribution: Optional[str] = None,
 ) -> None:  # fmt: skip
     """``decco-warp pile``'s work, also that of each pile of ``decco-warp piles``: exits as the command would."""
     from .checks import check_destination
@@ -246,7 +254,7 @@ def _form_pile(
         plan = plan_pile(
             out, particles=particles, seed=seed, radii=_floats(radii, "--radii"), density=density, ke_threshold=ke_threshold, fill=fill,
             max_steps=max_steps, k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt, precision=precision, gravity=gravity,
-            device=device,
+            device=device, size_distribution=size_distribution,
         )  # fmt: skip
     except ValueError as error:  # bad input: each input error of errors.py is a ValueError, as are Params' checks
         fail(str(error))
@@ -254,11 +262,16 @@ def _form_pile(
     if check:
         from .costs import formation_cost
 
-        typer.echo(f"pile: {particles} particles of radii {', '.join(f'{r / 1e5:g}' for r in plan.radii)} km (equal mass per size class), "
-                   f"density {density:g} g/cm^3, seed {seed}, {gravity} gravity on {chosen}")  # fmt: skip
+        typer.echo(f"pile: {particles} particles, density {density:g} g/cm^3, seed {seed}, {gravity} gravity on {chosen}")
+        for line in plan.grain_lines():
+            typer.echo(line)
         typer.echo(f"cost: {formation_cost(particles, density, fill, dt, gravity, chosen)}; gives up at {max_steps} steps")
+        if plan.refusal():
+            fail(plan.refusal())
         typer.echo(f"verdict: would form {out}" + (" (replacing it)" if out.exists() else ""))
         return
+    if plan.refusal():
+        fail(plan.refusal())
     if plan.note:
         typer.echo(f"{plan.note} (a pile takes ~{TYPICAL_FORMATION_STEPS:.0e} steps to settle)", err=True)
     typer.echo(f"forming a {particles}-particle pile on {chosen} (seed {seed}, {gravity} gravity)", err=True)

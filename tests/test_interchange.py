@@ -52,6 +52,22 @@ def test_frames_go_out_as_ss_in_pkdgrav_units(run_dir, tmp_path):
     assert result.returncode == 2 and "has 3 frame(s), 0 to 2" in result.stderr and result.stderr.count("\n") == 1
 
 
+def test_the_analysis_states_the_radii_of_its_size_classes(run_dir):
+    """analysis.h5 /size_classes: per class the smallest and largest radius of its particles and their
+    count, here the shipped piles' three sizes (258 + 129, 32 + 16, 10 + 5 grains)."""
+    import h5py
+
+    data = dw.read_trajectory(run_dir / "trajectory.h5")
+    radius, species = data.static["radius"], data.static["species"]
+    with h5py.File(run_dir / "analysis.h5", "r") as f:
+        classes = {name: f["size_classes"][name][()] for name in ("radius_min", "radius_max", "count")}
+        assert f["size_classes/radius_min"].attrs["unit"].startswith("cm")
+    for k in range(3):
+        assert classes["radius_min"][k] == radius[species == k].min() and classes["radius_max"][k] == radius[species == k].max()
+    np.testing.assert_array_equal(classes["radius_min"], [0.75e6, 1.5e6, 2.25e6])
+    assert classes["count"].tolist() == [387, 48, 15]
+
+
 def _fragments_by_hand(run_dir):
     """The last frame's fragments from the trajectory and the analysis's labels, in float64: mass,
     centre of mass, velocity, and the radius of the sphere of the volume of the uniform ellipsoid
