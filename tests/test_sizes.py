@@ -134,7 +134,7 @@ def test_check_says_what_the_smallest_grain_costs_and_what_the_largest_touches(t
     scale = math.sqrt(m_min / 1e18)
     assert f"sqrt(m/k_in) = {scale:.3g} s: dt = 0.04 s has a margin of {scale / 0.04:.3g} (need >= 10)" in result.stdout
     width = max(64, math.ceil(8 + 4 * (radii.max() / radii.min()) ** 2))
-    assert f"largest grain: radius {radii.max() / 1e5:.4g} km" in result.stdout and f"contact lists hold {width} candidates" in result.stdout
+    assert f"largest grain: radius {radii.max() / 1e5:.4g} km" in result.stdout and f"the tree hold {width} a particle" in result.stdout
     counts = np.bincount(np.clip(np.digitize(radii, 10 ** np.linspace(math.log10(5e5), math.log10(2.5e6), 4)[1:-1]), 0, 2))
     assert f"of {', '.join(str(c) for c in counts)} particles" in result.stdout and not (tmp_path / "p.h5").exists()
     # Grains of 1 km want a shorter step than the paper's 0.04 s: said before any work, exit 2.
