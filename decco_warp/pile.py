@@ -309,7 +309,7 @@ def form_pile(*args, progress: Callable[[FormationProgress], None] | None = None
     """Build a rubble pile: seed, collapse until KE < ke_threshold |U|, remove net motion, centre.
 
     The arguments are :class:`Formation`'s (n_particles, seed, device, radii, density,
-    params, ke_threshold, fill, check_every, max_steps, precision); ``progress`` is told
+    params, ke_threshold, fill, check_every, max_steps, precision, size_distribution); ``progress`` is told
     after each check.  Deterministic for a given ``seed`` on a given device.  The
     returned State has ``size_class`` (0 = smallest radius) and ``metadata`` with the
     formation history (time, KE/|U|) and the settings used.  (:class:`Formation` does
