@@ -112,19 +112,19 @@ def export_ss(source, destination, frame: int | str | None = None, reduced: bool
     if not trajectory.is_file():
         raise InputError(f"{source} does not exist" if not source.exists() else f"{source} is neither a pile file, a run folder nor a trajectory")
     steps, times = frame_clock(trajectory)
+    if len(steps) == 0:
+        raise InputError(f"{source} has no whole frame yet")
     if frame == "all":
-        chosen = range(len(steps))
+        destination.mkdir(parents=True, exist_ok=True)
+        chosen = [(index, destination / FRAME_NAME.format(step=int(step))) for index, step in enumerate(steps)]
     else:
-        chosen = [_frame_index(frame, len(steps), source)]
+        chosen = [(_frame_index(frame, len(steps), source), destination)]
     written = []
-    for index in chosen:
+    for index, path in chosen:
         particles_of, _, static = read_frame(trajectory, index)
         color = np.where(static["pile_id"] == 0, TARGET_COLOR, PROJECTILE_COLOR)
         particles = SSParticles(float(times[index]), static["mass"], static["radius"], particles_of["position"], particles_of["velocity"],
                                 particles_of["omega"], color, np.arange(static["mass"].shape[0]), reduced)  # fmt: skip
-        path = destination / FRAME_NAME.format(step=int(steps[index])) if frame == "all" else destination
-        if frame == "all":
-            destination.mkdir(parents=True, exist_ok=True)
         write_ss(path, particles, units)
         written.append(Exported(path, int(steps[index]), float(times[index]), particles.n))
     return written
@@ -138,8 +138,6 @@ def _kept(values, n: int, otherwise: np.ndarray) -> np.ndarray:
 
 def _frame_index(frame, frames: int, source) -> int:
     """A frame's index among a trajectory's ``frames`` (None: the last; negative: from the end)."""
-    if frames == 0:
-        raise InputError(f"{source} has no whole frame yet")
     if frame is None:
         return frames - 1
     try:
