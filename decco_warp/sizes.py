@@ -142,6 +142,7 @@ def touching_limit(r_large: float, r_small: float) -> int:
 
 def contact_list_rule(radius_ratio: float) -> int:
     """8 + 4 (R_max / R_min)^2, rounded up: contacts a particle's list is sized for in a pile of that
-    radius ratio (pkdgrav's soft-sphere sizing), close to the densest covering of the largest grain
-    by the smallest (about 0.9 of :func:`touching_limit`)."""
+    radius ratio, close to the densest covering of the largest grain by the smallest (hexagonal, about
+    0.9 of :func:`touching_limit`), which a settled pile does not reach (its large grains touch large
+    ones too)."""
     return int(math.ceil(8.0 + 4.0 * radius_ratio * radius_ratio))
