@@ -191,10 +191,15 @@ PILE_DEFAULTS = pile_defaults()
 
 @app.command()
 def pile(
+    context: typer.Context,
     out: Path = typer.Option(..., "--out", "-o", help="Pile file to write (HDF5)."),
     particles: int = typer.Option(PILE_DEFAULTS["particles"], "--particles", "-n", help="Number of particles."),
     seed: int = typer.Option(PILE_DEFAULTS["seed"], "--seed", help="Random seed: the same seed gives the same pile."),
-    radii: str = typer.Option(PILE_DEFAULTS["radii"], "--radii", help="Particle radii of the size classes [cm]."),
+    radii: str = typer.Option(PILE_DEFAULTS["radii"], "--radii", help="Particle radii of the size classes [cm], equal mass per size."),
+    size_distribution: Optional[str] = typer.Option(
+        PILE_DEFAULTS["size_distribution"], "--size-distribution",
+        help="Radii drawn from a power law instead of --radii: power:q=Q:r_min=R_MIN:r_max=R_MAX[:classes=K] (dN/dR ~ R^q, radii in cm; K size classes of equal width in log R, default 3), e.g. power:q=-3.5:r_min=5e5:r_max=2.5e6.",
+    ),
     density: float = typer.Option(PILE_DEFAULTS["density"], "--density", help="Particle density [g/cm^3]."),
     ke_threshold: float = typer.Option(PILE_DEFAULTS["ke_threshold"], "--ke-threshold", help="Stop when kinetic energy < this x |U|."),
     fill: float = typer.Option(PILE_DEFAULTS["fill"], "--fill", help="Volume fraction of the seeding sphere."),
@@ -208,19 +213,33 @@ def pile(
     gravity: str = typer.Option(PILE_DEFAULTS["gravity"], "--gravity", help="all-pairs, tree, or auto: the tree from the size where it is the faster on this device (params.TREE_FROM)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing pile file."),
     check: bool = typer.Option(False, "--check", help="Check the inputs and estimate the steps and wall time of the formation, form nothing."),
+    from_ss: Optional[Path] = typer.Option(
+        None, "--from", help="Make the pile from a pkdgrav .ss file (standard or reduced, pkdgrav's units) instead of forming one: centred, its bulk motion and spin removed, checked as every pile file."
+    ),
     device: Optional[str] = DeviceOption,
 ) -> None:
-    """Build a rubble pile: seed spheres without overlaps, collapse under gravity until settled."""
+    """Build a rubble pile: seed spheres without overlaps, collapse under gravity until settled (or take one from a pkdgrav .ss file)."""
+    if from_ss is not None:
+        given = {name: context.get_parameter_source(name) for name in PILE_DEFAULTS}
+        forming = [f"--{name.replace('_', '-')}" for name, source in given.items() if source is not None and source.name == "COMMANDLINE"]
+        if forming:
+            fail(f"--from takes the pile as the file holds it: {', '.join(forming)} {'does' if len(forming) == 1 else 'do'} not apply")
+        _pile_from_ss(from_ss, out, overwrite, check)
+        return
+    radii_given = context.get_parameter_source("radii")
+    if size_distribution is not None and radii_given is not None and radii_given.name == "COMMANDLINE":
+        fail("give --radii or --size-distribution, not both")
     _form_pile(
         out, overwrite, check, device, particles=particles, seed=seed, radii=radii, density=density, ke_threshold=ke_threshold,
         fill=fill, max_steps=max_steps, k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt, precision=precision, gravity=gravity,
+        size_distribution=size_distribution,
     )  # fmt: skip
 
 
 def _form_pile(
     out: Path, overwrite: bool, check: bool, device: Optional[str], *, particles: int, seed: int, radii: str, density: float,
     ke_threshold: float, fill: float, max_steps: int, k_in: float, restitution: float, mu_k: float, mu_r: float, dt: float,
-    precision: str, gravity: str,
+    precision: str, gravity: str, size_distribution: Optional[str] = None,
 ) -> None:  # fmt: skip
     """``decco-warp pile``'s work, also that of each pile of ``decco-warp piles``: exits as the command would."""
     from .checks import check_destination
@@ -235,7 +254,7 @@ def _form_pile(
         plan = plan_pile(
             out, particles=particles, seed=seed, radii=_floats(radii, "--radii"), density=density, ke_threshold=ke_threshold, fill=fill,
             max_steps=max_steps, k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt, precision=precision, gravity=gravity,
-            device=device,
+            device=device, size_distribution=size_distribution,
         )  # fmt: skip
     except ValueError as error:  # bad input: each input error of errors.py is a ValueError, as are Params' checks
         fail(str(error))
@@ -243,11 +262,16 @@ def _form_pile(
     if check:
         from .costs import formation_cost
 
-        typer.echo(f"pile: {particles} particles of radii {', '.join(f'{r / 1e5:g}' for r in plan.radii)} km (equal mass per size class), "
-                   f"density {density:g} g/cm^3, seed {seed}, {gravity} gravity on {chosen}")  # fmt: skip
+        typer.echo(f"pile: {particles} particles, density {density:g} g/cm^3, seed {seed}, {gravity} gravity on {chosen}")
+        for line in plan.grain_lines():
+            typer.echo(line)
         typer.echo(f"cost: {formation_cost(particles, density, fill, dt, gravity, chosen)}; gives up at {max_steps} steps")
+        if plan.refusal():
+            fail(plan.refusal())
         typer.echo(f"verdict: would form {out}" + (" (replacing it)" if out.exists() else ""))
         return
+    if plan.refusal():
+        fail(plan.refusal())
     if plan.note:
         typer.echo(f"{plan.note} (a pile takes ~{TYPICAL_FORMATION_STEPS:.0e} steps to settle)", err=True)
     typer.echo(f"forming a {particles}-particle pile on {chosen} (seed {seed}, {gravity} gravity)", err=True)
@@ -300,12 +324,51 @@ def _form_pile(
     )
 
 
-def _size_classes(pile) -> str:
-    """A pile's size classes in words, smallest first: '385 of radius 7.5 km, 48 of radius 15 km, ...'."""
+def _pile_from_ss(source: Path, out: Path, overwrite: bool, check: bool) -> None:
+    """``decco-warp pile --from FILE.ss``: the pile of a pkdgrav file, checked, written as a pile file."""
     import numpy as np
 
-    radii, counts = np.unique(pile.radii, return_counts=True)
-    return ", ".join(f"{int(c)} of radius {r / 1e5:g} km" for c, r in zip(counts, radii))
+    from .checks import check_destination
+    from .collision import pile_radius
+    from .errors import FileFormatError, InputError
+    from .interchange import pile_from_ss
+    from .io import save_pile
+
+    if out.exists() and not overwrite and not check:
+        fail(f"{out} already exists; use --overwrite to replace it")
+    try:
+        if not check:
+            check_destination(out, "pile file")
+        pile = pile_from_ss(source)
+    except (InputError, FileFormatError) as error:
+        fail(str(error))
+    meta = pile.metadata
+    what = (f"{pile.n} particles ({_size_classes(pile)}), mass {pile.total_mass:.4g} g, radius {pile_radius(pile) / 1e5:.4g} km, from {source} "
+            f"(pkdgrav {meta['ss_format']} .ss, t = {meta['ss_time']:.6g} s); its bulk velocity {np.linalg.norm(meta['removed_velocity']):.3g} cm/s "
+            f"and spin {np.linalg.norm(meta['removed_spin']):.3g} rad/s removed")  # fmt: skip
+    if check:
+        typer.echo(f"pile: {what}")
+        typer.echo(f"verdict: would write {out}" + (" (replacing it)" if out.exists() else ""))
+        return
+    try:
+        save_pile(pile, out)
+    except OSError as error:
+        write_failed(error, f"{out} is not written (any earlier one is as it was)")
+    typer.echo(f"wrote {out}: {what}")
+
+
+def _size_classes(pile) -> str:
+    """A pile's size classes in words, smallest first: '385 of radius 7.5 km, 48 of radius 15 km, ...';
+    continuous radii by class: '120 of 5 to 8.55 km, 40 of 8.56 to 14.6 km, ...'."""
+    from .sizes import MAX_DISCRETE_SIZES, class_ranges, distinct_sizes
+
+    if distinct_sizes(pile.radii).size <= MAX_DISCRETE_SIZES:
+        import numpy as np
+
+        radii, counts = np.unique(pile.radii, return_counts=True)
+        return ", ".join(f"{int(c)} of radius {r / 1e5:g} km" for c, r in zip(counts, radii))
+    ranges = class_ranges(pile.radii, pile.size_class)
+    return ", ".join(f"{int(c)} of {low / 1e5:.3g} to {high / 1e5:.3g} km" for c, low, high in zip(ranges["count"], ranges["radius_min"], ranges["radius_max"]))
 
 
 # --- simulate, resume ----------------------------------------------------------------------
@@ -978,21 +1041,53 @@ def view(
 
 @app.command()
 def export(
-    path: Path = typer.Argument(..., help="A run folder or its trajectory.h5 (finished, stopped or still running)."),
+    path: Path = typer.Argument(..., help="A run folder or its trajectory.h5 (finished, stopped or still running); with --ss, a pile file too."),
     xdmf: bool = typer.Option(False, "--xdmf", help="Write trajectory.xdmf beside trajectory.h5, for ParaView and VisIt."),
+    ss: Optional[Path] = typer.Option(
+        None, "--ss", help="Write pkdgrav's .ss here (its units: G = 1, M_sun, AU, yr/2pi): a frame of the run (--frame), every frame into this folder (--frame all), or the pile."
+    ),
+    reduced: bool = typer.Option(False, "--reduced", help="With --ss: pkdgrav's reduced format (float mass, radius and position; no velocities or spins)."),
+    rebound: Optional[Path] = typer.Option(
+        None, "--rebound", help="Write an analysed frame's fragments (and the grains of none) as a REBOUND simulation file here, in cgs with sim.G in cgs (needs rebound)."
+    ),
+    frame: Optional[str] = typer.Option(
+        None, "--frame", help="The frame: its index (negative: from the end; default the last, for --rebound the last analysed), or all (--ss only)."
+    ),
 ) -> None:
-    """Describe a run's trajectory for other programs (the data stays in trajectory.h5)."""
+    """Write a run (or a pile) for other programs: an XDMF description for ParaView and VisIt, pkdgrav
+    .ss files, or its fragments as a REBOUND simulation."""
+    if not (xdmf or ss or rebound):
+        fail("say what to export: --xdmf, --ss FILE or --rebound FILE")
+    if frame not in (None, "all"):
+        try:
+            frame = int(frame)
+        except ValueError:
+            fail(f"--frame must be a frame's index (negative: from the end) or all; got {frame!r}")
+    if frame == "all" and rebound:
+        fail("--frame all goes with --ss alone: --rebound writes one frame")
+    if reduced and not ss:
+        fail("--reduced goes with --ss")
+    if not path.exists():
+        fail(f"{path} does not exist")
+    if xdmf:
+        _export_xdmf(path)
+    if ss:
+        _export_ss(path, ss, frame, reduced)
+    if rebound:
+        _export_rebound(path, rebound, frame)
+
+
+def _export_xdmf(path: Path) -> None:
+    """``export --xdmf``: trajectory.xdmf beside the run's trajectory."""
     from .checks import InputError, check_destination
     from .io import FileFormatError
     from .repair import clear_write_flags
     from .lock import RunFolderBusy
     from .xdmf import write_xdmf
 
-    if not xdmf:
-        fail("say what to export: --xdmf")
     trajectory = RunFolder(path).trajectory if path.is_dir() else path
     if not trajectory.is_file():
-        fail(f"{path} does not exist" if not path.exists() else f"{path} is neither a run folder with a {RunFolder.TRAJECTORY} nor a trajectory file")
+        fail(f"{path} is neither a run folder with a {RunFolder.TRAJECTORY} nor a trajectory file")
     destination = trajectory.with_name(RunFolder.XDMF)
     running = False
     try:
@@ -1011,6 +1106,51 @@ def export(
             "the run is still going: ParaView and VisIt open its trajectory once it ends (while a file is written, HDF5 "
             "admits only SWMR readers), and it then rewrites trajectory.xdmf with every frame"
         )
+
+
+def _export_ss(path: Path, destination: Path, frame, reduced: bool) -> None:
+    """``export --ss``: a frame, every frame or a pile as pkdgrav .ss."""
+    from .checks import check_destination
+    from .errors import FileFormatError, InputError
+    from .interchange import export_ss, is_pile_file
+
+    try:
+        check_destination(destination, "folder of .ss files" if frame == "all" else ".ss file", folder=frame == "all")
+        pile = is_pile_file(path)
+        written = export_ss(path, destination, frame, reduced)
+    except (InputError, FileFormatError) as error:
+        fail(str(error))
+    except OSError as error:
+        write_failed(error, "each .ss file written before it is whole")
+    kind = "reduced" if reduced else "standard"
+    if len(written) > 1:
+        typer.echo(f"wrote {len(written)} pkdgrav {kind} .ss files into {destination}, {written[0].path.name} to {written[-1].path.name}")
+        return
+    one = written[0]
+    what = f"the pile {path}" if pile else f"step {one.step} (t = {one.time:.6g} s) of {path}"
+    typer.echo(f"wrote {one.path}: {what}, {one.n} particles, pkdgrav {kind} .ss in pkdgrav's units (G = 1; M_sun, AU, yr/2pi: docs/data.md)")
+
+
+def _export_rebound(path: Path, destination: Path, frame) -> None:
+    """``export --rebound``: an analysed frame's fragments as a REBOUND simulation file."""
+    from .checks import check_destination
+    from .errors import FileFormatError, InputError
+    from .interchange import handoff_bodies, write_rebound
+
+    if not path.is_dir():
+        fail(f"--rebound takes a run folder (analysed: its analysis.h5 holds the fragments); {path} is not one")
+    try:
+        check_destination(destination, "REBOUND file")
+        bodies = handoff_bodies(path, frame)
+        write_rebound(destination, bodies)
+    except (InputError, FileFormatError) as error:
+        fail(str(error))
+    except OSError as error:
+        write_failed(error, f"{destination} is not written (any earlier one is as it was)")
+    typer.echo(
+        f"wrote {destination}: frame {bodies.frame} (step {bodies.step}, t = {bodies.time:.6g} s) of {path}, {bodies.fragments} fragment(s) "
+        f"and {bodies.grains} grain(s) of none as REBOUND particles in cgs (sim.G = {bodies.G:g}); open it with rebound.Simulation('{destination}')"
+    )
 
 
 # --- sweep ---------------------------------------------------------------------------------

@@ -23,6 +23,7 @@ from .kernels.bodies import BODY_TYPES, PACK_KERNELS, PRECISIONS
 from .kernels.contacts import CANDIDATES, LEDGER_CHANNELS, unpack_depth
 from .kernels.pair import ContactModel
 from .params import Params
+from .sizes import contact_list_rule
 from .state import State
 from .errors import InputError
 
@@ -45,6 +46,15 @@ def system_sizes(systems: Sequence[int] | None, count: int) -> np.ndarray:
     if sizes.ndim != 1 or len(sizes) == 0 or (sizes <= 0).any() or sizes.sum() != count:
         raise InputError(f"systems must be positive sizes adding up to the {count} particles; got {list(sizes)}")
     return sizes
+
+
+def candidate_width(min_radius: float, max_radius: float) -> int:
+    """Contact candidates a particle's list holds on the paths that list them (the Newton layout, the
+    tree): CANDIDATES, or more for a wide size range (sizes.contact_list_rule of the radius ratio), so
+    that a large grain among many small ones does not overflow into a walk over its whole system.
+    Gravity on its own clock keeps CANDIDATES: its build holds a row in a fixed vector
+    (kernels/neighbours.py NeighbourRow)."""
+    return max(CANDIDATES, contact_list_rule(max_radius / min_radius))
 
 
 def contact_model(params: Params) -> ContactModel:
@@ -120,6 +130,7 @@ class Engine:
         self.ranges = wp.array(ranges, dtype=wp.vec2i, device=self.device)
         self.max_radius = float(state.radii.max())
         self.min_radius = float(state.radii.min())
+        self.candidate_width = candidate_width(self.min_radius, self.max_radius)
         # The sweeps' per-i contact bound, in their arithmetic (float32 rounding of the largest
         # radius is no smaller than that of any other radius, so the bound holds).
         self.sweep_max_radius = (wp.float32 if precision == "mixed" else wp.float64)(self.max_radius)
@@ -145,7 +156,7 @@ class Engine:
 
     @property
     def candidates(self) -> wp.array:
-        """Per particle, the first CANDIDATES of them."""
+        """Per particle, the first of them (as many as its list holds: candidate_width)."""
         return self.path.candidates
 
     # -- stages of a step -----------------------------------------------------------
@@ -388,7 +399,7 @@ CPU_TREE_SECONDS_PER_PARTICLE = 7.5e-6
 
 def memory_estimate(
     n: int, gravity: str, device: str = "cpu", ledger: bool = True, *, gravity_every: int = 1, layout: Layout | None = None,
-    precision: str = "mixed",
+    precision: str = "mixed", candidate_width: int = CANDIDATES,
 ) -> int:
     """Bytes a job of ``n`` particles needs on its device (and on the host), an upper estimate:
     the arrays Engine and GravityTree allocate, taken as for the largest layout, and the Newton
@@ -398,7 +409,7 @@ def memory_estimate(
     per = 3 * f64 + 5 * vec3d  # radius, mass, inertia; position, velocity, omega, force, torque
     per += (len(LEDGER_CHANNELS) * vec3d + 32) if ledger else 0  # channels, work
     per += 8 + 32 + 8  # deepest contact, packed body, system range
-    per += i32 * (1 + CANDIDATES)  # the contact candidates of the Newton layout, the tree or the neighbour list
+    per += i32 * (1 + candidate_width)  # the contact candidates of the Newton layout, the tree or the neighbour list
     per += 3 * vec3d + f64 + 5 * i32  # gravity on its own clock: gravity, the list's build positions, the build's sorted
     # positions and radii; system, cell keys and order (2 N)
     per += len(PAIR_OBSERVABLES) * f64  # a frame's pair observables

@@ -81,9 +81,10 @@ def _on_cuda(device: str) -> bool:
     return device.startswith("cuda")
 
 
-def _candidate_arrays(count: int, device: str) -> tuple[wp.array, wp.array]:
-    """Per particle: how many contact candidates it met, and the first CANDIDATES of them."""
-    return wp.zeros(count, dtype=wp.int32, device=device), wp.zeros((count, CANDIDATES), dtype=wp.int32, device=device)
+def _candidate_arrays(count: int, device: str, width: int = CANDIDATES) -> tuple[wp.array, wp.array]:
+    """Per particle: how many contact candidates it met, and the first ``width`` of them (the kernels
+    read the width from the array)."""
+    return wp.zeros(count, dtype=wp.int32, device=device), wp.zeros((count, width), dtype=wp.int32, device=device)
 
 
 def _bodies(engine, count: int) -> wp.array:
@@ -293,7 +294,7 @@ class NewtonForces(ForcePath):
     def __init__(self, engine):
         super().__init__(engine)
         _check_cpu_blocks(engine, newton=True)
-        self.candidate_count, self.candidates = _candidate_arrays(engine.count, engine.device)
+        self.candidate_count, self.candidates = _candidate_arrays(engine.count, engine.device, engine.candidate_width)
         self.body = _bodies(engine, engine.count)
         self.gravity = NewtonGravity(engine, engine.layout, self.body, self.candidate_count, self.candidates)
         # The gather lists each particle's candidates in increasing j: lanes can share them out.
@@ -350,7 +351,7 @@ class TreeForces(ForcePath):
     def __init__(self, engine):
         super().__init__(engine)
         self.gravity = TreeGravity(engine)
-        self.candidate_count, self.candidates = _candidate_arrays(engine.count, engine.device)
+        self.candidate_count, self.candidates = _candidate_arrays(engine.count, engine.device, engine.candidate_width)
         self.contact_pass = ContactPass(engine, accumulate=True)  # added to gravity's force
 
     def _candidates(self) -> None:
@@ -395,6 +396,7 @@ class NeighbourList:
         self.engine = engine
         self.skin = SKIN_FRACTION * min_radius
         """[cm]"""
+        # CANDIDATES wide, not engine.candidate_width: the build keeps a row in a vector of that length.
         self.candidate_count, self.candidates = _candidate_arrays(count, device)
         self.reference = wp.zeros(count, dtype=wp.vec3d, device=device)
         """The positions of the last build."""

@@ -5,16 +5,19 @@ Large piles need this: the paper's 5 000-particle piles took ~1.5e5 steps, and a
 
 from __future__ import annotations
 
+import math
 import time as _time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 from .device import resolve_device
-from .engine import check_fits
+from .engine import candidate_width, check_fits
 from .io import FileFormatError, read_checkpoint, save_pile, write_checkpoint
 from .params import GRAVITY_CHOICES, Params, choose_gravity
-from .pile import Formation, FormationError, FormationProgress, check_formation_inputs
+from .pile import Formation, FormationError, FormationProgress, check_formation_inputs, grain_sizes
+from .sizes import PowerLaw, parse_size_distribution, touching_limit
+from .stability import MIN_TIME_STEP_MARGIN
 from .state import State
 from .stops import StopRequests
 from .errors import FormationStopped, InputError  # noqa: F401 (re-exported: the error lives in errors.py)
@@ -45,20 +48,60 @@ class PilePlan:
     precision: str
     device: str
     note: str | None  # the line that says a formation would take hours here, else None
+    size_distribution: PowerLaw | None = None  # radii drawn from a power law instead of ``radii``
 
     def options(self) -> dict:
         """:class:`decco_warp.pile.Formation`'s options."""
         return {"n_particles": self.particles, "seed": self.seed, "device": self.device, "radii": self.radii, "density": self.density,
                 "params": self.params, "ke_threshold": self.ke_threshold, "fill": self.fill, "max_steps": self.max_steps,
-                "precision": self.precision}  # fmt: skip
+                "precision": self.precision, "size_distribution": self.size_distribution}  # fmt: skip
+
+    def grain_lines(self) -> list[str]:
+        """``pile --check``'s lines on the grains: their sizes; what the smallest costs (paper eq. 17:
+        the time step it allows); how many grains the largest can touch, beside what the contact lists
+        hold (engine.candidate_width)."""
+        radii, _, sizes = grain_sizes(self.particles, self.seed, self.radii, self.size_distribution)
+        counts = ", ".join(str(int(c)) for c in sizes["size_counts"])
+        if self.size_distribution is None:
+            kinds = f"radii {', '.join(f'{r / 1e5:g}' for r in self.radii)} km, equal mass per size ({counts} particles)"
+        else:
+            law = self.size_distribution
+            edges = ", ".join(f"{e / 1e5:.3g}" for e in sizes["size_class_edges"])
+            kinds = (f"radii drawn from dN/dR ~ R^{law.q:g} on {law.r_min / 1e5:.4g} to {law.r_max / 1e5:.4g} km, in {law.classes} size classes "
+                     f"of equal width in log R (edges {edges} km) of {counts} particles")  # fmt: skip
+        r_min, r_max = float(radii.min()), float(radii.max())
+        scale = self._time_scale(r_min)
+        return [
+            f"sizes: {kinds}",
+            f"smallest grain: radius {r_min / 1e5:.4g} km, {4.0 / 3.0 * math.pi * self.density * r_min**3:.3g} g; eq. 17's time scale "
+            f"sqrt(m/k_in) = {scale:.3g} s: dt = {self.params.dt:g} s has a margin of {scale / self.params.dt:.3g} (need >= {MIN_TIME_STEP_MARGIN:g})",
+            f"largest grain: radius {r_max / 1e5:.4g} km ({r_max / r_min:.3g} x the smallest), touched by at most {touching_limit(r_max, r_min)} "
+            f"of the smallest (were they to cover it); the contact lists of the Newton layout (CUDA) and the tree hold {candidate_width(r_min, r_max)} "
+            "a particle (8 + 4 (R_max/R_min)^2, at least 64; a particle that meets more looks at its whole pile, slower)",
+        ]  # fmt: skip
+
+    def refusal(self) -> str | None:
+        """Why the formation would be refused before it starts (its smallest grain's eq. 17 margin), or None."""
+        radii, _, _ = grain_sizes(self.particles, self.seed, self.radii, self.size_distribution)
+        safe = self._time_scale(float(radii.min())) / MIN_TIME_STEP_MARGIN
+        if self.params.dt <= safe:
+            return None
+        return (f"dt = {self.params.dt:g} s is too long for the smallest grain (eq. 17 margin {MIN_TIME_STEP_MARGIN * safe / self.params.dt:.3g}, "
+                f"need >= {MIN_TIME_STEP_MARGIN:g}): --dt {safe:.3g} or shorter, {self.params.dt / safe:.3g} times the steps")  # fmt: skip
+
+    def _time_scale(self, radius: float) -> float:
+        """sqrt(m / k_in) of a grain of ``radius`` [s] (paper eq. 17)."""
+        return math.sqrt(4.0 / 3.0 * math.pi * self.density * radius**3 / self.params.k_in)
 
 
 def plan_pile(
     out, *, particles: int, seed: int, radii, density: float, ke_threshold: float, fill: float, max_steps: int, k_in: float,
     restitution: float, mu_k: float, mu_r: float, dt: float, precision: str, gravity: str, device: str | None = None,
+    size_distribution: str | None = None,
 ) -> PilePlan:  # fmt: skip
     """The plan of a pile's formation (``decco-warp pile``'s options; spec.PILE_SCHEMA): ValueError
-    (an InputError for what the checks refuse) on bad input, before anything is formed."""
+    (an InputError for what the checks refuse) on bad input, before anything is formed.
+    ``size_distribution``: a power law's text (sizes.parse_size_distribution), in place of ``radii``."""
     chosen = resolve_device(device)
     if gravity not in GRAVITY_CHOICES:
         raise InputError(f"--gravity must be one of {', '.join(GRAVITY_CHOICES)}; got {gravity!r}")
@@ -66,9 +109,12 @@ def plan_pile(
         gravity = choose_gravity(particles, chosen)
     params = Params(k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt, gravity=gravity)
     radii = tuple(float(r) for r in radii)
-    check_formation_inputs(particles, radii, density, ke_threshold, fill, max_steps=max_steps)
-    note = check_fits(particles, gravity, chosen, min(max_steps, TYPICAL_FORMATION_STEPS), "forming a pile")
-    return PilePlan(Path(out), particles, seed, radii, density, ke_threshold, fill, max_steps, params, precision, chosen, note)
+    law = None if size_distribution is None else parse_size_distribution(size_distribution)
+    sizes = radii if law is None else (law.r_min, law.r_max)
+    check_formation_inputs(particles, sizes, density, ke_threshold, fill, max_steps=max_steps)
+    width = candidate_width(min(sizes), max(sizes))
+    note = check_fits(particles, gravity, chosen, min(max_steps, TYPICAL_FORMATION_STEPS), "forming a pile", candidate_width=width)
+    return PilePlan(Path(out), particles, seed, radii, density, ke_threshold, fill, max_steps, params, precision, chosen, note, law)
 
 
 def partial_path(out: Path) -> Path:

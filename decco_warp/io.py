@@ -523,6 +523,15 @@ def last_frame_step(path) -> int:
         return int(element["step"][n - 1]) if n else -1
 
 
+def frame_clock(path) -> tuple[np.ndarray, np.ndarray]:
+    """The step and time [s] of each whole frame of a trajectory (every particle element written),
+    without reading the frames: what picks one frame of a long run to read with :func:`read_frame`."""
+    with open_trajectory(path) as f:
+        particles = f["particles/all"]
+        n = min(_complete_frames(particles[name], np.iinfo(np.int64).max) for name in Trajectory.PARTICLE_ELEMENTS)
+        return particles["position/step"][:n], particles["position/time"][:n]
+
+
 def read_frame(path, index: int = 0) -> tuple[dict, dict, dict]:
     """(particles, observables, static) of one frame of a trajectory, without reading the rest."""
     with open_trajectory(path) as f:

@@ -1,8 +1,8 @@
 """Rubble-pile formation (paper sect. 2.6, docs/model.md).
 
-Seed spheres of three sizes (equal total mass per size) uniformly in a sphere
-without overlaps, then let the cloud collapse under its own gravity until its
-kinetic energy is below ``ke_threshold`` |U|; finally remove the pile's net
+Seed spheres of three sizes (equal total mass per size), or of radii drawn from a power law
+(sizes.PowerLaw), uniformly in a sphere without overlaps, then let the cloud collapse under its own
+gravity until its kinetic energy is below ``ke_threshold`` |U|; finally remove the pile's net
 momentum and spin and centre it.
 """
 
@@ -18,7 +18,8 @@ import numpy as np
 from .params import Params
 from .simulation import Simulation
 from .checks import DENSITY_RANGE, RADIUS_RANGE
-from .state import State
+from .sizes import PowerLaw, classify, parse_size_distribution
+from .state import State, remove_net_motion
 from .errors import FormationError, InputError  # noqa: F401 (re-exported: the error lives in errors.py)
 
 #: The paper's particle radii [cm] (Table 1) and density [g/cm^3].
@@ -68,6 +69,23 @@ def size_class_counts(n_particles: int, radii=PAPER_RADII) -> np.ndarray:
     return counts
 
 
+def grain_sizes(n_particles: int, seed: int, radii=PAPER_RADII, size_distribution: PowerLaw | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Each particle's radius [cm] and size class, smallest first, and what the pile file records of
+    its sizes: the discrete ``radii`` with equal mass per size (``size_radii``, ``size_counts``), or
+    radii drawn from ``size_distribution`` with ``seed`` in its log-R classes (``size_distribution``,
+    ``size_class_edges``, ``size_counts``)."""
+    if size_distribution is None:
+        radii = np.asarray(radii, dtype=float)
+        counts = size_class_counts(n_particles, radii)
+        size_class = np.repeat(np.arange(radii.size, dtype=np.int32), counts)
+        return radii[size_class], size_class, {"size_radii": radii, "size_counts": counts}
+    particle_radii = size_distribution.sample(n_particles, seed)
+    edges = size_distribution.edges()
+    size_class = classify(particle_radii, edges)
+    counts = np.bincount(size_class, minlength=size_distribution.classes)
+    return particle_radii, size_class, {"size_distribution": size_distribution.text(), "size_class_edges": edges, "size_counts": counts}
+
+
 def seed_cloud(radii: np.ndarray, rng: np.random.Generator, fill: float = 0.3) -> tuple[np.ndarray, float]:
     """Positions of non-overlapping spheres, uniform in a sphere; and that sphere's radius [cm].
 
@@ -112,22 +130,6 @@ def _uniform_in_ball(rng: np.random.Generator, radius: float) -> np.ndarray:
             return radius * point
 
 
-def remove_net_motion(state: State) -> State:
-    """Centre the pile and remove its net momentum and rigid spin (orbital plus particle spins).
-
-    The spin removed is omega = I_pile^-1 L about the centre of mass, with I_pile
-    including the particles' own moments of inertia; afterwards the total
-    angular momentum about the centre is zero to round-off.
-    """
-    state = state.copy()
-    spin = state.spin()
-    state.positions -= state.centre_of_mass
-    state.velocities -= state.bulk_velocity
-    state.velocities -= np.cross(spin, state.positions)
-    state.omegas -= spin
-    return state
-
-
 class Formation:
     """A pile forming: a seeded cloud collapsing under its own gravity, advanced one check at a time.
 
@@ -154,15 +156,18 @@ class Formation:
         max_steps: int = 5_000_000,
         precision: str = "mixed",
         snapshot: dict | None = None,
+        size_distribution: PowerLaw | str | None = None,
     ):
+        """``size_distribution``: radii drawn from a power law (a PowerLaw, or its text) instead of ``radii``."""
         params = params or Params()
-        radii = np.asarray(radii, dtype=float)
+        law = parse_size_distribution(size_distribution) if isinstance(size_distribution, str) else size_distribution
+        radii = np.asarray(radii, dtype=float) if law is None else np.array([law.r_min, law.r_max])
         check_formation_inputs(n_particles, radii, density, ke_threshold, fill, check_every, max_steps)
         self.precision, self.check_every, self.max_steps = precision, check_every, max_steps
         self.settings = {
             "seed": int(seed),
             "n_particles": int(n_particles),
-            "size_radii": radii,
+            **({"size_radii": radii} if law is None else {"size_distribution": law.text()}),
             "density": float(density),
             "ke_threshold": float(ke_threshold),
             "fill": float(fill),
@@ -170,11 +175,8 @@ class Formation:
             "precision": precision,
             "params": params.to_dict(),
         }
-        counts = size_class_counts(n_particles, radii)
-        size_class = np.repeat(np.arange(radii.size, dtype=np.int32), counts)
-        particle_radii = radii[size_class]
+        particle_radii, size_class, self.sizes = grain_sizes(n_particles, seed, radii, law)
         masses = 4.0 / 3.0 * math.pi * density * particle_radii**3
-        self.size_counts = counts
         # Where this session's wall time goes (seconds): set-up (seeding, the simulation), stepping
         # (waited for), checks (KE/|U| every check_every steps), saves (counted by the caller).
         self.seconds = {"set-up": 0.0, "stepping": 0.0, "checks": 0.0, "saves": 0.0}
@@ -268,8 +270,7 @@ class Formation:
         pile.metadata = {
             "seed": settings["seed"],
             "n_particles": settings["n_particles"],
-            "size_radii": settings["size_radii"],
-            "size_counts": self.size_counts,
+            **self.sizes,
             "density": settings["density"],
             "ke_threshold": settings["ke_threshold"],
             "fill": settings["fill"],
@@ -308,7 +309,7 @@ def form_pile(*args, progress: Callable[[FormationProgress], None] | None = None
     """Build a rubble pile: seed, collapse until KE < ke_threshold |U|, remove net motion, centre.
 
     The arguments are :class:`Formation`'s (n_particles, seed, device, radii, density,
-    params, ke_threshold, fill, check_every, max_steps, precision); ``progress`` is told
+    params, ke_threshold, fill, check_every, max_steps, precision, size_distribution); ``progress`` is told
     after each check.  Deterministic for a given ``seed`` on a given device.  The
     returned State has ``size_class`` (0 = smallest radius) and ``metadata`` with the
     formation history (time, KE/|U|) and the settings used.  (:class:`Formation` does

@@ -20,9 +20,8 @@ from .diagnostics import diagnostics
 from .folder import RunFolder
 from .io import read_trajectory
 from .params import Params
-from .pile import remove_net_motion
 from .simulation import Simulation
-from .state import State
+from .state import State, remove_net_motion
 
 #: How the fragment's spin is treated: kept (its rigid rotation about its centre stays), or removed.
 SPIN_CHOICES = ("keep", "remove")

@@ -16,6 +16,7 @@ import math
 from pathlib import Path
 
 from .params import auto_gravity_every
+from .sizes import parse_size_distribution
 from .errors import InputError
 
 
@@ -37,9 +38,13 @@ def pile_file(path: str, resolution: float) -> str:
 
 
 def pile_entry(entry: dict, resolution: float, default_radii: str) -> dict:
-    """A ``[[pile]]`` table of ``decco-warp piles`` at ``resolution``: R x the particles, radii x f,
-    the output renamed by :func:`pile_file`; the seed stays."""
+    """A ``[[pile]]`` table of ``decco-warp piles`` at ``resolution``: R x the particles, radii (or a
+    power law's r_min and r_max) x f, the output renamed by :func:`pile_file`; the seed stays."""
     f = length_factor(resolution)
+    if "size_distribution" in entry:
+        law = parse_size_distribution(entry["size_distribution"]).scaled(f)
+        return {**entry, "out": pile_file(entry["out"], resolution), "particles": max(1, round(entry["particles"] * resolution)),
+                "size_distribution": law.text()}  # fmt: skip
     radii = entry.get("radii", default_radii)
     radii = [float(r) for r in (radii.split(",") if isinstance(radii, str) else radii)]
     return {**entry, "out": pile_file(entry["out"], resolution), "particles": max(1, round(entry["particles"] * resolution)),

@@ -191,12 +191,13 @@ def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None
 def plan_fits(plan: Plan, n: int, steps: int) -> str | None:
     """Refuse (RunError) a run of ``n`` particles that its device has no memory for, its force path
     counted (the Newton sweep's rows, O(N^2 / tile)); a line for one that takes hours on the CPU."""
-    from .engine import check_fits
+    from .engine import candidate_width, check_fits
 
     try:
         return check_fits(
             n, plan.params.gravity, plan.device, steps, "a run",
             gravity_every=plan.params.gravity_every, layout=plan.layout, precision=plan.precision,
+            candidate_width=candidate_width(float(plan.state.radii.min()), float(plan.state.radii.max())),
         )  # fmt: skip
     except InputError as error:
         raise RunError(str(error)) from None

@@ -181,12 +181,14 @@ def sweep_settings(sweep: dict, default_name: str) -> dict:
 #: A pile's formation: the keys of a [[pile]] table of ``decco-warp piles`` and the defaults of
 #: ``decco-warp pile``'s options.  Only their types are checked here; their ranges where a pile is
 #: formed (pile.check_formation_inputs, Params), with the same messages for either command.
-#: radii: a list in a [[pile]] table, comma-separated on the command line (the default's form).
+#: radii: a list in a [[pile]] table, comma-separated on the command line (the default's form);
+#: size_distribution: a power law (sizes.POWER_LAW_FORM) in place of radii.
 PILE_SCHEMA: dict[str, tuple[type, Any]] = {  # key: (type, default)
     "out": (str, None),
     "particles": (int, 5000),
     "seed": (int, 1),
     "radii": (list, "0.75e6,1.5e6,2.25e6"),
+    "size_distribution": (str, None),
     "density": (float, 2.7),
     "ke_threshold": (float, 1e-5),
     "fill": (float, 0.3),
@@ -221,6 +223,8 @@ def check_pile_list(raw: dict, path) -> list[dict]:
                 raise SpecError(f"[[pile]] {k + 1}: {key} = {value!r} must be {kind.__name__}")
         if "out" not in entry or "particles" not in entry:
             raise SpecError(f"[[pile]] {k + 1}: out and particles are required")
+        if "radii" in entry and "size_distribution" in entry:
+            raise SpecError(f"[[pile]] {k + 1}: radii or size_distribution, not both")
     return entries
 
 

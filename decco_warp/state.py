@@ -131,6 +131,22 @@ class State:
         return replace(self, **{name: getattr(self, name)[mask].copy() for name in arrays}, metadata={})
 
 
+def remove_net_motion(state: State) -> State:
+    """Centre the pile and remove its net momentum and rigid spin (orbital plus particle spins).
+
+    The spin removed is omega = I_pile^-1 L about the centre of mass, with I_pile
+    including the particles' own moments of inertia; afterwards the total
+    angular momentum about the centre is zero to round-off.
+    """
+    state = state.copy()
+    spin = state.spin()
+    state.positions -= state.centre_of_mass
+    state.velocities -= state.bulk_velocity
+    state.velocities -= np.cross(spin, state.positions)
+    state.omegas -= spin
+    return state
+
+
 def _float_array(name: str, values, shape) -> np.ndarray:
     try:
         array = np.array(values, dtype=np.float64, copy=True)

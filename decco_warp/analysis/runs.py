@@ -17,6 +17,7 @@ from ..durable import json_ready, json_text, write_atomic
 from ..folder import RunFolder
 from ..io import OBSERVABLE_UNITS, read_trajectory
 from ..params import G_CGS
+from ..sizes import class_ranges
 from ..state import State
 from . import scaling
 from .clusters import find_clusters
@@ -364,6 +365,9 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
             "ledger_closure": ledger_closure(obs, obs["total_energy"][0], energy_scale(_start_energies(obs))),
         },
         "overlap": {"time": data["time"], "deepest": depth},
+        # The bins the compositions and stress shares count by, as the particles fill them: one per
+        # size for discrete radii, log-R bins for continuous ones (sizes.py).
+        "size_classes": class_ranges(static["radius"], static["species"]),
         "final": {
             "step": int(data["step"][-1]),
             "time": float(data["time"][-1]),
@@ -489,6 +493,9 @@ ANALYSIS_UNITS = {
     "composition": "particles per size class",
     "free_composition": "particles per size class, in no cluster",
     "cluster_mass": "g (each frame's clusters, largest first; 0: none)",
+    "radius_min": "cm (the smallest radius among the size class's particles)",
+    "radius_max": "cm (the largest radius among the size class's particles)",
+    "count": "particles (of the size class)",
     **{name: OBSERVABLE_UNITS[name] for name in ENERGY_SERIES},
 }
 
