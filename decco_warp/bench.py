@@ -22,7 +22,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import warp as wp
 
-from . import forces
+from . import layouts as thread_layouts  # (its PARTICLE_BLOCK is set per row; "layouts" names the option)
 from .engine import Engine
 from .layouts import Layout, choose_layout
 from .params import Params
@@ -73,7 +73,7 @@ class BenchRow:
     versus_every_step: float | None = None
     """The K = 1 step time over this row's, at the same N in the same call (K > 1 rows)."""
     particle_block: int | None = None
-    """Threads a block of the kernels of one thread a particle, where a row sets it (forces.PARTICLE_BLOCK otherwise)."""
+    """Threads a block of the kernels of one thread a particle, where a row sets it (layouts.PARTICLE_BLOCK otherwise)."""
     versus_default_block: float | None = None
     """The step time at the default PARTICLE_BLOCK over this row's, same N, K and call."""
 
@@ -200,13 +200,13 @@ def bench_size(
     whole outer steps of K), as a run steps: steps left over are launched one by one, and at K > 1
     each of those reads the list's stale flag on the host.  With ``gravity_every`` K > 1 the row
     counts the neighbour list's builds per step.  ``particle_block``: the threads a block of the
-    kernels of one thread a particle, in place of forces.PARTICLE_BLOCK for this row."""
-    default = forces.PARTICLE_BLOCK
-    forces.PARTICLE_BLOCK = particle_block or default
+    kernels of one thread a particle, in place of layouts.PARTICLE_BLOCK for this row."""
+    default = thread_layouts.PARTICLE_BLOCK
+    thread_layouts.PARTICLE_BLOCK = particle_block or default
     try:
         row = _bench_size(n, device, precision, layout, budget, steps, baseline, gravity, systems, system, gravity_every)
     finally:
-        forces.PARTICLE_BLOCK = default
+        thread_layouts.PARTICLE_BLOCK = default
     row.particle_block = particle_block
     return row
 
@@ -268,7 +268,7 @@ def bench_rows(
     ensembles of ``ensembles`` systems (against one at a time), and gravity every K of ``clocks``
     (against K = 1 with the same solver), and the default layout at K = 1 and each K of ``clocks``
     with ``particle_blocks`` threads a block for the kernels of one thread a particle (against
-    forces.PARTICLE_BLOCK); each comparison is added to the row's layout text."""
+    layouts.PARTICLE_BLOCK); each comparison is added to the row's layout text."""
     for size, kind in itertools.product(sizes, kinds):
         runs = [("all-pairs", layout) for layout in [None, *layouts]] if "all-pairs" in solvers else []
         runs += [("tree", None)] if "tree" in solvers else []
@@ -289,7 +289,7 @@ def bench_rows(
                 default_block[(solver, every)] = row
             if block is not None:  # against the default block, same solver and clock
                 row.versus_default_block = default_block[(solver, every)].step_seconds / row.step_seconds
-                row.layout += f", {block} threads a block for the per-particle kernels: {row.versus_default_block:.2f}x {forces.PARTICLE_BLOCK}"
+                row.layout += f", {block} threads a block for the per-particle kernels: {row.versus_default_block:.2f}x {thread_layouts.PARTICLE_BLOCK}"
                 yield row
                 continue
             if systems == 1 and layout is None and every == 1:

@@ -695,7 +695,7 @@ def bench(
         "", "--gravity-every", help="Also time gravity on its own clock at these K, e.g. 5,10,20 (gravity every K steps, contacts from a neighbour list), against the K = 1 step of the same call; 1 in the list is the default row."
     ),
     particle_blocks: str = typer.Option(
-        "", "--particle-blocks", help="Also time the step with these threads a block for the kernels of one thread a particle (kicks, drift, gather, list build), e.g. 32,64, at K = 1 and each --gravity-every K, against the default (decco_warp.forces.PARTICLE_BLOCK); the motion is the same at any."
+        "", "--particle-blocks", help="Also time the step with these threads a block for the kernels of one thread a particle (kicks, drift, gather, list build), e.g. 32,64, at K = 1 and each --gravity-every K, against the default (decco_warp.layouts.PARTICLE_BLOCK); the motion is the same at any."
     ),
     device: Optional[str] = DeviceOption,
 ) -> None:
@@ -707,7 +707,7 @@ def bench(
     from . import bench as benchmarks
     from .checks import InputError, check_destination
     from .device import DeviceError, resolve_device
-    from .engine import PRECISIONS
+    from .scheme import PRECISIONS
     from .layouts import parse_layout
     from .params import GRAVITY_SOLVERS
 

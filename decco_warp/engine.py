@@ -1,9 +1,14 @@
-"""Device arrays of one particle system and the kernel launches that act on them.
+"""One particle system on a device: its arrays, composed with the parts that step it.
 
-This module (with the force paths of forces.py and gravity_tree.py) is the only one that touches
-Warp arrays and launches kernels; the public objects (:class:`~decco_warp.simulation.Simulation`,
-:func:`~decco_warp.simulation.compute_forces`, :func:`~decco_warp.diagnostics.diagnostics`)
-are built on it, and the cluster finder's smoothed density on a GPU (:func:`smoothed_density`).
+The engine holds the arrays (decco_warp/arrays.py: the model's constants and the state), and
+composes, from its :class:`~decco_warp.scheme.Scheme`, a force path (decco_warp/forces.py: a gravity
+solver, a contact finder and the contact pass, or one kernel doing both) and an integrator
+(decco_warp/integrators.py: one clock, or two).  It chooses them in one place
+(``scheme.force_path``), then only delegates: the public objects
+(:class:`~decco_warp.simulation.Simulation`, :func:`~decco_warp.simulation.compute_forces`,
+:func:`~decco_warp.diagnostics.diagnostics`) are built on it.  Beside its parts, this module is the
+only one that launches kernels (the packing of the bodies, and the cluster finder's smoothed density
+on a GPU, :func:`smoothed_density`).
 """
 
 from __future__ import annotations
@@ -14,20 +19,20 @@ from collections.abc import Sequence
 import numpy as np
 import warp as wp
 
+from .arrays import ModelArrays, StateArrays, system_sizes
 from .device import resolve_device
-from .forces import FORCE_PATHS, particle_block, path_name
-from .layouts import Layout, choose_layout, newton_scratch_bytes, newton_sweep_layout
+from .forces import FORCE_PATHS
 from .gravity_tree import walk_parts
-from .kernels import integrate, observables
-from .kernels.bodies import BODY_TYPES, PACK_KERNELS, PRECISIONS
+from .integrators import INTEGRATORS, check_steps
+from .kernels import observables
+from .kernels.bodies import PACK_KERNELS
 from .kernels.contacts import CANDIDATES, LEDGER_CHANNELS, unpack_depth
-from .kernels.pair import ContactModel
+from .layouts import Layout, choose_layout, newton_scratch_bytes, newton_sweep_layout, particle_block
 from .params import Params
+from .scheme import choose_scheme, force_path
 from .sizes import contact_list_rule
 from .state import State
 from .errors import InputError
-
-FORCE_KERNELS = ("tiled", "reference")
 
 #: Per-particle outputs of kernels/observables.py, in the kernel's order.
 PAIR_OBSERVABLES = {
@@ -40,14 +45,6 @@ PAIR_OBSERVABLES = {
 }
 
 
-def system_sizes(systems: Sequence[int] | None, count: int) -> np.ndarray:
-    """The sizes of an ensemble's systems, checked against the particle count (None: one system)."""
-    sizes = np.array([count] if systems is None else list(systems), dtype=np.int64)
-    if sizes.ndim != 1 or len(sizes) == 0 or (sizes <= 0).any() or sizes.sum() != count:
-        raise InputError(f"systems must be positive sizes adding up to the {count} particles; got {list(sizes)}")
-    return sizes
-
-
 def candidate_width(min_radius: float, max_radius: float) -> int:
     """Contact candidates a particle's list holds on the paths that list them (the Newton layout, the
     tree): CANDIDATES, or more for a wide size range (sizes.contact_list_rule of the radius ratio), so
@@ -57,18 +54,14 @@ def candidate_width(min_radius: float, max_radius: float) -> int:
     return max(CANDIDATES, contact_list_rule(max_radius / min_radius))
 
 
-def contact_model(params: Params) -> ContactModel:
-    model = ContactModel()
-    model.G = wp.float64(params.G)
-    model.k_in = wp.float64(params.k_in)
-    model.k_out = wp.float64(params.k_out)
-    model.mu_k = wp.float64(params.mu_k)
-    model.mu_r = wp.float64(params.mu_r)
-    return model
-
-
 class Engine:
-    """Particle arrays on one device and launch wrappers for each stage of a step."""
+    """A particle system on one device, and the parts that step it.
+
+    >>> engine = Engine(state, params, device="cpu")
+    >>> engine.eval_forces()      # the forces at the current state (the first half kick needs them)
+    >>> engine.advance(100)       # 100 steps
+    >>> positions, velocities, omegas = engine.read()
+    """
 
     def __init__(
         self,
@@ -83,91 +76,62 @@ class Engine:
     ):
         """``systems``: the sizes of independent systems laid one after another in ``state``
         (an ensemble: each particle feels only its own system; default, one system)."""
-        if precision not in PRECISIONS:
-            raise InputError(f"precision must be one of {', '.join(PRECISIONS)}; got {precision!r}")
-        if force_kernel not in FORCE_KERNELS:
-            raise InputError(f"force_kernel must be one of {', '.join(FORCE_KERNELS)}; got {force_kernel!r}")
         self.device = resolve_device(device)
         self.params = params
-        self.precision = precision
-        self.force_kernel = force_kernel
-        self.ledger = ledger
-        self.count = state.n
-        self.systems = system_sizes(systems, self.count)
-        self.layout = layout or choose_layout(int(self.systems.max()), self.device)
-        self.model = contact_model(params)
+        sizes = system_sizes(systems, state.n)
+        self.scheme = choose_scheme(int(sizes.max()), self.device, params, precision, force_kernel, layout)
+        self.model = ModelArrays(state, params, self.device, precision, systems,
+                                 candidate_width(float(state.radii.min()), float(state.radii.max())))  # fmt: skip
+        self.state = StateArrays(state, self.device, ledger)
+        # The parts, chosen in one place (scheme.force_path; the integrator by the clocks).
+        self.path = FORCE_PATHS[force_path(self.scheme)](self.model, self.state, self.scheme)
+        self.integrator = INTEGRATORS[1 if self.scheme.clock == 1 else 2](self.model, self.state, self.path, self.scheme, self.pack_bodies)
 
-        def vectors(values):
-            return wp.array(values, dtype=wp.vec3d, device=self.device)
+    # -- what others read of it ----------------------------------------------------
 
-        def scalars(values):
-            return wp.array(values, dtype=wp.float64, device=self.device)
-
-        # Model: constant per particle.
-        self.radius = scalars(state.radii)
-        self.mass = scalars(state.masses)
-        self.inertia = scalars(state.inertia)
-        # State: changes every step.
-        self.position = vectors(state.positions)
-        self.velocity = vectors(state.velocities)
-        self.omega = vectors(state.omegas)
-        self.force = wp.zeros(self.count, dtype=wp.vec3d, device=self.device)
-        self.torque = wp.zeros(self.count, dtype=wp.vec3d, device=self.device)
-        # Energy ledger (kernels/integrate.py): contact channels of the last force
-        # evaluation, and the work of each channel since the start, per particle.
-        ledger_rows = self.count if ledger else 0
-        channel_count = len(LEDGER_CHANNELS)
-        self.channels = wp.zeros((ledger_rows, channel_count), dtype=wp.vec3d, device=self.device)
-        self.work = wp.zeros(ledger_rows, dtype=wp.vec4d, device=self.device)
-        # Each particle's deepest contact met by any force evaluation since the host last took it
-        # (kernels/contacts.py note_depth): frames report the peak between them, not a sample.
-        self.deepest_contact = wp.zeros(self.count, dtype=wp.int64, device=self.device)
-
-        # Each particle's own system, [first, end).
-        self.ends = np.cumsum(self.systems)
-        self.starts = self.ends - self.systems
-        ranges = np.repeat(np.stack([self.starts, self.ends], axis=1), self.systems, axis=0).astype(np.int32)
-        self.ranges = wp.array(ranges, dtype=wp.vec2i, device=self.device)
-        self.max_radius = float(state.radii.max())
-        self.min_radius = float(state.radii.min())
-        self.candidate_width = candidate_width(self.min_radius, self.max_radius)
-        # The sweeps' per-i contact bound, in their arithmetic (float32 rounding of the largest
-        # radius is no smaller than that of any other radius, so the bound holds).
-        self.sweep_max_radius = (wp.float32 if precision == "mixed" else wp.float64)(self.max_radius)
-
-        self._no_body = wp.zeros(0, dtype=BODY_TYPES[precision], device=self.device)  # a kick_drift that packs none
-        # The force path (decco_warp/forces.py), chosen by name in one place.
-        self.path = FORCE_PATHS[path_name(force_kernel, params, self.layout)](self)
-        self.gravity_every = params.gravity_every
-        """K: steps of dt per gravity evaluation (K > 1: the force path is RespaForces)."""
-
-    def pair_state(self) -> list:
-        """What a pair kernel reads of the particles: radius, mass, position, velocity, omega."""
-        return [self.radius, self.mass, self.position, self.velocity, self.omega]
-
-    def contact_state(self) -> list:
-        """What a contact pass reads of the particles beside their radii: position, velocity, omega."""
-        return [self.position, self.velocity, self.omega]
+    precision = property(lambda self: self.scheme.precision)
+    force_kernel = property(lambda self: self.scheme.force_kernel)
+    layout = property(lambda self: self.scheme.layout)
+    gravity_every = property(lambda self: self.scheme.clock, doc="K: steps of dt per gravity evaluation")
+    ledger = property(lambda self: self.state.ledger)
+    count = property(lambda self: self.model.count)
+    systems = property(lambda self: self.model.systems)
+    starts = property(lambda self: self.model.starts)
+    ends = property(lambda self: self.model.ends)
+    max_radius = property(lambda self: self.model.max_radius)
+    min_radius = property(lambda self: self.model.min_radius)
+    candidate_width = property(lambda self: self.model.candidate_width)
+    contact = property(lambda self: self.model.contact, doc="the pair laws' constants (kernels/pair.py ContactModel)")
+    radius = property(lambda self: self.model.radius)
+    mass = property(lambda self: self.model.mass)
+    ranges = property(lambda self: self.model.ranges)
+    position = property(lambda self: self.state.position)
+    velocity = property(lambda self: self.state.velocity)
+    omega = property(lambda self: self.state.omega)
+    force = property(lambda self: self.state.force)
+    torque = property(lambda self: self.state.torque)
+    channels = property(lambda self: self.state.channels)
 
     @property
     def candidate_count(self) -> wp.array:
         """Per particle, the contact candidates its force path met at the last evaluation (empty if it lists none)."""
-        return self.path.candidate_count
+        return self.path.finder.candidate_count if self.path.finder is not None else wp.zeros(0, dtype=wp.int32, device=self.device)
 
     @property
     def candidates(self) -> wp.array:
-        """Per particle, the first of them (as many as its list holds: candidate_width)."""
-        return self.path.candidates
+        """Per particle, the first of them (as many as its list holds)."""
+        return self.path.finder.candidates if self.path.finder is not None else wp.zeros((0, CANDIDATES), dtype=wp.int32, device=self.device)
 
-    # -- stages of a step -----------------------------------------------------------
+    # -- stepping --------------------------------------------------------------------
 
     def pack_bodies(self) -> None:
         """The sweep's packed bodies (``path.body``) from the current positions (none unless the path reads them)."""
         if self.path.body.shape[0] > 0:
+            m = self.model
             wp.launch(
-                PACK_KERNELS[self.precision],
-                dim=self.count,
-                inputs=[wp.float64(self.params.G), self.radius, self.mass, self.position],
+                PACK_KERNELS[self.scheme.precision],
+                dim=m.count,
+                inputs=[wp.float64(self.params.G), m.radius, m.mass, self.state.position],
                 outputs=[self.path.body],
                 device=self.device,
                 block_dim=particle_block(),
@@ -175,8 +139,7 @@ class Engine:
 
     def eval_forces(self) -> None:
         """Force and torque on every particle at the current positions and velocities."""
-        self.pack_bodies()
-        self.path.evaluate()
+        self.integrator.evaluate()
 
     def candidate_overflows(self, first: int = 0, end: int | None = None) -> int:
         """Particles (of rows [first, end)) whose contact candidates overflowed the list at the last
@@ -184,113 +147,21 @@ class Engine:
         its whole system."""
         return self.path.candidate_overflows(first, end)
 
-    def kick_drift(self, close_step: bool = False, pack: bool = False) -> None:
-        """Half kick with the current forces, then a full drift; with ``close_step`` first the last
-        half kick of the step before (:meth:`kick`), with ``pack`` then the packing of the bodies
-        for the sweep (the first stage of :meth:`eval_forces`), in the same launch."""
-        wp.launch(
-            integrate.KICK_DRIFT[self.precision],
-            dim=self.count,
-            inputs=[wp.float64(self.params.dt), wp.float64(self.params.G), self.radius, self.mass, self.inertia,
-                    self.force, self.torque, self.channels, close_step],
-            outputs=[self.position, self.velocity, self.omega, self.work, self.path.body if pack else self._no_body],
-            device=self.device,
-            block_dim=particle_block(),
-        )  # fmt: skip
-
-    def kick(self) -> None:
-        """Second half kick with the forces at the new positions."""
-        wp.launch(
-            integrate.kick,
-            dim=self.count,
-            inputs=[wp.float64(self.params.dt), self.mass, self.inertia, self.force, self.torque, self.channels],
-            outputs=[self.velocity, self.omega, self.work],
-            device=self.device,
-            block_dim=particle_block(),
-        )
-
-    # Gravity on its own clock (K = gravity_every > 1, docs/model.md): the path is RespaForces.
-
-    def kick_outer(self, close_step: bool = False) -> None:
-        """A gravity half kick of K dt / 2; with ``close_step`` first the last contact half kick (:meth:`kick`)."""
-        wp.launch(
-            integrate.kick_outer,
-            dim=self.count,
-            inputs=[wp.float64(self.params.dt), wp.float64(self.gravity_every * self.params.dt), self.mass, self.inertia,
-                    self.force, self.torque, self.channels, self.path.gravity_force, close_step],
-            outputs=[self.velocity, self.omega, self.work],
-            device=self.device,
-            block_dim=particle_block(),
-        )  # fmt: skip
-
-    def kick_drift_inner(self, close_step: bool = False, gravity_kicks: int = 0, pack: bool = False) -> None:
-        """A contact half kick and a full drift, then the neighbour list's displacement check; with
-        ``close_step`` first the last contact half kick of the step before, then ``gravity_kicks``
-        gravity half kicks (closing and opening outer steps); with ``pack`` the packing of the bodies
-        for the gravity sweep after the drift."""
-        neighbours = self.path.neighbours
-        wp.launch(
-            integrate.KICK_DRIFT_INNER[self.precision],
-            dim=self.count,
-            inputs=[wp.float64(self.params.dt), wp.float64(self.gravity_every * self.params.dt), wp.float64(self.params.G),
-                    self.radius, self.mass, self.inertia, self.force, self.torque, self.channels, self.path.gravity_force,
-                    close_step, gravity_kicks, neighbours.reference, wp.float64(0.5 * neighbours.skin), neighbours.system],
-            outputs=[self.position, self.velocity, self.omega, self.work, neighbours.stale, neighbours.stale_system,
-                     self.path.body if pack else self._no_body],
-            device=self.device,
-            block_dim=particle_block(),
-        )  # fmt: skip
-
     def step(self) -> None:
-        """One step (docs/model.md), each stage a launch of its own: kick-drift, the forces at x(n+1)
-        with the half-step velocities, kick.  With gravity on its own clock, one outer step of K
-        steps: a gravity half kick, K steps of the contacts alone, gravity at the new positions and
-        the second gravity half kick."""
-        if self.gravity_every == 1:
-            self.kick_drift()
-            self.eval_forces()
-            self.kick()
-            return
-        self.kick_outer()
-        for k in range(self.gravity_every):
-            self.kick_drift_inner(pack=k == self.gravity_every - 1)
-            self.path.contacts()
-            self.kick()
-        self.path.gravity_step()
-        self.kick_outer()
+        """One step (docs/model.md), each stage a launch of its own (with gravity on its own clock, one
+        outer step of K steps): the integrator's :meth:`~decco_warp.integrators.OneClock.step`."""
+        self.integrator.step()
 
     def advance(self, steps: int) -> None:
         """``steps`` steps (a multiple of K), ending at a whole step as :meth:`step` does, bit for bit
         the same: with ``layout.fuse_kicks``, a step's last half kick, the next one's first half
-        kick and drift and the packing of its bodies are one launch (kernels/integrate.py
-        ``kick_drift``, ``kick_drift_inner``)."""
-        if steps % self.gravity_every:
-            raise InputError(f"steps must be a multiple of gravity_every = {self.gravity_every}; got {steps}")
-        if not self.layout.fuse_kicks:
-            for _ in range(steps // self.gravity_every):
-                self.step()
-        elif self.gravity_every == 1:
-            self._advance_one_clock(steps)
+        kick and drift and the packing of its bodies are one launch."""
+        check_steps(steps, self.scheme.clock)
+        if not self.scheme.layout.fuse_kicks:
+            for _ in range(steps // self.scheme.clock):
+                self.integrator.step()
         else:
-            self._advance_two_clocks(steps // self.gravity_every)
-
-    def _advance_one_clock(self, steps: int) -> None:
-        for k in range(steps):
-            self.kick_drift(close_step=k > 0, pack=True)
-            self.path.evaluate()
-        if steps > 0:
-            self.kick()
-
-    def _advance_two_clocks(self, outer_steps: int) -> None:
-        last = self.gravity_every - 1
-        for s in range(outer_steps):
-            for k in range(self.gravity_every):
-                # The first inner step opens the outer step's gravity kick (after closing the one before).
-                self.kick_drift_inner(close_step=s > 0 or k > 0, gravity_kicks=(2 if s > 0 else 1) if k == 0 else 0, pack=k == last)
-                self.path.contacts()
-            self.path.gravity_step()
-        if outer_steps > 0:
-            self.kick_outer(close_step=True)
+            self.integrator.advance(steps)
 
     # -- host side ----------------------------------------------------------------
 
@@ -307,7 +178,7 @@ class Engine:
         ``deepest_overlap_pair`` (lower index first, counted from ``first``; -1 -1 when nothing
         touched), among particles [first, end) (one system of an ensemble); starts their new record."""
         end = self.count if end is None else end
-        part = self.deepest_contact[first:end]
+        part = self.state.deepest_contact[first:end]
         records = part.numpy().copy()  # on the CPU numpy() is a view of the array zeroed next
         part.zero_()
         i = int(np.argmax(records))
@@ -317,54 +188,44 @@ class Engine:
 
     def read(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Positions, velocities and angular velocities copied to the host."""
-        return self.position.numpy().copy(), self.velocity.numpy().copy(), self.omega.numpy().copy()
+        s = self.state
+        return s.position.numpy().copy(), s.velocity.numpy().copy(), s.omega.numpy().copy()
 
     def read_forces(self) -> tuple[np.ndarray, np.ndarray]:
         """The last evaluated force [dyne] (gravity included) and torque [dyne cm], copied to the host."""
-        return self.path.total_force(), self.torque.numpy().copy()
+        return self.path.total_force(), self.state.torque.numpy().copy()
 
     def read_work(self) -> np.ndarray:
         """Work of (gravity, spring, sliding, rolling) on each particle since the start [erg], (N, 4)."""
-        return self.work.numpy().copy() if self.ledger else np.zeros((self.count, 4))
+        return self.state.work.numpy().copy() if self.ledger else np.zeros((self.count, 4))
+
+    #: The state's arrays a snapshot holds and restores, by snapshot key.
+    SNAPSHOT_ARRAYS = {"positions": "position", "velocities": "velocity", "omegas": "omega", "force": "force",
+                       "torque": "torque", "channels": "channels", "work": "work"}  # fmt: skip
 
     def snapshot(self) -> dict[str, np.ndarray]:
         """Every array the next step depends on: enough to continue bit for bit.  With gravity on its
         own clock ``force`` is the contact force; gravity, a function of the positions alone, is
-        evaluated anew on :meth:`restore`, and the neighbour lists are kept (forces.py ``NeighbourList.arrays``)."""
-        positions, velocities, omegas = self.read()
-        return {
-            "positions": positions,
-            "velocities": velocities,
-            "omegas": omegas,
-            "force": self.force.numpy().copy(),
-            "torque": self.torque.numpy().copy(),
-            "channels": self.channels.numpy().copy(),
-            "work": self.work.numpy().copy(),
-            "deepest_contact": self.deepest_contact.numpy().copy(),
-            **self.path.arrays(),
-        }
+        evaluated anew on :meth:`restore`, and the neighbour lists are kept (contact_finders.py
+        ``NeighbourList.arrays``)."""
+        s = self.state
+        arrays = {key: getattr(s, name).numpy().copy() for key, name in self.SNAPSHOT_ARRAYS.items()}
+        return {**arrays, "deepest_contact": s.deepest_contact.numpy().copy(), **self.path.arrays()}
 
     def restore(self, snapshot: dict[str, np.ndarray]) -> None:
         """Load a :meth:`snapshot` back (same particle count and ledger setting)."""
-        for name, target in [
-            ("positions", self.position),
-            ("velocities", self.velocity),
-            ("omegas", self.omega),
-            ("force", self.force),
-            ("torque", self.torque),
-            ("channels", self.channels),
-            ("work", self.work),
-        ]:
-            values = np.asarray(snapshot[name], dtype=np.float64)
+        for key, name in self.SNAPSHOT_ARRAYS.items():
+            target = getattr(self.state, name)
+            values = np.asarray(snapshot[key], dtype=np.float64)
             if values.shape != target.numpy().shape:
-                raise InputError(f"snapshot {name} has shape {values.shape}; expected {target.numpy().shape}")
+                raise InputError(f"snapshot {key} has shape {values.shape}; expected {target.numpy().shape}")
             target.assign(wp.array(values, dtype=target.dtype, device=self.device))
         # The record since the last frame (checkpoints of decco-warp 0.2 have none: it starts afresh).
         records = np.asarray(snapshot.get("deepest_contact", np.zeros(self.count)), dtype=np.int64)
         if records.shape != (self.count,):
             raise InputError(f"snapshot deepest_contact has shape {records.shape}; expected {(self.count,)}")
-        self.deepest_contact.assign(wp.array(records, dtype=wp.int64, device=self.device))
-        self.path.restored(snapshot)
+        self.state.deepest_contact.assign(wp.array(records, dtype=wp.int64, device=self.device))
+        self.path.restored(snapshot, self.pack_bodies)
 
 
 def smoothed_density(sources: np.ndarray, norm: np.ndarray, inv_two_var: np.ndarray, targets: np.ndarray, device: str) -> np.ndarray:

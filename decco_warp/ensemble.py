@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 
 from .diagnostics import state_diagnostics
-from .forces import NEIGHBOUR_ARRAYS, neighbour_arrays
+from .contact_finders import NEIGHBOUR_ARRAYS, neighbour_arrays
 from .simulation import Simulation
 from .stability import StabilityReport
 from .state import State
@@ -103,7 +103,7 @@ def _partners_moved(records: np.ndarray, offset: int) -> np.ndarray:
 
 
 def _lists_moved(count: np.ndarray, listed: np.ndarray, offset: int) -> np.ndarray:
-    """Neighbour lists (forces.py ``NeighbourList.arrays``) with each listed index moved by ``offset``."""
+    """Neighbour lists (contact_finders.py ``NeighbourList.arrays``) with each listed index moved by ``offset``."""
     used = np.arange(listed.shape[1])[None, :] < count[:, None]
     return np.where(used, listed + offset, 0).astype(np.int32)
 

@@ -62,6 +62,18 @@ class Layout:
         return f"{self.block_dim} threads x {self.particles_per_block} per block, {self.contact_slots} slots" + registers + kicks
 
 
+#: Threads a block for the kernels of one thread a particle (the packing, the kicks and drifts, the
+#: Newton sweep's gather, the neighbour list's build).  A thread's arithmetic is the same at any
+#: block size, and so is the motion; Warp's default, 256, puts 6 250 particles in 25 blocks, on 25 of
+#: a GPU's 132 SMs (docs/benchmarks.md, "The device limit").
+PARTICLE_BLOCK = 256
+
+
+def particle_block() -> int:
+    """``block_dim`` of a launch of one thread a particle: :data:`PARTICLE_BLOCK`, read at launch."""
+    return PARTICLE_BLOCK
+
+
 #: Systems up to this many particles take the Newton layout on CUDA, which keeps a field sum and
 #: a candidate word per particle and tile of 64 (N^2 / 64 x 20 bytes: 5.4 GB at 131 072 particles);
 #: past it all-pairs takes the fused layout, which keeps nothing.
@@ -122,13 +134,13 @@ def newton_sweep_layout(gravity: str, gravity_every: int, layout: Layout, device
     return newton_layout(device) if gravity_every > 1 else None
 
 
-#: Host bytes per tile pair while the Newton tables are built (forces.newton_tiles: the index pairs
+#: Host bytes per tile pair while the Newton tables are built (gravity_solvers.newton_tiles: the index pairs
 #: and six columns in int64, then the int32 table that goes to the device).
 NEWTON_TABLE_BYTES = 2 * 8 + 6 * 8 + 6 * 4
 
 
 def newton_scratch_bytes(n: int, layout: Layout, vector_bytes: int, listing: bool) -> int:
-    """Bytes the Newton sweep keeps for a system of ``n`` particles (forces.NewtonGravity): for each
+    """Bytes the Newton sweep keeps for a system of ``n`` particles (gravity_solvers.PairsOnce): for each
     of its (n / tile)^2 rows a field sum per particle of a tile (``vector_bytes``: 12 in mixed
     precision, 24 in double) and, where it lists contact candidates, a 64-bit word; the tile-pair
     table as it is built; each particle's gather entry.  O(N^2 / tile): the CPU's tiles of 4 make

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from .collision import ETA_POTENTIALS, SPIN_AXES, spin_axis
-from .engine import PRECISIONS
+from .scheme import PRECISIONS
 from .layouts import LAYOUT_CHOICES
 from .params import GRAVITY_CHOICES, ROLLING_FRICTION_FORMS, Params, auto_gravity_every, choose_gravity
 from .stability import DEFAULT_MAX_COMPRESSION, choose_stiffness, choose_time_step

@@ -14,7 +14,7 @@ particle on a GPU, one on the CPU) walks a list in order and reduces its lanes i
 order, so its sums (and the ledger's channels) do not depend on scheduling.  A listed pair that does
 not touch adds an exact zero, but its slot decides which lane adds the contacts after it: with
 lanes, the rounding of a sum depends on which superset of the touching pairs the list holds (a
-neighbour list is part of the state: decco_warp/forces.py ``NeighbourList``).  The observables walk
+neighbour list is part of the state: decco_warp/contact_finders.py ``NeighbourList``).  The observables walk
 the lists the same way (``candidates_walk``, ``candidate_at``).
 """
 

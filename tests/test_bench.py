@@ -157,7 +157,7 @@ def test_bench_times_the_per_particle_block_beside_the_default(tmp_path):
     block for the kernels of one thread a particle, each with its ratio to the default row of its K;
     the module's setting is as it was after the call; a bad list is refused with one line."""
     from decco_warp import bench as benchmarks
-    from decco_warp import forces
+    from decco_warp import layouts
 
     out = tmp_path / "bench.json"
     result = cli("bench", "--device", "cpu", "--n", "200", "--seconds", "0.02", "--steps", "5", "--system", "piles",
@@ -168,9 +168,9 @@ def test_bench_times_the_per_particle_block_beside_the_default(tmp_path):
     for default, blocked in zip(rows[:2], rows[2:]):
         assert np.isclose(blocked["versus_default_block"], default["step_seconds"] / blocked["step_seconds"])
         assert f"32 threads a block for the per-particle kernels: {blocked['versus_default_block']:.2f}x" in blocked["layout"]
-    before = forces.PARTICLE_BLOCK
+    before = layouts.PARTICLE_BLOCK
     row = benchmarks.bench_size(100, "cpu", budget=0.01, steps=2, baseline=False, particle_block=before // 2)
-    assert row.particle_block == before // 2 and forces.PARTICLE_BLOCK == before
+    assert row.particle_block == before // 2 and layouts.PARTICLE_BLOCK == before
     for bad in ("0", "2000", "x"):
         result = cli("bench", "--device", "cpu", "--particle-blocks", bad)
         assert result.returncode == 2 and "--particle-blocks must list threads a block" in result.stderr

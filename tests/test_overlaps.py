@@ -258,7 +258,7 @@ def test_block_per_particle_observables_equal_the_plain_loop(device):
     tiled = engine.pair_observables()
     outputs = [wp.zeros(engine.count, dtype=dtype, device=engine.device) for dtype in PAIR_OBSERVABLES.values()]
     wp.launch(observables.pair_observables, dim=engine.count, device=engine.device, outputs=outputs,
-              inputs=[engine.model, engine.ranges, engine.radius, engine.mass, engine.position, engine.velocity])  # fmt: skip
+              inputs=[engine.contact, engine.ranges, engine.radius, engine.mass, engine.position, engine.velocity])  # fmt: skip
     plain = {name: array.numpy() for name, array in zip(PAIR_OBSERVABLES, outputs)}
     assert tiled["overlap_partner"][0] == 1 and plain["overlap_partner"][0] == 1
     assert tiled["contacts"].sum() > engine.count  # a crowded scene
@@ -283,7 +283,7 @@ state = dw.State.from_arrays(scene["positions"], zeros, zeros, scene["radii"], s
 engine = dw.Simulation(state, dw.Params(), device="cpu", allow_unstable=True).engine
 def run(kernel, block):
     outs = [wp.zeros(engine.count, dtype=d, device="cpu") for d in PAIR_OBSERVABLES.values()]
-    args = dict(inputs=[engine.model, engine.ranges, engine.radius, engine.mass, engine.position, engine.velocity], outputs=outs, device="cpu")
+    args = dict(inputs=[engine.contact, engine.ranges, engine.radius, engine.mass, engine.position, engine.velocity], outputs=outs, device="cpu")
     wp.launch(kernel, dim=engine.count, **args) if block == 0 else wp.launch_tiled(kernel, dim=[engine.count], block_dim=block, **args)
     return {n: a.numpy() for n, a in zip(PAIR_OBSERVABLES, outs)}
 plain = run(observables.pair_observables, 0)

@@ -14,7 +14,7 @@ from scenes import contact_cluster
 
 import decco_warp as dw
 from decco_warp.diagnostics import energy_ledger
-from decco_warp.forces import SKIN_FRACTION
+from decco_warp.contact_finders import SKIN_FRACTION
 
 #: One outer step against NumPy, as a fraction of the largest change of each quantity over the
 #: step: float64 to round-off; mixed within float32 gravity's error (measured ~1e-8 in velocity).
@@ -101,7 +101,7 @@ def test_the_neighbour_list_holds_every_touching_pair_and_is_rebuilt_past_half_t
     pairs); the list is rebuilt as the particles travel, and kept while nothing moves far."""
     state = _fast_clump()
     sim = dw.Simulation(state, dw.Params(gravity_every=2), device="cpu", allow_unstable=True)
-    neighbours = sim.engine.path.neighbours
+    neighbours = sim.engine.path.finder
     skin = SKIN_FRACTION * state.radii.min()
     assert neighbours.skin == skin
     builds = [sim.neighbour_list_builds()]
@@ -215,7 +215,7 @@ def test_a_restart_from_a_snapshot_is_bit_identical(precision, device):
 def test_a_snapshot_without_neighbour_lists_restarts_with_lists_built_afresh():
     """A checkpoint of decco-warp 0.2 holds no neighbour lists: the restart builds them at the
     restored positions and steps on (the lists hold every touching pair)."""
-    from decco_warp.forces import NEIGHBOUR_ARRAYS
+    from decco_warp.contact_finders import NEIGHBOUR_ARRAYS
 
     clump, params = _fast_clump(), dw.Params(gravity_every=5)
     first = dw.Simulation(clump, params, device="cpu", ledger=True, allow_unstable=True)
@@ -224,11 +224,11 @@ def test_a_snapshot_without_neighbour_lists_restarts_with_lists_built_afresh():
     assert all(key in snap for key in NEIGHBOUR_ARRAYS)
     old = {key: value for key, value in snap.items() if key not in NEIGHBOUR_ARRAYS}
     second = dw.Simulation.from_snapshot(clump, params, old, device="cpu")
-    reference = second.engine.path.neighbours.reference.numpy()
+    reference = second.engine.path.finder.reference.numpy()
     assert np.array_equal(reference, snap["positions"])  # built at the restored positions
     second.step(20)
     distance, reach = _touching_pairs(second.state.positions, clump.radii)
-    count, listed = second.engine.path.candidate_count.numpy(), second.engine.path.candidates.numpy()
+    count, listed = second.engine.candidate_count.numpy(), second.engine.candidates.numpy()
     for i, j in zip(*np.nonzero(distance < reach)):
         assert j in listed[i, : count[i]]
 
@@ -411,11 +411,11 @@ def test_runs_on_two_clocks_stepped_as_an_ensemble_write_what_they_would_alone(t
 
 @pytest.mark.parametrize("every", [1, 5])
 def test_the_per_particle_block_size_leaves_the_motion_unchanged(device, every, monkeypatch):
-    """forces.PARTICLE_BLOCK (threads a block of the kernels of one thread a particle) changes
+    """layouts.PARTICLE_BLOCK (threads a block of the kernels of one thread a particle) changes
     where threads run on a GPU, not what they compute: 150 steps at 32 and at 256 end bit for bit
     alike, at K = 1 (the Newton sweep's gather) and K = 5 (the neighbour list's build, rebuilt many
     times).  The CPU runs a launch's threads one by one whatever the block: nothing to test there."""
-    from decco_warp import forces
+    from decco_warp import layouts
 
     if device == "cpu":
         pytest.skip("a block shapes GPU launches only")
@@ -423,7 +423,7 @@ def test_the_per_particle_block_size_leaves_the_motion_unchanged(device, every, 
     clump = _fast_clump(300, seed=3)
     ends = []
     for block in (256, 32):
-        monkeypatch.setattr(forces, "PARTICLE_BLOCK", block)
+        monkeypatch.setattr(layouts, "PARTICLE_BLOCK", block)
         sim = dw.Simulation(clump, dw.Params(gravity_every=every), device=device, ledger=True, allow_unstable=True)
         sim.step(150)
         ends.append(sim.snapshot())
@@ -438,13 +438,13 @@ wp.config.enable_cpu_blocks = True  # the contact pass's 8 lanes a particle, as 
 wp.config.kernel_cache_dir = sys.argv[1]
 sys.path.insert(0, sys.argv[2])
 import decco_warp as dw
-from decco_warp import forces
+from decco_warp import contact_finders
 from test_respa import _fast_clump
 KEYS = ("positions", "velocities", "omegas", "force", "torque", "channels", "work", "deepest_contact")
 if len(sys.argv) > 3:  # the check of the check: lists built afresh on restore, every system's lists at every build
-    forces.NEIGHBOUR_ARRAYS = ("none",)
-    build = forces.NeighbourList.build
-    forces.NeighbourList.build = lambda self, everything=False: build(self, True)
+    contact_finders.NEIGHBOUR_ARRAYS = ("none",)
+    build = contact_finders.NeighbourList.build
+    contact_finders.NeighbourList.build = lambda self, state, everything=False: build(self, state, True)
 from dataclasses import replace
 from decco_warp.io import load_pile
 from decco_warp.plan import builtin_pile
@@ -453,7 +453,7 @@ def sheared(seed):  # the shipped pile (lists of up to ~30 neighbours) in a shea
     pile = load_pile(builtin_pile("target"))
     y = pile.positions[:, 1] - pile.positions[:, 1].mean()
     flow = np.zeros_like(pile.velocities)
-    flow[:, 0] = forces.SKIN_FRACTION * 7.5e5 * (0.2 + 0.1 * (seed % 3)) * y / np.abs(y).max()
+    flow[:, 0] = contact_finders.SKIN_FRACTION * 7.5e5 * (0.2 + 0.1 * (seed % 3)) * y / np.abs(y).max()
     return replace(pile, velocities=pile.velocities + flow)
 clump = sheared(11)
 straight = dw.Simulation(clump, params, device="cpu", ledger=True, allow_unstable=True)
@@ -478,7 +478,7 @@ for k, state in enumerate(states):
     together &= np.array_equal(ensemble.state.positions[part], alone.state.positions)
     together &= np.array_equal(ensemble.work()[part], alone.work())
     builds &= ensemble.neighbour_list_builds(k) == alone.neighbour_list_builds()
-longest = int(straight.engine.path.candidate_count.numpy().max())
+longest = int(straight.engine.candidate_count.numpy().max())
 print("restart", restart, "ensemble", together, "builds", builds, "longest list", longest)
 """
 
