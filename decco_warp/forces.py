@@ -73,7 +73,7 @@ class ContactPass:
         self.model = model
         blocks = _on_cuda(model.device) or wp.config.enable_cpu_blocks
         self.lanes, self.particles = (CONTACT_LANES, CONTACT_PARTICLES) if blocks else (1, 1)
-        self.kernel = contact_pass(model.params.rolling_friction, self.lanes, self.particles, accumulate)
+        self.kernel = contact_pass(model.params.law, self.lanes, self.particles, accumulate)
 
     def launch(self, state: StateArrays, finder: ContactFinder) -> None:
         m = self.model
@@ -174,7 +174,7 @@ class ReferenceForces(ForcePath):
 
     def __init__(self, model: ModelArrays, state: StateArrays, scheme: Scheme):
         super().__init__(model, state, scheme)
-        self.kernel = pair_forces_reference(scheme.precision, model.params.rolling_friction)
+        self.kernel = pair_forces_reference(scheme.precision, model.params.law)
 
     def evaluate(self) -> None:
         m, s = self.model, self.state
@@ -195,7 +195,7 @@ class FusedForces(ForcePath):
         layout = scheme.layout
         self.blocks = wp.array(tiled_blocks(model.starts, model.ends, layout.particles_per_block), dtype=wp.vec4i, device=model.device)
         self.kernel = pair_forces_tiled(
-            layout.block_dim, layout.particles_per_block, layout.contact_slots, scheme.precision, model.params.rolling_friction,
+            layout.block_dim, layout.particles_per_block, layout.contact_slots, scheme.precision, model.params.law,
             state.ledger, layout.max_registers,
         )  # fmt: skip
 

@@ -100,6 +100,12 @@ class Params:
             )
 
     @property
+    def law(self) -> str:
+        """The contact law's name among the kernels' (kernels/pair.py CONTACT_LAWS): the paper's law
+        with rolling friction as a couple ("paper"), or as the paper's printed force."""
+        return "paper" if self.rolling_friction == "couple" else "paper-printed-rolling"
+
+    @property
     def k_out(self) -> float:
         """Spring constant while receding or at rest, eps^2 k_in [dyne/cm]."""
         return self.restitution**2 * self.k_in

@@ -22,7 +22,7 @@ import functools
 
 import warp as wp
 
-from .pair import CONTACT_FUNCTIONS, ContactModel, in_contact, overlap
+from .pair import CONTACT_LAWS, ContactModel, in_contact, overlap
 
 wp.set_module_options({"enable_backward": False})
 
@@ -55,14 +55,15 @@ def unpack_depth(record: int) -> tuple[float, int]:
 
 
 @functools.cache
-def contact_function(rolling: str):
-    """The Warp function giving the contact channels on i from j if they touch, in float64 from the state arrays.
+def contact_function(law: str):
+    """The Warp function giving the contact channels on i from j if they touch, by ``law``
+    (kernels/pair.py CONTACT_LAWS), in float64 from the state arrays.
 
     Returns (spring force, sliding force, sliding torque, rolling force, rolling
     torque), all zero for a pair that does not touch; notes the contact's depth in
     ``deepest_out`` (see :func:`note_depth`).
     """
-    contact = CONTACT_FUNCTIONS[rolling]
+    contact = CONTACT_LAWS[law]
 
     @wp.func
     def contact_channels(
@@ -110,9 +111,9 @@ class ContactSum:
 
 
 @functools.cache
-def contact_sum_function(rolling: str):
+def contact_sum_function(law: str):
     """The Warp function adding the contact channels on i from j (zero unless they touch) to a ContactSum."""
-    contact_channels = contact_function(rolling)
+    contact_channels = contact_function(law)
 
     @wp.func
     def add_contact(
@@ -229,7 +230,7 @@ def candidate_at(i: int, listed: bool, ranges: wp.array(dtype=wp.vec2i), candida
 
 
 @functools.cache
-def contact_pass(rolling: str = "couple", lanes: int = 1, particles: int = 1, accumulate: bool = True):
+def contact_pass(law: str = "paper", lanes: int = 1, particles: int = 1, accumulate: bool = True):
     """Build the contact pass over candidate lists kept in increasing j: a block of ``particles``
     particles with ``lanes`` lanes each (8 x 4 on a GPU, 1 x 1 on the CPU; launch with
     ``wp.launch_tiled(dim=[ceil(N / particles)], block_dim=lanes * particles)``), each lane
@@ -243,8 +244,8 @@ def contact_pass(rolling: str = "couple", lanes: int = 1, particles: int = 1, ac
     Why groups of lanes: a particle lists ~8 candidates (~30 in a squeezed pile), so a warp of 32
     lanes a particle leaves most lanes idle and spends its time in a 32-lane reduction of 15
     float64 values; 8 lanes keep each lane busy and a warp serves four particles."""
-    contact_channels = contact_function(rolling)
-    add_contact = contact_sum_function(rolling)
+    contact_channels = contact_function(law)
+    add_contact = contact_sum_function(law)
 
     @wp.kernel(module="unique", enable_backward=False)
     def contact_pass_kernel(

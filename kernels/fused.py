@@ -32,7 +32,7 @@ def pair_forces_tiled(
     particles_per_block: int,
     contact_slots: int,
     precision: str = "mixed",
-    rolling: str = "couple",
+    law: str = "paper",
     ledger: bool = False,
     max_registers: int = 0,
 ):
@@ -47,7 +47,7 @@ def pair_forces_tiled(
     contact code, which runs rarely, then spills instead of the sweep losing occupancy.
     """
     real, _, Body, inverse_sqrt, radius_at, g_mass_at, candidate = sweep_of(precision)
-    contact_channels = contact_function(rolling)
+    contact_channels = contact_function(law)
     T, P, K = block_dim, particles_per_block, contact_slots
     Bodies = wp.types.matrix(shape=(P, Body._length_), dtype=real)
     Near = wp.types.vector(length=P, dtype=real)

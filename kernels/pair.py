@@ -274,8 +274,11 @@ def contact_with_printed_rolling(
     return spring, sliding, sliding_torque, rolling, wp.cross(arm_i, rolling)
 
 
-# Rolling-friction forms by name (Params.rolling_friction).
-CONTACT_FUNCTIONS = {
-    "couple": contact_with_rolling_couple,
-    "paper": contact_with_printed_rolling,
+#: The contact laws, by name (params.py ``Params.law``): each gives the channels of a touching j's
+#: action on i.  "paper": the paper's law, rolling friction as a couple (docs/model.md);
+#: "paper-printed-rolling": the same, rolling friction as the force printed as the paper's eq. 9.
+#: A new law is one function of that signature and its line here.
+CONTACT_LAWS = {
+    "paper": contact_with_rolling_couple,
+    "paper-printed-rolling": contact_with_printed_rolling,
 }

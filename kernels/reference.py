@@ -18,11 +18,11 @@ wp.set_module_options({"enable_backward": False})
 
 
 @functools.cache
-def pair_forces_reference(precision: str = "mixed", rolling: str = "couple"):
+def pair_forces_reference(precision: str = "mixed", law: str = "paper"):
     """Build the one-thread-per-particle kernel; launch with ``dim=N``.  The ledger's channels are
     written when ``channels_out`` has rows."""
     real, vec_real = real_types(precision)
-    add_contact = contact_sum_function(rolling)
+    add_contact = contact_sum_function(law)
 
     @wp.kernel(module="unique", enable_backward=False)
     def pair_forces_reference_kernel(
