@@ -135,12 +135,30 @@ def surface_slip(
     return g - wp.dot(g, n) * n
 
 
+#: Slip below this fraction of the pair's velocity scale (:func:`velocity_scale`) is none: the slip
+#: of a rigidly moving pair is round-off of its velocities, and friction then would act in a
+#: direction set by round-off (docs/model.md, "Sliding friction").
+SLIP_THRESHOLD = 1e-10
+
+
 @wp.func
-def sliding_friction(slip: wp.vec3d, normal_magnitude: wp.float64, mu_k: wp.float64) -> wp.vec3d:
-    """F_S = -mu_k |F_N| s/|s| on i: opposes the slip; zero without slip."""
-    speed = wp.length(slip)
-    if speed > f64(0.0):
-        return (-mu_k * normal_magnitude / speed) * slip
+def velocity_scale(
+    velocity_i: wp.vec3d, omega_i: wp.vec3d, radius_i: wp.float64, velocity_j: wp.vec3d, omega_j: wp.vec3d, radius_j: wp.float64
+) -> wp.float64:
+    """V = |v_i| + |v_j| + |w_i| R_i + |w_j| R_j, summed so that i <-> j gives the same bits."""
+    return (wp.length(velocity_i) + wp.length(velocity_j)) + (wp.length(omega_i) * radius_i + wp.length(omega_j) * radius_j)
+
+
+@wp.func
+def sliding_friction(slip: wp.vec3d, n: wp.vec3d, normal_magnitude: wp.float64, mu_k: wp.float64, scale: wp.float64) -> wp.vec3d:
+    """F_S = -mu_k |F_N| s_t/|s_t| on i: opposes the slip s, along s_t = s - (s.n) n (s projected
+    once more, so that round-off cannot tilt the force off the tangent plane); zero where
+    |s| <= SLIP_THRESHOLD x the pair's velocity scale (``scale``)."""
+    if wp.length(slip) > f64(SLIP_THRESHOLD) * scale:
+        tangent = slip - wp.dot(slip, n) * n
+        size = wp.length(tangent)
+        if size > f64(0.0):
+            return (-mu_k * normal_magnitude / size) * tangent
     return vec3d()
 
 
@@ -222,7 +240,8 @@ def normal_and_sliding(
     arm_i = lever_arm(r_ij, radius_i, radius_j)
     arm_j = lever_arm(-r_ij, radius_j, radius_i)  # j's own arm, seen from j
     slip = surface_slip(n, velocity_i, omega_i, arm_i, velocity_j, omega_j, arm_j)
-    friction = sliding_friction(slip, normal_magnitude, model.mu_k)
+    scale = velocity_scale(velocity_i, omega_i, radius_i, velocity_j, omega_j, radius_j)
+    friction = sliding_friction(slip, n, normal_magnitude, model.mu_k, scale)
     return normal_magnitude * n, friction, wp.cross(arm_i, friction), n, normal_magnitude, arm_i
 
 

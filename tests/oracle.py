@@ -39,8 +39,12 @@ def pair_loop_forces(x, v, w, radii, masses, k_in, restitution, mu_k, mu_r, G, r
             arm_j = (radii[j] / (radii[i] + radii[j])) * r[j]
             g = (v[i] + np.cross(w[i], arm_i)) - (v[j] + np.cross(w[j], arm_j))
             slip = g - np.dot(g, nij) * nij
-            slip_speed = np.linalg.norm(slip)
-            f_slide = -mu_k * fn * slip / slip_speed if slip_speed > 0 else np.zeros(3)
+            # No friction below 1e-10 of the pair's velocity scale (rigid motion: round-off), and its
+            # direction the slip projected once more onto the tangent plane.
+            scale = np.linalg.norm(v[i]) + np.linalg.norm(v[j]) + np.linalg.norm(w[i]) * radii[i] + np.linalg.norm(w[j]) * radii[j]
+            tangent = slip - np.dot(slip, nij) * nij
+            sliding = np.linalg.norm(slip) > 1e-10 * scale and np.linalg.norm(tangent) > 0
+            f_slide = -mu_k * fn * tangent / np.linalg.norm(tangent) if sliding else np.zeros(3)
             f_pair = fn * nij + f_slide
             t_pair = np.cross(arm_i, f_slide)
             if rolling == "couple":

@@ -173,3 +173,64 @@ def test_printed_rolling_form_is_the_papers_force_at_the_contact(device):
     np.testing.assert_allclose(force[1], -(normal * n + rolling), rtol=1e-12)
     arm_i = -0.5 * r_ij
     np.testing.assert_allclose(torque[0], np.cross(arm_i, rolling), rtol=1e-12)
+
+
+def _rigidly_spinning_cluster(fraction=0.5, seed=5):
+    """A clump of touching spheres of the paper's radii (ratio 3 between the largest and smallest),
+    turning rigidly at ``fraction`` of its breakup spin sqrt(G M / R^3) about a tilted axis, as
+    collision.setup_collision spins a pile: v = w x (x - x_cm), every sphere's spin w."""
+    from scenes import contact_cluster
+
+    state = contact_cluster(80, seed=seed, overlap_range=(1.0, 1e3), speed=0.0, spin=0.0)
+    assert state.radii.max() / state.radii.min() == 3.0
+    offset = state.positions - state.centre_of_mass
+    radius = (np.linalg.norm(offset, axis=1) + state.radii).max()
+    axis = np.array([0.3, -0.5, 1.0]) / np.linalg.norm([0.3, -0.5, 1.0])
+    omega = fraction * np.sqrt(dw.G_CGS * state.total_mass / radius**3) * axis
+    state.velocities = np.cross(omega, offset) + np.array([3.0e3, -1.0e3, 2.0e3])  # and a bulk motion
+    state.omegas = np.tile(omega, (state.n, 1))
+    return state, omega
+
+
+@pytest.mark.parametrize("kernel", ["tiled", "reference"])
+def test_a_rigidly_spinning_cluster_feels_no_sliding_friction(device, kernel):
+    """A rigidly turning clump (half its breakup spin) has no slip but round-off: no contact slides,
+    so the sliding channel is zero on every sphere (an exact |slip| > 0 test gave every contact the
+    full mu_k |F_N|, here up to 1e20 dyne against springs of 3.5e20, in a direction of round-off),
+    no sphere feels a torque (equal spins: no rolling either), and the forces are bit for bit those
+    without friction."""
+    state, omega = _rigidly_spinning_cluster()
+    forces = {}
+    for mu_k in (0.3, 0.0):
+        sim = dw.Simulation(state, dw.Params(mu_k=mu_k), device=device, force_kernel=kernel, ledger=True, allow_unstable=True)
+        assert sim.diagnostics()["number_of_contacts"] >= state.n - 1
+        channels = sim.engine.channels.numpy()
+        assert np.all(channels[:, 1] == 0) and np.all(channels[:, 2] == 0)  # sliding force and its torque
+        forces[mu_k] = sim.forces()
+    assert np.array_equal(forces[0.3][0], forces[0.0][0]) and np.all(forces[0.3][1] == 0)
+
+
+def test_sliding_friction_lies_in_the_tangent_plane_and_vanishes_below_the_slip_threshold():
+    """A slip along the tangent plane gives a friction force with no normal part (to round-off of its
+    size); a slip below 1e-10 of the pair's velocity scale gives none, one just above it the full
+    mu_k |F_N| (the NumPy oracle agrees on both sides)."""
+    from oracle import pair_loop_forces
+
+    radii = np.array([0.75e6, 2.25e6])
+    x = np.array([[1.0e7, -2.0e7, 3.0e6], [1.0e7 + radii.sum() - 100.0, -2.0e7, 3.0e6]])
+    for slip, slides in ((5e-8, True), (1e-8, False)):  # the scale: |v_i| + |v_j| = 2 x 1e2 cm/s, so 2e-8
+        velocities = np.array([[1e2, slip, 0.0], [1e2, 0.0, 0.0]])
+        state = dw.State.from_arrays(x, velocities, np.zeros((2, 3)), radii, sphere_mass(radii))
+        params = dw.Params(G=0.0)
+        force, torque = dw.compute_forces(state, params, device="cpu", precision="float64", force_kernel="reference")
+        expected, _, _, _ = pair_loop_forces(state.positions, state.velocities, state.omegas, state.radii, state.masses,
+                                             params.k_in, params.restitution, params.mu_k, params.mu_r, 0.0)  # fmt: skip
+        n = (state.positions[0] - state.positions[1]) / np.linalg.norm(state.positions[0] - state.positions[1])
+        tangential = force[0] - np.dot(force[0], n) * n
+        normal = 0.5 * params.k_out * 100.0
+        assert np.allclose(force, expected, rtol=1e-12, atol=1e-9 * normal)
+        if slides:
+            assert np.linalg.norm(tangential) == pytest.approx(params.mu_k * normal, rel=1e-9)
+            assert abs(np.dot(tangential, n)) < 1e-15 * np.linalg.norm(tangential)
+        else:
+            assert np.linalg.norm(tangential) < 1e-9 * normal
