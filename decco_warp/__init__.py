@@ -22,7 +22,7 @@ from .diagnostics import diagnostics  # noqa: E402
 from .folder import RunFolder  # noqa: E402
 from .layouts import Layout  # noqa: E402
 from .io import load_pile, read_trajectory, save_pile  # noqa: E402
-from .params import G_CGS, ROLLING_FRICTION_FORMS, Params  # noqa: E402
+from .params import CONTACT_LAWS, G_CGS, ROLLING_FRICTION_FORMS, Params  # noqa: E402
 from .pile import Formation, form_pile  # noqa: E402
 from .simulation import Simulation, compute_forces  # noqa: E402
 from .stability import (  # noqa: E402
@@ -46,6 +46,7 @@ __all__ = [
     "Layout",
     "Params",
     "ROLLING_FRICTION_FORMS",
+    "CONTACT_LAWS",
     "Simulation",
     "StabilityError",
     "StabilityReport",

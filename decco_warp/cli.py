@@ -527,6 +527,9 @@ def simulate(
     gravity_every: Optional[str] = typer.Option(
         None, "--gravity-every", help="K: gravity evaluated every K steps, the contacts every step (docs/model.md, \"Gravity on its own clock\"); 1 is the paper's scheme, auto is 10. Step counts must then be multiples of K."
     ),
+    contact_law: Optional[str] = typer.Option(
+        None, "--contact-law", help="paper (the paper's law as docs/model.md states it) or decco-code (DECCO's pair forces as its code computes them)."
+    ),
     check: bool = typer.Option(False, "--check", help="Set up the collision, print its margins and predicted deepest overlap, run nothing."),
     output_every: Optional[int] = typer.Option(None, "--output-every", help="Steps between trajectory frames."),
     checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Steps between checkpoints."),
@@ -565,7 +568,7 @@ def simulate(
             "piles": {"target": target, "projectile": projectile},
             "collision": collision,
             "params": {"dt": _number_or_auto(dt, "--dt"), "k_in": _number_or_auto(k_in, "--k-in"), "gravity": gravity,
-                       "gravity_every": _integer_or_auto(gravity_every, "--gravity-every")},
+                       "gravity_every": _integer_or_auto(gravity_every, "--gravity-every"), "contact_law": contact_law},
         }
         spec = specs.resolve_spec(raw, overrides)
     except specs.SpecError as error:

@@ -15,6 +15,11 @@ G_CGS = 6.67430e-8
 #: the default; "paper" is the force printed as the paper's eq. 9, for comparison.
 ROLLING_FRICTION_FORMS = ("couple", "paper")
 
+#: Contact laws (docs/model.md, "Contact laws"): "paper", the paper's law as docs/model.md states it
+#: (rolling friction by ``rolling_friction``); "decco-code", DECCO's pair forces as its code computes
+#: them (LucasKolanz/DECCO at fae89d3).
+CONTACT_LAWS = ("paper", "decco-code")
+
 #: Gravity solvers: "all-pairs" sums every pair (exact, O(N^2)); "tree" walks a radix tree with
 #: monopole + quadrupole nodes (O(N log N), error set by theta_open; contacts from a hash grid).
 GRAVITY_SOLVERS = ("all-pairs", "tree")
@@ -69,7 +74,9 @@ class Params:
     G: float = G_CGS
     """Gravitational constant [cm^3 g^-1 s^-2]; 0 switches gravity off."""
     rolling_friction: str = "couple"
-    """Form of rolling friction, one of ROLLING_FRICTION_FORMS."""
+    """Form of rolling friction of the paper's law, one of ROLLING_FRICTION_FORMS."""
+    contact_law: str = "paper"
+    """The contact law, one of CONTACT_LAWS."""
     gravity: str = "all-pairs"
     """Gravity solver, one of GRAVITY_SOLVERS."""
     theta_open: float = 0.4
@@ -98,12 +105,18 @@ class Params:
             raise InputError(
                 f"rolling_friction must be one of {', '.join(ROLLING_FRICTION_FORMS)}; got {self.rolling_friction!r}"
             )
+        if self.contact_law not in CONTACT_LAWS:
+            raise InputError(f"contact_law must be one of {', '.join(CONTACT_LAWS)}; got {self.contact_law!r}")
+        if self.contact_law != "paper" and self.rolling_friction != "couple":
+            raise InputError(f"rolling_friction chooses the paper law's rolling friction; contact_law {self.contact_law!r} has its own")
 
     @property
     def law(self) -> str:
         """The contact law's name among the kernels' (kernels/pair.py CONTACT_LAWS): the paper's law
-        with rolling friction as a couple ("paper"), or as the paper's printed force."""
-        return "paper" if self.rolling_friction == "couple" else "paper-printed-rolling"
+        with rolling friction as a couple ("paper") or as the paper's printed force, or another law."""
+        if self.contact_law == "paper":
+            return "paper" if self.rolling_friction == "couple" else "paper-printed-rolling"
+        return self.contact_law
 
     @property
     def k_out(self) -> float:

@@ -7,7 +7,7 @@ A specification has four tables, every key optional (defaults below):
     [piles]      target, projectile          (pile files, or builtin:target / builtin:projectile)
     [collision]  eta | speed, eta_potential, theta_deg, gap, target_spin, target_spin_axis, projectile_spin,
                  projectile_spin_axis, orientation_seed
-    [params]     k_in, restitution, mu_k, mu_r, dt, G, rolling_friction, gravity, theta_open, gravity_every,
+    [params]     k_in, restitution, mu_k, mu_r, dt, G, rolling_friction, contact_law, gravity, theta_open, gravity_every,
                  max_compression
 
 Every problem is a :class:`SpecError` naming the table, the key and what is allowed.
@@ -33,7 +33,7 @@ from typing import Any, Callable
 from .collision import ETA_POTENTIALS, SPIN_AXES, spin_axis
 from .scheme import PRECISIONS
 from .layouts import LAYOUT_CHOICES
-from .params import GRAVITY_CHOICES, ROLLING_FRICTION_FORMS, Params, auto_gravity_every, choose_gravity
+from .params import CONTACT_LAWS, GRAVITY_CHOICES, ROLLING_FRICTION_FORMS, Params, auto_gravity_every, choose_gravity
 from .stability import DEFAULT_MAX_COMPRESSION, choose_stiffness, choose_time_step
 from .errors import SpecError  # noqa: F401 (re-exported: the error lives in errors.py)
 
@@ -130,6 +130,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "dt": Key(float, _PARAMS_DEFAULT.dt, _positive, "> 0 (s) or \"auto\"", auto=True),
         "G": Key(float, _PARAMS_DEFAULT.G, _non_negative, ">= 0 (cm^3 g^-1 s^-2)"),
         "rolling_friction": Key(str, "couple", lambda v: v in ROLLING_FRICTION_FORMS, " or ".join(ROLLING_FRICTION_FORMS)),
+        "contact_law": Key(str, _PARAMS_DEFAULT.contact_law, lambda v: v in CONTACT_LAWS, " or ".join(CONTACT_LAWS)),
         "gravity": Key(str, _PARAMS_DEFAULT.gravity, lambda v: v in GRAVITY_CHOICES, " or ".join(GRAVITY_CHOICES)),
         "theta_open": Key(float, _PARAMS_DEFAULT.theta_open, lambda v: 0 < v < 2, "in (0, 2) (tree opening angle)"),
         "gravity_every": Key(

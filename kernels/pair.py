@@ -293,11 +293,89 @@ def contact_with_printed_rolling(
     return spring, sliding, sliding_torque, rolling, wp.cross(arm_i, rolling)
 
 
+# --- DECCO's code (LucasKolanz/DECCO at fae89d3, ColliderSingleCore.cpp sim_one_step) -------------
+#
+# DECCO meets each pair once, as (A, B) with A the higher index, and computes from A's side: its
+# lever arm r_a = (R_A / S) (x_B - x_A) (our a_A), the slip of B seen from A with both spins on A's
+# arm, u = (v_B - v_A)_t - w_A x r_a - w_B x r_a, sliding friction mu_k |F_N| u / |u| on A (-that on B)
+# where |u| > 1e-13 cm/s, and rolling friction -mu_r |F_N| (w_A - w_B) x r_a / |(w_A - w_B) x r_a|
+# where |w_A - w_B| > 1e-13 rad/s, applied as torques alone: r_a x it on A and r_b x it on B. These
+# functions give i's part of that, i being A or B.
+
+#: DECCO's absolute thresholds of slip [cm/s] and relative spin [rad/s] below which no friction acts.
+DECCO_THRESHOLD = 1e-13
+
+
+@wp.func
+def decco_friction(
+    n: wp.vec3d,
+    normal_magnitude: wp.float64,
+    mu_k: wp.float64,
+    mu_r: wp.float64,
+    velocity_a: wp.vec3d,
+    omega_a: wp.vec3d,
+    arm_a: wp.vec3d,
+    velocity_b: wp.vec3d,
+    omega_b: wp.vec3d,
+):
+    """(sliding force on A, rolling force whose torques act on both) of DECCO's code for a pair seen
+    from A (its arm ``arm_a``; n along A's outward normal, from B to A)."""
+    relative = velocity_b - velocity_a
+    slip = relative - wp.dot(relative, n) * n - wp.cross(omega_a, arm_a) - wp.cross(omega_b, arm_a)
+    sliding = vec3d()
+    speed = wp.length(slip)
+    if speed > f64(DECCO_THRESHOLD):
+        sliding = (mu_k * normal_magnitude / speed) * slip
+    rolling = vec3d()
+    spin = omega_a - omega_b
+    if wp.length(spin) > f64(DECCO_THRESHOLD):
+        direction = wp.cross(spin, arm_a)
+        size = wp.length(direction)
+        if size > f64(0.0):  # (DECCO divides by it unguarded: a spin along the normal gives NaN there)
+            rolling = (-mu_r * normal_magnitude / size) * direction
+    return sliding, rolling
+
+
+@wp.func
+def contact_as_decco_code(
+    model: ContactModel,
+    r_ij: wp.vec3d,
+    d2: wp.float64,
+    radius_i: wp.float64,
+    velocity_i: wp.vec3d,
+    omega_i: wp.vec3d,
+    radius_j: wp.float64,
+    velocity_j: wp.vec3d,
+    omega_j: wp.vec3d,
+    i_is_first: bool,
+):
+    """Channels of a touching j's action on i by DECCO's code: the paper's spring, DECCO's sliding and
+    rolling friction computed from the pair's higher index (A), i taking A's part or B's."""
+    d = wp.sqrt(d2)
+    n = r_ij / d
+    delta = overlap(d, radius_i, radius_j)
+    k = spring_constant(wp.dot(velocity_i - velocity_j, n), model.k_in, model.k_out)
+    normal_magnitude = normal_force_magnitude(delta, k)
+    arm_i = lever_arm(r_ij, radius_i, radius_j)
+    sliding = vec3d()
+    rolling = vec3d()
+    if i_is_first:  # i is B: the pair seen from j (A), whose normal is -n
+        sliding_a, rolling_a = decco_friction(-n, normal_magnitude, model.mu_k, model.mu_r, velocity_j, omega_j,
+                                              lever_arm(-r_ij, radius_j, radius_i), velocity_i, omega_i)  # fmt: skip
+        sliding = -sliding_a
+        rolling = rolling_a
+    else:
+        sliding, rolling = decco_friction(n, normal_magnitude, model.mu_k, model.mu_r, velocity_i, omega_i, arm_i, velocity_j, omega_j)
+    return normal_magnitude * n, sliding, wp.cross(arm_i, sliding), vec3d(), wp.cross(arm_i, rolling)
+
+
 #: The contact laws, by name (params.py ``Params.law``): each gives the channels of a touching j's
 #: action on i.  "paper": the paper's law, rolling friction as a couple (docs/model.md);
-#: "paper-printed-rolling": the same, rolling friction as the force printed as the paper's eq. 9.
-#: A new law is one function of that signature and its line here.
+#: "paper-printed-rolling": the same, rolling friction as the force printed as the paper's eq. 9;
+#: "decco-code": DECCO's pair forces as its code computes them.  A new law is one function of that
+#: signature and its line here.
 CONTACT_LAWS = {
     "paper": contact_with_rolling_couple,
     "paper-printed-rolling": contact_with_printed_rolling,
+    "decco-code": contact_as_decco_code,
 }

@@ -91,3 +91,47 @@ def energies(x, v, w, radii, masses, k_in, restitution, G):
             k = k_in if approaching else restitution**2 * k_in
             elastic += 0.25 * k * delta[jj] ** 2
     return kinetic, rotational, potential, elastic
+
+
+def decco_code_forces(x, v, w, radii, masses, k_in, restitution, mu_k, mu_r, G):
+    """Force and torque on every particle by DECCO's code (LucasKolanz/DECCO at fae89d3,
+    ColliderSingleCore.cpp, sim_one_step's second pass), transcribed term by term in its own names:
+    each pair once as (A, B), A > B, every quantity from A's side.  Two changes, both docs/model.md's:
+    gravity between every pair (that commit had it off for dust, with van der Waals cohesion on), and
+    the spring's k_in while the pair approaches by its normal velocity (DECCO: while its distance is
+    shorter than at the step before).  k_out = restitution^2 k_in (DECCO's cor is restitution^2)."""
+    n = len(radii)
+    acc_force = np.zeros((n, 3))
+    torque = np.zeros((n, 3))
+    kout = restitution**2 * k_in
+    for A in range(1, n):
+        for B in range(A):
+            sumRaRb = radii[A] + radii[B]
+            rVecab = x[B] - x[A]
+            rVecba = -rVecab
+            dist = np.linalg.norm(rVecab)
+            overlap = sumRaRb - dist
+            gravForceOnA = (G * masses[A] * masses[B] / (dist * dist)) * (rVecab / dist)
+            totalForceOnA = gravForceOnA
+            if overlap > 0:
+                k = k_in if np.dot(v[B] - v[A], rVecab) < 0 else kout  # the normal velocity's sign
+                elasticForceOnA = -k * overlap * 0.5 * (rVecab / dist)
+                elastic_force_A_mag = np.linalg.norm(elasticForceOnA)
+                r_a = rVecab * radii[A] / sumRaRb
+                r_b = rVecba * radii[B] / sumRaRb
+                w_diff = w[A] - w[B]
+                d_vel = v[B] - v[A]
+                frame_A_vel_B = d_vel - np.dot(d_vel, rVecab) * (rVecab / (dist * dist)) - np.cross(w[A], r_a) - np.cross(w[B], r_a)
+                slideForceOnA = np.zeros(3)
+                rel_vel_mag = np.linalg.norm(frame_A_vel_B)
+                if rel_vel_mag > 1e-13:
+                    slideForceOnA = mu_k * elastic_force_A_mag * (frame_A_vel_B / rel_vel_mag)
+                rollForceA = np.zeros(3)
+                if np.linalg.norm(w_diff) > 1e-13:
+                    rollForceA = -mu_r * elastic_force_A_mag * np.cross(w_diff, r_a) / np.linalg.norm(np.cross(w_diff, r_a))
+                totalForceOnA = gravForceOnA + elasticForceOnA + slideForceOnA
+                torque[A] += np.cross(r_a, slideForceOnA + rollForceA)
+                torque[B] += np.cross(r_b, -slideForceOnA + rollForceA)
+            acc_force[A] += totalForceOnA
+            acc_force[B] -= totalForceOnA
+    return acc_force, torque

@@ -234,3 +234,71 @@ def test_sliding_friction_lies_in_the_tangent_plane_and_vanishes_below_the_slip_
             assert abs(np.dot(tangential, n)) < 1e-15 * np.linalg.norm(tangential)
         else:
             assert np.linalg.norm(tangential) < 1e-9 * normal
+
+
+def _spinning_pair(ratio, spin=(0.0, 0.0, 2e-4), other_spin=(1e-4, -5e-5, 0.0), slip=(0.0, 40.0, 10.0)):
+    """Two touching spheres of radii 0.75e6 and ratio x that, with spins and a slip."""
+    radii = np.array([0.75e6, 0.75e6 * ratio])
+    x = np.array([[2.0e7, -1.0e7, 3.0e6], [2.0e7 + radii.sum() - 300.0, -1.0e7 + 2e4, 3.0e6 - 1e4]])
+    v = np.array([[0.0, 0.0, 0.0], slip])
+    w = np.array([spin, other_spin])
+    return dw.State.from_arrays(x, v, w, radii, sphere_mass(radii))
+
+
+@pytest.mark.parametrize("precision", ["mixed", "float64"])
+@pytest.mark.parametrize("kernel", ["tiled", "reference"])
+def test_decco_code_law_is_deccos_loop(device, kernel, precision):
+    """contact_law = "decco-code" gives, on a spinning, sliding clump of the paper's three radii, the
+    forces and torques of DECCO's own loop transcribed in NumPy (tests/oracle.py), particle by particle
+    (to 1e-9 of the largest in float64, 1e-5 in mixed precision)."""
+    from oracle import decco_code_forces
+    from scenes import contact_cluster
+
+    state = contact_cluster(60, seed=9, overlap_range=(10.0, 1e4), speed=50.0, spin=3e-4)
+    params = dw.Params(contact_law="decco-code", mu_r=0.05)
+    force, torque = dw.compute_forces(state, params, device=device, precision=precision, force_kernel=kernel)
+    expected_force, expected_torque = decco_code_forces(state.positions, state.velocities, state.omegas, state.radii, state.masses,
+                                                        params.k_in, params.restitution, params.mu_k, params.mu_r, params.G)  # fmt: skip
+    scale = np.abs(expected_force).max()
+    tolerance = 1e-5 if precision == "mixed" else 1e-9  # mixed: float32 gravity, and the fused layout's float32 sums
+    np.testing.assert_allclose(force, expected_force, rtol=0, atol=tolerance * scale)
+    np.testing.assert_allclose(torque, expected_torque, rtol=0, atol=tolerance * np.abs(expected_torque).max())
+    paper, _ = dw.compute_forces(state, dw.Params(mu_r=0.05), device=device, precision=precision, force_kernel=kernel)
+    assert np.abs(paper - force).max() > 1e-3 * scale  # the laws differ on this clump
+
+
+def test_decco_code_law_differs_from_the_paper_law_only_at_unequal_radii():
+    """DECCO's slip puts the second sphere's spin on the first one's lever arm: for equal radii its
+    sliding force is the paper law's; at radius ratio 3 it is not.  Its rolling friction is a torque
+    mu_r |F_N| R_i on each sphere, not the couple's mu_r |F_N| R* (twice it for equal radii)."""
+    for ratio, same_sliding in ((1.0, True), (3.0, False)):
+        state = _spinning_pair(ratio)
+        channels = {}
+        for law in ("paper", "decco-code"):
+            sim = dw.Simulation(state, dw.Params(contact_law=law, G=0.0, mu_r=0.02), device="cpu", precision="float64",
+                                force_kernel="reference", ledger=True, allow_unstable=True)  # fmt: skip
+            channels[law] = sim.engine.channels.numpy().copy(), sim.forces()[1]
+        sliding = {law: channels[law][0][:, 1] for law in channels}
+        assert np.allclose(sliding["paper"], sliding["decco-code"], rtol=1e-12, atol=0) == same_sliding
+        rolling = {law: channels[law][1] - channels[law][0][:, 2] for law in channels}  # torque beside sliding's
+        reduced = state.radii.prod() / state.radii.sum()
+        d = np.linalg.norm(state.positions[0] - state.positions[1])
+        for k in range(2):  # DECCO's lever arm reaches the contact point: R_i d / (R_i + R_j)
+            expected = state.radii[k] * d / state.radii.sum() / reduced
+            assert np.linalg.norm(rolling["decco-code"][k]) / np.linalg.norm(rolling["paper"][k]) == pytest.approx(expected, rel=1e-9)
+
+
+@pytest.mark.parametrize("ratio", [1.0, 2.0, 3.0])
+def test_decco_code_rolling_friction_leaks_angular_momentum_at_unequal_radii(ratio):
+    """The paper law's rolling couple conserves angular momentum; DECCO's torques on each sphere
+    change the pair's by mu_r |F_N| |R_i - R_j| d / (R_i + R_j) (zero for equal radii)."""
+    state = _spinning_pair(ratio, slip=(0.0, 0.0, 0.0), other_spin=(0.0, 0.0, -2e-4))
+    x = state.positions
+    for law in ("paper", "decco-code"):
+        params = dw.Params(contact_law=law, G=0.0, mu_k=0.0, mu_r=0.02)
+        force, torque = dw.compute_forces(state, params, device="cpu", precision="float64", force_kernel="reference")
+        rate = np.cross(x, force).sum(axis=0) + torque.sum(axis=0)  # dL/dt about the origin
+        d = np.linalg.norm(x[0] - x[1])
+        normal = 0.5 * params.k_out * (state.radii.sum() - d)  # at rest along the normal: k_out
+        expected = 0.0 if law == "paper" else params.mu_r * normal * abs(state.radii[0] - state.radii[1]) * d / state.radii.sum()
+        assert np.linalg.norm(rate) == pytest.approx(expected, abs=1e-9 * params.mu_r * normal * state.radii.max())
