@@ -14,10 +14,31 @@ import numpy as np
 import warp as wp
 
 from .errors import InputError
-from .kernels.contacts import LEDGER_CHANNELS
+from .kernels.contacts import CANDIDATES, LEDGER_CHANNELS
 from .kernels.pair import ContactModel
 from .params import Params
+from .sizes import contact_list_rule
 from .state import State
+
+
+#: Per-particle outputs of kernels/observables.py, in the kernel's order.
+PAIR_OBSERVABLES = {
+    "potential": wp.float64,
+    "elastic": wp.float64,
+    "contacts": wp.int32,
+    "max_overlap": wp.float64,
+    "overlap_depth": wp.float64,
+    "overlap_partner": wp.int32,
+}
+
+
+def candidate_width(min_radius: float, max_radius: float) -> int:
+    """Contact candidates a particle's list holds on the paths that list them (the Newton layout, the
+    tree): CANDIDATES, or more for a wide size range (sizes.contact_list_rule of the radius ratio), so
+    that a large grain among many small ones does not overflow into a walk over its whole system.
+    Gravity on its own clock keeps CANDIDATES: its build holds a row in a fixed vector
+    (kernels/neighbours.py NeighbourRow)."""
+    return max(CANDIDATES, contact_list_rule(max_radius / min_radius))
 
 
 def system_sizes(systems: Sequence[int] | None, count: int) -> np.ndarray:

@@ -13,46 +13,23 @@ on a GPU, :func:`smoothed_density`).
 
 from __future__ import annotations
 
-import os
 from collections.abc import Sequence
 
 import numpy as np
 import warp as wp
 
-from .arrays import ModelArrays, StateArrays, system_sizes
+from .arrays import PAIR_OBSERVABLES, ModelArrays, StateArrays, candidate_width, system_sizes
 from .device import resolve_device
 from .forces import FORCE_PATHS
-from .gravity_tree import walk_parts
 from .integrators import INTEGRATORS, check_steps
 from .kernels import observables
 from .kernels.bodies import PACK_KERNELS
-from .kernels.contacts import CANDIDATES, LEDGER_CHANNELS, unpack_depth
-from .layouts import Layout, choose_layout, newton_scratch_bytes, newton_sweep_layout, particle_block
+from .kernels.contacts import CANDIDATES, unpack_depth
+from .layouts import Layout, particle_block
 from .params import Params
 from .scheme import choose_scheme, force_path
-from .sizes import contact_list_rule
 from .state import State
 from .errors import InputError
-
-#: Per-particle outputs of kernels/observables.py, in the kernel's order.
-PAIR_OBSERVABLES = {
-    "potential": wp.float64,
-    "elastic": wp.float64,
-    "contacts": wp.int32,
-    "max_overlap": wp.float64,
-    "overlap_depth": wp.float64,
-    "overlap_partner": wp.int32,
-}
-
-
-def candidate_width(min_radius: float, max_radius: float) -> int:
-    """Contact candidates a particle's list holds on the paths that list them (the Newton layout, the
-    tree): CANDIDATES, or more for a wide size range (sizes.contact_list_rule of the radius ratio), so
-    that a large grain among many small ones does not overflow into a walk over its whole system.
-    Gravity on its own clock keeps CANDIDATES: its build holds a row in a fixed vector
-    (kernels/neighbours.py NeighbourRow)."""
-    return max(CANDIDATES, contact_list_rule(max_radius / min_radius))
-
 
 class Engine:
     """A particle system on one device, and the parts that step it.
@@ -242,88 +219,3 @@ def smoothed_density(sources: np.ndarray, norm: np.ndarray, inv_two_var: np.ndar
     inputs = [array(sources, wp.vec3d), array(norm, wp.float64), array(inv_two_var, wp.float64), array(targets, wp.vec3d)]
     wp.launch(observables.smoothed_density, dim=len(targets), inputs=inputs, outputs=[density], device=device)
     return density.numpy()
-
-
-# --- what a job needs, before it starts ---------------------------------------------------------
-
-#: Bytes a particle takes on the host beside the engine's arrays: the State, a frame's record, a
-#: snapshot, the checks (NumPy copies of a few vectors each), with room.
-HOST_BYTES_PER_PARTICLE = 600
-#: Bytes of a job whatever its size: Warp's modules, the hash grid's cells, launch bookkeeping.
-FIXED_BYTES = 256 << 20
-#: CPU step time of this project's 2-core CI-class machine (docs/benchmarks.md, the tree section):
-#: all-pairs ~5 ns a pair (8 000 particles: 0.31 s a step); the tree ~7.5 us a particle at 8 000,
-#: growing as log N.  Scaled by the cores here.
-CPU_SECONDS_PER_PAIR = 5e-9
-CPU_TREE_SECONDS_PER_PARTICLE = 7.5e-6
-
-
-def memory_estimate(
-    n: int, gravity: str, device: str = "cpu", ledger: bool = True, *, gravity_every: int = 1, layout: Layout | None = None,
-    precision: str = "mixed", candidate_width: int = CANDIDATES,
-) -> int:
-    """Bytes a job of ``n`` particles needs on its device (and on the host), an upper estimate:
-    the arrays Engine and GravityTree allocate, taken as for the largest layout, and the Newton
-    sweep's rows where all-pairs gravity takes it (``layout`` Newton, as CUDA's default is up to
-    NEWTON_MAX particles, or gravity on its own clock, ``gravity_every`` > 1, on any device)."""
-    vec3d, f64, i32 = 24, 8, 4
-    per = 3 * f64 + 5 * vec3d  # radius, mass, inertia; position, velocity, omega, force, torque
-    per += (len(LEDGER_CHANNELS) * vec3d + 32) if ledger else 0  # channels, work
-    per += 8 + 32 + 8  # deepest contact, packed body, system range
-    per += i32 * (1 + candidate_width)  # the contact candidates of the Newton layout, the tree or the neighbour list
-    per += 3 * vec3d + f64 + 5 * i32  # gravity on its own clock: gravity, the list's build positions, the build's sorted
-    # positions and radii; system, cell keys and order (2 N)
-    per += len(PAIR_OBSERVABLES) * f64  # a frame's pair observables
-    if gravity == "tree":  # nodes (2n): mass, centre, quadrupole, box, size, offset, links (16), child, first,
-        # last, parent, escape; keys, order (2n); leaf positions, grid points; each walk part's field and potential
-        per += 2 * (f64 + vec3d + 72 + 2 * vec3d + 2 * f64 + 16 + 5 * i32) + 4 * i32 + vec3d + 12
-        per += walk_parts(n, device) * (vec3d + f64)
-    newton = newton_sweep_layout(gravity, gravity_every, layout or choose_layout(n, device), device)
-    scratch = newton_scratch_bytes(n, newton, 12 if precision == "mixed" else 24, listing=gravity_every == 1) if newton else 0
-    return int(n * (per + HOST_BYTES_PER_PARTICLE) + scratch + FIXED_BYTES)
-
-
-def cpu_step_seconds(n: int, gravity: str) -> float:
-    """About how long one step of ``n`` particles takes on this machine's CPU."""
-    cores = max(1, os.cpu_count() or 1) / 2.0
-    if gravity == "tree":
-        return CPU_TREE_SECONDS_PER_PARTICLE * n * max(1.0, np.log2(max(n, 2)) / np.log2(8000)) / cores
-    return CPU_SECONDS_PER_PAIR * float(n) * float(n) / cores
-
-
-#: A CPU job expected to take longer than this says so before it starts [s].
-LONG_ON_CPU = 3600.0
-
-
-def check_fits(n: int, gravity: str, device: str, steps: int, what: str, **forces) -> str | None:
-    """Refuse (InputError) a job whose memory estimate passes the device's free memory; for one that
-    fits but would take hours on the CPU, the line that says so (else None).  ``forces``: the
-    keywords of :func:`memory_estimate` that say how its forces are summed."""
-    from .checks import InputError
-    from .device import free_memory
-
-    need = memory_estimate(n, gravity, device, **forces)
-    free = free_memory(device)
-    if need > free:
-        tree = "" if gravity == "tree" else ", gravity = \"tree\" (its memory grows as N, all-pairs' as N^2 here)"
-        raise InputError(
-            f"{what} of {n} particles needs about {need / 2**30:.3g} GiB on {device}, which has {free / 2**30:.3g} GiB free; "
-            f"use fewer particles{tree} or a device with more memory"
-        )
-    if device.startswith("cuda"):
-        return None
-    seconds = steps * cpu_step_seconds(n, gravity)
-    if seconds < LONG_ON_CPU:
-        return None
-    return (
-        f"note: {what} of {n} particles ({gravity} gravity) will take about {_duration(seconds)} on the CPU "
-        f"({cpu_step_seconds(n, gravity):.3g} s a step, {steps} steps); a GPU (--device cuda) is far faster"
-    )
-
-
-def _duration(seconds: float) -> str:
-    hours = seconds / 3600.0
-    if hours < 48:
-        return f"{hours:.3g} hours"
-    days = hours / 24.0
-    return f"{days:.3g} days" if days < 730 else f"{days / 365.25:.3g} years"

@@ -12,7 +12,8 @@ from pathlib import Path
 from typing import Callable
 
 from .device import resolve_device
-from .engine import candidate_width, check_fits
+from .arrays import candidate_width
+from .costs import check_fits
 from .io import FileFormatError, read_checkpoint, save_pile, write_checkpoint
 from .params import GRAVITY_CHOICES, Params, choose_gravity
 from .pile import Formation, FormationError, FormationProgress, check_formation_inputs, grain_sizes

@@ -191,7 +191,8 @@ def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None
 def plan_fits(plan: Plan, n: int, steps: int) -> str | None:
     """Refuse (RunError) a run of ``n`` particles that its device has no memory for, its force path
     counted (the Newton sweep's rows, O(N^2 / tile)); a line for one that takes hours on the CPU."""
-    from .engine import candidate_width, check_fits
+    from .arrays import candidate_width
+    from .costs import check_fits
 
     try:
         return check_fits(

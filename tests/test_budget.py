@@ -7,7 +7,7 @@ import warp as wp
 from typer.testing import CliRunner
 
 import decco_warp as dw
-from decco_warp import engine as engines
+from decco_warp import costs
 from decco_warp.cli import EXIT_INPUT, app
 from decco_warp.run import builtin_pile
 
@@ -40,7 +40,7 @@ def test_the_memory_estimate_bounds_the_engines_arrays(gravity):
     sim = dw.Simulation(pile, dw.Params(gravity=gravity), device="cpu", ledger=True)
     engine = sim.engine
     held = _array_bytes(engine)
-    device_part = engines.memory_estimate(pile.n, gravity) - engines.FIXED_BYTES - pile.n * engines.HOST_BYTES_PER_PARTICLE
+    device_part = costs.memory_estimate(pile.n, gravity) - costs.FIXED_BYTES - pile.n * costs.HOST_BYTES_PER_PARTICLE
     # An upper estimate (the largest layout), but not a loose one: within a factor of 3.
     assert held <= device_part <= 3 * held, (held, device_part)
 
@@ -56,8 +56,8 @@ def test_the_memory_estimate_counts_the_newton_sweeps_rows_where_gravity_takes_i
     for every in (1, 10):
         sim = dw.Simulation(state, dw.Params(gravity_every=every), device="cpu", ledger=True)
         held[every] = _array_bytes(sim.engine)
-        estimate = engines.memory_estimate(state.n, "all-pairs", gravity_every=every) - engines.FIXED_BYTES
-        estimate -= state.n * engines.HOST_BYTES_PER_PARTICLE
+        estimate = costs.memory_estimate(state.n, "all-pairs", gravity_every=every) - costs.FIXED_BYTES
+        estimate -= state.n * costs.HOST_BYTES_PER_PARTICLE
         assert held[every] <= estimate <= 3 * held[every], (every, held[every], estimate)
     rows = 2000**2 // 4 * 12  # a float32 vec3 per particle of a tile, for each of the (N / 4)^2 rows
     assert held[10] - held[1] > 0.9 * rows
@@ -71,27 +71,27 @@ def test_an_all_pairs_run_whose_newton_rows_do_not_fit_is_refused_before_it_star
     from decco_warp.errors import InputError
 
     monkeypatch.setattr(devices, "free_memory", lambda device: 16 << 30)
-    assert engines.check_fits(100_000, "tree", "cpu", 1_000_000, "a run", gravity_every=10).startswith("note: a run")  # days, but it fits
-    assert engines.check_fits(2_000, "all-pairs", "cpu", 10, "a run", gravity_every=10) is None
+    assert costs.check_fits(100_000, "tree", "cpu", 1_000_000, "a run", gravity_every=10).startswith("note: a run")  # days, but it fits
+    assert costs.check_fits(2_000, "all-pairs", "cpu", 10, "a run", gravity_every=10) is None
     with pytest.raises(InputError, match=r"a run of 100000 particles needs about \d+(\.\d+)? GiB on cpu, which has 16 GiB free; .*gravity = \"tree\""):
-        engines.check_fits(100_000, "all-pairs", "cpu", 10, "a run", gravity_every=10)
-    assert engines.memory_estimate(100_000, "all-pairs", "cpu", gravity_every=10) > 25 * 2**30
-    assert engines.memory_estimate(100_000, "all-pairs", "cpu") < 1 * 2**30  # the CPU's fused layout keeps no rows
+        costs.check_fits(100_000, "all-pairs", "cpu", 10, "a run", gravity_every=10)
+    assert costs.memory_estimate(100_000, "all-pairs", "cpu", gravity_every=10) > 25 * 2**30
+    assert costs.memory_estimate(100_000, "all-pairs", "cpu") < 1 * 2**30  # the CPU's fused layout keeps no rows
 
 
 def test_the_cpu_time_estimate_follows_the_benchmarks_two_core_steps(monkeypatch):
-    monkeypatch.setattr(engines.os, "cpu_count", lambda: 2)
+    monkeypatch.setattr(costs.os, "cpu_count", lambda: 2)
     # docs/benchmarks.md, 2-core CPU: all-pairs 8 000: 308 to 341 ms; tree (piles) 8 000: 60.6 ms.
-    assert 0.25 < engines.cpu_step_seconds(8000, "all-pairs") < 0.4
-    assert 0.05 < engines.cpu_step_seconds(8000, "tree") < 0.075
-    assert engines.cpu_step_seconds(16000, "all-pairs") == pytest.approx(4 * engines.cpu_step_seconds(8000, "all-pairs"))
+    assert 0.25 < costs.cpu_step_seconds(8000, "all-pairs") < 0.4
+    assert 0.05 < costs.cpu_step_seconds(8000, "tree") < 0.075
+    assert costs.cpu_step_seconds(16000, "all-pairs") == pytest.approx(4 * costs.cpu_step_seconds(8000, "all-pairs"))
 
 
 def test_a_job_too_large_for_the_device_is_refused_with_the_estimate_and_the_free_memory(tmp_path, monkeypatch):
     import decco_warp.device as devices
 
     monkeypatch.setattr(devices, "free_memory", lambda device: 300 << 20)  # 300 MiB
-    need = engines.memory_estimate(200_000, "tree") / 2**30
+    need = costs.memory_estimate(200_000, "tree") / 2**30
     result = CliRunner().invoke(app, ["pile", "--particles", "200000", "--out", str(tmp_path / "p.h5"), "--device", "cpu"])
     assert result.exit_code == EXIT_INPUT, result.stderr
     line = result.stderr.strip().splitlines()[-1]
@@ -105,11 +105,11 @@ def test_a_job_too_large_for_the_device_is_refused_with_the_estimate_and_the_fre
 
 
 def test_a_job_of_hours_on_the_cpu_says_so_and_goes_on(tmp_path, monkeypatch):
-    note = engines.check_fits(50_000, "tree", "cpu", 150_000, "forming a pile")
-    hours = 150_000 * engines.cpu_step_seconds(50_000, "tree") / 3600
+    note = costs.check_fits(50_000, "tree", "cpu", 150_000, "forming a pile")
+    hours = 150_000 * costs.cpu_step_seconds(50_000, "tree") / 3600
     assert note.startswith("note: forming a pile of 50000 particles (tree gravity) will take about") and hours > 1
-    assert engines.check_fits(450, "all-pairs", "cpu", 2400, "a run") is None  # the demo: seconds
-    monkeypatch.setattr(engines, "LONG_ON_CPU", 0.0)  # every CPU job counts as long: the line, then the work
+    assert costs.check_fits(450, "all-pairs", "cpu", 2400, "a run") is None  # the demo: seconds
+    monkeypatch.setattr(costs, "LONG_ON_CPU", 0.0)  # every CPU job counts as long: the line, then the work
     result = CliRunner().invoke(
         app, ["pile", "--particles", "12", "--seed", "9", "--dt", "0.2", "--ke-threshold", "1e-4", "--out", str(tmp_path / "p.h5"), "--device", "cpu"]
     )
