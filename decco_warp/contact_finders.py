@@ -93,9 +93,9 @@ class HashGrid(ContactFinder):
 #: The neighbour list's skin, as a fraction of the smallest radius: 0.5 (3.75 km at the paper's
 #: 7.5 km spheres).  A wider skin rebuilds the list less often but lists more pairs that do not
 #: touch, each evaluated every step (the contact pass's lanes take them side by side).  Measured on
-#: an H100 in the Fig. 8 collision at K = 10 (docs/benchmarks.md): skins of 0.2, 0.5 and 1.0 rebuilt
-#: the list every 24, 60 and 118 steps, listed 5.6, 7.6 and 10.2 neighbours a particle at impact
-#: (at most 31, 34 and 42 of the list's 64 slots), and stepped in 52, 41 and 39 us.
+#: an H100 at the Fig. 8 impact at K = 10 (docs/benchmarks.md, "Tried and dropped"): skins of 0.2,
+#: 0.35, 0.5 and 0.75 rebuilt the list every 23, 40, 58 and 86 steps, listed 4.9, 6.2, 7.1 and 8.5
+#: neighbours a particle, and stepped in 35.0, 32.3, 32.3 and 31.8 us.
 SKIN_FRACTION = 0.5
 
 #: The snapshot keys of the neighbour lists (NeighbourList.arrays), per particle.

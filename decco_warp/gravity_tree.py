@@ -12,7 +12,7 @@ GRID_CELLS = 128
 #: Threads per particle's walk on a GPU (kernels.walk_roots): the tree is split into this many
 #: subtrees and each particle walks each one in its own thread.  A warp's 32 neighbouring particles
 #: then mostly take the same few nodes of a part whole, and the GPU has work in flight: on the H100
-#: the walk of an 80 000-particle pile is 1.9x faster at 64 parts than at 1, 1e6 particles 1.6x
+#: the walk of an 80 000-particle pile is 1.73x faster at 64 parts than at 1, 1e6 particles 1.6x
 #: (docs/benchmarks.md); more parts open more large nodes that one walk would take whole.
 WALK_PARTS = 64
 #: At most this many partial fields (12 bytes each in float32) are kept: 768 MB.

@@ -41,8 +41,9 @@ def choose_gravity(n: int, device: str) -> str:
 
 
 #: The K that ``gravity_every = "auto"`` stands for: on the paper's runs (the Fig. 8 collision and the
-#: equal-mass head-on ones at eta 3 and 9) every K from 5 to 50 lands inside the spread of K = 1's
-#: realizations (docs/benchmarks.md, "Gravity on its own clock"); 10 takes most of the speed (whole
+#: equal-mass head-on ones at eta 3, 9 and 12) every K from 5 to 50 lands inside the spread of K = 1's
+#: realizations or within 0.015 of it (eta 9: K = 5 and 10 above it; docs/benchmarks.md, "Equivalence
+#: before speed"), no difference resolved or growing with K; 10 takes most of the speed (whole
 #: runs ~2x at 6 250 particles, ~3x at 10 000) at a fifth of the largest K measured.
 GRAVITY_EVERY_AUTO = 10
 

@@ -56,9 +56,9 @@ from .folder import RunFolder
 
 #: ``ensemble = "auto"`` on a GPU: runs go to a worker up to 8 at a time (fewer where that leaves a
 #: worker idle), and those of the same particle count up to ENSEMBLE_MAX_PARTICLES are stepped
-#: together.  On an H100 (docs/benchmarks.md), systems of 5 500 to 6 250 particles step 1.43 to 1.54
-#: times as fast as one at a time 4 together, 1.53 to 1.67 times 8 together (bench, piles), and whole
-#: sweeps 1.45 to 1.55x with 4, 1.68 to 1.86x with 6.
+#: together.  On an H100 (docs/benchmarks.md, "Ensembles"), systems of 5 500 to 6 250 particles step
+#: 1.39 to 1.50 times as fast as one at a time 4 together, 1.47 to 1.60 times 8 together (bench,
+#: piles), and whole sweeps 1.45 to 1.55x with 4, 1.68 to 1.86x with 6.
 AUTO_ENSEMBLE = 8
 #: The largest particle count measured to gain from stepping together (H100, piles): 4 together gain
 #: 1.25x at 10 000 (a sweep: 4 runs of 10 000 in 505 s against ~668 s one at a time), 1.14x at
