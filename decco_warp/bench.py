@@ -52,6 +52,8 @@ class BenchRow:
     baseline_pairs_per_s: float
     speedup: float
     fraction_of_limit: float | None
+    """The gravity pairs the step evaluates per second (N^2 a gravity evaluation, one every K steps:
+    N^2 / K a step) over the device's arithmetic limit: at most 1 (None: no limit here, or a tree)."""
     systems: int = 1
     """Systems of n particles stepped together (an ensemble); pairs/s counts all of them."""
     system: str = "lattice"
@@ -193,8 +195,10 @@ def bench_size(
     gravity_every: int = 1,
     particle_block: int | None = None,
 ) -> BenchRow:
-    """One row: the force evaluation and the full step at ``n`` (pairs/s counts N^2 pairs; a tree row
-    gives none, only its times and particles/s), beside the one-thread-per-particle kernel.
+    """One row: the force evaluation and the full step at ``n`` (pairs/s counts N^2 pairs a step, what
+    an every-step all-pairs code needs, also at K > 1; the fraction of the device's limit counts the
+    pairs the step evaluates, N^2 / K; a tree row gives neither, only its times and particles/s),
+    beside the one-thread-per-particle kernel.
     With ``systems`` > 1, that many systems of ``n`` stepped together, and pairs/s counts them all.
     A call is ``steps`` rounded up to whole recorded graphs (simulation.graph_steps: 50 steps, or
     whole outer steps of K), as a run steps: steps left over are launched one by one, and at K > 1
@@ -248,7 +252,7 @@ def _bench_size(n, device, precision, layout, budget, steps, baseline, gravity, 
         baseline_seconds=baseline_seconds,
         baseline_pairs_per_s=float(n) * n * systems / baseline_seconds,
         speedup=baseline_seconds / force_seconds,
-        fraction_of_limit=None if limit is None or gravity != "all-pairs" else (pairs / step_seconds) / limit,
+        fraction_of_limit=None if limit is None or gravity != "all-pairs" else (pairs / gravity_every / step_seconds) / limit,
         systems=systems,
         system=system,
         particles_per_s=n * systems / step_seconds,

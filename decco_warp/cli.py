@@ -750,6 +750,7 @@ def bench(
     d = wp.get_device(chosen)
     typer.echo(f"device: {chosen} ({d.name}), warp-lang {wp.config.version}, precision {precision}")
     typer.echo(f"limit: {how}" + (f" -> {limit:.3g} pairs/s" if limit else ""))
+    typer.echo("pairs/s: N^2 a step (what an every-step all-pairs code needs); of limit: the gravity pairs evaluated, N^2 / K a step at gravity every K")
     header = f"{'N':>8} {'force pairs/s':>14} {'step pairs/s':>13} {'step ms':>9} {'particles/s':>12} {'of limit':>9} {'baseline pairs/s':>17} {'speed-up':>9}  layout"
     typer.echo(header)
     rows = []

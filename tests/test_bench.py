@@ -5,6 +5,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 from helpers import cli
 
 import decco_warp as dw
@@ -175,3 +176,16 @@ def test_bench_times_the_per_particle_block_beside_the_default(tmp_path):
         result = cli("bench", "--device", "cpu", "--particle-blocks", bad)
         assert result.returncode == 2 and "--particle-blocks must list threads a block" in result.stderr
         assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_the_fraction_of_the_limit_counts_the_pairs_a_step_evaluates(monkeypatch):
+    """Gravity every K steps evaluates N^2 pairs a gravity step, N^2 / K a step: the fraction of the
+    device's limit counts those (a K = 10 row read 2x to 3.5x its limit, counting N^2 a step), while
+    pairs/s keeps counting N^2 a step, the rate an every-step code would need."""
+    from decco_warp import bench as benchmarks
+
+    monkeypatch.setattr(benchmarks, "device_limit_pairs_per_s", lambda device: (1e9, "a test limit"))
+    for every in (1, 5):
+        row = benchmarks.bench_size(120, "cpu", budget=0.01, steps=5, baseline=False, gravity_every=every)
+        assert row.step_pairs_per_s == pytest.approx(120 * 120 / row.step_seconds, rel=1e-12)
+        assert row.fraction_of_limit == pytest.approx(120 * 120 / every / row.step_seconds / 1e9, rel=1e-12)
