@@ -867,7 +867,7 @@ def compare(
         help="Keep only the runs with one of these values in COLUMN (repeatable, every column must match; numbers within 1 %), e.g. --where mass_ratio=1 --where eta=3,6."
     ),
     allow_mixed: bool = typer.Option(
-        False, "--allow-mixed", help="Compare runs at one point that differ in a set-up column (mass_ratio, theta_deg, k_in, dt, eta_potential, n_particles) other than --by and --at."
+        False, "--allow-mixed", help="Compare runs at one point that differ in a set-up column (mass_ratio, theta_deg, k_in, dt, gravity_every, eta_potential, n_particles, restitution, mu_k, mu_r, G, rolling_friction) other than --by and --at."
     ),
     allow_single: bool = typer.Option(
         False, "--allow-single", help="Accept groups of one run: shown without spread or interval (without it, the table is printed and the command exits 2 naming them)."

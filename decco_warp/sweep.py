@@ -67,9 +67,10 @@ ENSEMBLE_MAX_PARTICLES = 20_000
 SUMMARY_FIELDS = [
     "run", "status", "reason", "n_particles", "mass_ratio", "theta_deg", "eta", "speed", "spin_kind", "realization", "orientation_seed",
     "target_pile", "projectile_pile",
-    "k_in", "dt", "gravity_every", "steps",
+    "k_in", "dt", "restitution", "mu_k", "mu_r", "G", "rolling_friction", "gravity_every", "steps",
     "largest_mass_ratio", "settled", "settled_note", "largest_mass_ratio_late_low", "largest_mass_ratio_late_high",
     "ls12_largest_mass_ratio", "ls12_band_low", "ls12_band_high", "ls12_planets_largest_mass_ratio",
+    "speed_over_escape", "q_r", "q_rd_star", "q_r_over_q_rd_star",
     "eta_potential", "eta_self", "eta_all", "cross_potential", "contact_surface_speed", "contact_twist_rate",
     "particle_size_change", "particle_size_change_mass_weighted", "size_change_late", "size_change_late_std",
     "size_change_mass_weighted_late", "size_change_mass_weighted_late_std", "late_frames",
@@ -77,6 +78,33 @@ SUMMARY_FIELDS = [
     "momentum_drift", "angular_momentum_drift", "ledger_closure", "wall_seconds", "stepping_seconds", "analysis_seconds",
     "device", "device_name", "ensemble",
 ]  # fmt: skip
+
+
+def summary_fields(swept=()) -> list[str]:
+    """summary.csv's columns: SUMMARY_FIELDS, then every other key of [params] (a law added to the
+    specification is a column without a word here), then the columns of the keys a sweep varies
+    (``swept``, :func:`swept_columns`) that are not among them."""
+    fields = list(SUMMARY_FIELDS)
+    for column in (*specs.SCHEMA["params"], *swept):
+        if column not in fields:
+            fields.append(column)
+    return fields
+
+
+def swept_columns(grid_keys) -> list[str]:
+    """The summary columns of a grid's ``(table, key)`` pairs, in grid order (a run's summary.json
+    holds each: analysis.runs.spec_columns)."""
+    from .analysis.runs import spec_column
+
+    return list(dict.fromkeys(spec_column(table, key) for table, key in grid_keys))
+
+
+def set_up_values(spec: dict, swept: list[str]) -> dict:
+    """The [params] and the ``swept`` columns of a run as its own specification gives them, so that a
+    run that fails has them too (a run's analysis replaces them by those it was resolved to)."""
+    from .analysis.runs import spec_columns
+
+    return {column: value for column, value in spec_columns(spec).items() if column in swept or column in spec["params"]}
 
 
 def load_sweep(path, overrides: dict | None = None) -> tuple[dict, list[dict]]:
@@ -133,6 +161,7 @@ def load_sweep(path, overrides: dict | None = None) -> tuple[dict, list[dict]]:
     if len(set(names)) != len(names):
         raise specs.SpecError("[sweep.grid] gives two runs the same name; use values that differ in their text")
     runs, settings["same_as"] = _distinct(runs)
+    settings["swept"] = swept_columns(key for keys, _ in axes for key in keys)
     return settings, runs
 
 
@@ -572,7 +601,7 @@ def run_sweep(
             k, row = pending.pop(future)
             try:
                 summary = future.result()
-                finish(k, {**row, **{key: summary.get(key) for key in SUMMARY_FIELDS if key in summary}, "run": row["run"]})
+                finish(k, {**row, **{key: value for key, value in summary.items() if key not in SWEEP_OWN}, "run": row["run"]})
             except Exception as error:  # a damaged trajectory, a full disk: this run only
                 finish(k, {**row, "status": "failed", "reason": f"analysis: {' '.join(str(error).split())}"})
 
@@ -611,6 +640,7 @@ def run_sweep(
                         stepped[k] = 1.0
                         looked = -math.inf  # reported at the next poll
                     collision = runs[k]["collision"]
+                    row.update(set_up_values(runs[k], settings.get("swept", [])))
                     row.update(eta=collision.get("eta"), speed=collision.get("speed"), theta_deg=collision["theta_deg"])
                     row.update(realization=realization_of(runs[k]), orientation_seed=collision.get("orientation_seed"))
                     if row["status"] == "failed":
@@ -638,12 +668,18 @@ POLL_SECONDS = 0.2
 PROGRESS_SECONDS = 10.0
 
 
-def write_summary(folder: Path, rows: list[dict]) -> Path:
+#: The columns of a sweep's row that are the sweep's own (where and how the run went), which a
+#: run's summary.json does not replace.
+SWEEP_OWN = ("status", "reason", "realization", "wall_seconds", "stepping_seconds", "device", "device_name", "ensemble", "run_dir")
+
+
+def write_summary(folder: Path, rows: list[dict], swept=()) -> Path:
+    """summary.csv of ``rows``: :func:`summary_fields` (``swept``: the columns of the grid's keys)."""
     from .durable import write_table
     from .folder import TABLE
 
     folder.mkdir(parents=True, exist_ok=True)
-    return write_table(folder / TABLE, rows, SUMMARY_FIELDS, ignore_extra=True)  # a full disk leaves the previous table whole
+    return write_table(folder / TABLE, rows, summary_fields(swept), ignore_extra=True)  # a full disk leaves the previous table whole
 
 
 def write_record(folder: Path, settings: dict, rows: list[dict], wall_seconds: float) -> Path:
@@ -748,7 +784,7 @@ class SweepJob:
 
         def report(row: dict) -> None:
             self.finished.append(row)
-            write_summary(self.folder, self.finished)  # as runs finish, so that a stopped sweep keeps its table
+            write_summary(self.folder, self.finished, self.swept)  # as runs finish, so that a stopped sweep keeps its table
             on_row(row)
             on_progress()
 
@@ -785,9 +821,14 @@ class SweepJob:
         """Every run's summary.csv, in grid order, and the cross-run figures of those that did not fail."""
         from .analysis.figures import write_cross_run
 
-        summary = write_summary(self.folder, self.rows)
-        write_cross_run(self.folder, [r for r in self.rows if r.get("status") != "failed"])
+        summary = write_summary(self.folder, self.rows, self.swept)
+        write_cross_run(self.folder, [r for r in self.rows if r.get("status") != "failed"], self.swept)
         return summary
+
+    @property
+    def swept(self) -> list[str]:
+        """The columns of the keys the grid varies."""
+        return self.settings.get("swept", [])
 
     @property
     def failed(self) -> list[dict]:

@@ -159,12 +159,19 @@ def analyse_runs(
         yield result
 
 
+#: Beside [params], the set-up keys whose values make series of their own in the cross-run figures
+#: of a folder of runs (where they vary among its runs): not a sweep, so what varies is found.
+SPLIT_COLLISION = ("target_spin", "projectile_spin", "gap", "eta_potential", "precision", "resolution")
+
+
 def write_cross_run_results(path, summaries: list[dict]) -> None:
-    """A folder of runs' summary.csv (a row per run), cross-run figures (figures/) and
-    summaries.json, each whole or absent."""
+    """A folder of runs' summary.csv (a row per run), cross-run figures (figures/, series split by
+    the set-up columns that differ among the runs) and summaries.json, each whole or absent."""
     from .analysis.figures import write_cross_run
 
+    from .spec import SCHEMA
+
     path = Path(path)
-    write_table(path / TABLE, summaries, list(summaries[0]))
-    write_cross_run(path, summaries)
+    write_table(path / TABLE, summaries, list(dict.fromkeys(key for summary in summaries for key in summary)))
+    write_cross_run(path, summaries, split=[*SCHEMA["params"], *SPLIT_COLLISION])
     write_atomic(path / "summaries.json", json_text(summaries))

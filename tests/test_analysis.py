@@ -169,6 +169,47 @@ def test_summary_is_strict_json_with_both_etas_the_laws_and_the_verdict(sweep):
     _strict((out / "summaries.json").read_text())
 
 
+def test_a_summary_carries_every_parameter_of_its_run_and_the_impact_in_ls12_terms(sweep):
+    """Every key of the run's resolved [params] (and its [collision] and [run] set-up) is a column of
+    summary.json with spec.toml's value; the impact speed over the mutual escape speed, Q_R and
+    Q_R / Q*_RD agree with the same numbers computed here from the set-up's masses, radii and speed,
+    and Q_R / Q*_RD with the LS12 column (below 1.8 Q*_RD the law is M_lr / M_tot = 1 - Q_R / 2 Q*_RD)."""
+    import tomllib
+
+    out, _ = sweep
+    for run_dir in (out / "eta0.5", out / "eta1"):
+        summary = _strict((run_dir / "summary.json").read_text())
+        spec = tomllib.loads((run_dir / "spec.toml").read_text())
+        for key, value in spec["params"].items():
+            assert summary[key] == value, key
+        for key in ("gap", "target_spin", "projectile_spin_axis", "eta_potential"):
+            assert summary[key] == spec["collision"][key], key
+        assert summary["run_device"] == spec["run"]["device"] and summary["precision"] == spec["run"]["precision"]
+        meta = dw.read_trajectory(run_dir / "trajectory.h5").parameters["collision"]
+        m_t, m_p, r_t, r_p = meta["target_mass"], meta["projectile_mass"], meta["target_radius"], meta["projectile_radius"]
+        escape = np.sqrt(2 * spec["params"]["G"] * (m_t + m_p) / (r_t + r_p))
+        assert summary["speed_over_escape"] == pytest.approx(meta["speed"] / escape, rel=1e-12)
+        reduced = m_t * m_p / (m_t + m_p)
+        assert summary["q_r"] == pytest.approx(0.5 * reduced * meta["speed"] ** 2 / (m_t + m_p), rel=1e-12)
+        ratio = summary["q_r"] / summary["q_rd_star"]
+        assert summary["q_r_over_q_rd_star"] == pytest.approx(ratio, rel=1e-12) and ratio < 1.8
+        assert summary["ls12_largest_mass_ratio"] * m_t / (m_t + m_p) == pytest.approx(1 - ratio / 2, rel=1e-12)
+
+
+def test_ratios_and_spreads_are_stored_without_round_off():
+    """eta computed back from a set-up for eta 3 reads 2.9999999999999996: kept as 3; the spread of
+    equal values (whose float mean is not always that value) is 0, any real spread its std."""
+    from decco_warp.analysis.runs import rounded, spread
+
+    assert rounded(2.9999999999999996) == 3.0 and rounded(0.1 + 0.2) == 0.3 and rounded(None) is None
+    assert rounded(2.284224635012422) == pytest.approx(2.284224635012422, rel=1e-11)  # 12 significant digits
+    equal = np.full(7, 0.1)
+    assert np.std(equal) > 0 and spread(equal) == 0.0  # the float mean of seven 0.1 is not 0.1
+    assert spread(np.array([1.0, 2.0, 4.0])) == np.std([1.0, 2.0, 4.0])
+    assert 100 * ((0.1 * 7 / 7) / (0.1 * 3 / 3) - 1) != 0 and particle_size_change(0.1 * 7, 7, 0.1 * 3, 3) == 0.0
+    assert particle_size_change(1.0, 1, 1.0, 2) == pytest.approx(100.0)
+
+
 def test_a_run_without_any_cluster_writes_null_not_nan(tmp_path):
     """No cluster of min_members at the end: m_lf/m_t is 0 and the size change does not exist, which
     strict JSON says as null; the CLI line says the result is not settled."""
@@ -209,7 +250,8 @@ def test_a_summary_is_refreshed_from_analysis_h5_alone(sweep, tmp_path):
     shutil.copytree(out / "eta1", kept, ignore=shutil.ignore_patterns("trajectory.h5", "checkpoint.h5"))
     before = json.loads((kept / "summary.json").read_text())
     parameters = dw.read_trajectory(out / "eta1" / "trajectory.h5").parameters
-    after = refresh_summary(kept, parameters["collision"], parameters["spec"]["params"], piles=parameters["spec"]["piles"])
+    spec = parameters["spec"]
+    after = refresh_summary(kept, parameters["collision"], spec["params"], piles=spec["piles"], spec=spec)
     assert _strict((kept / "summary.json").read_text()) == after
     for key, value in before.items():
         assert after[key] == (pytest.approx(value, rel=1e-12) if isinstance(value, float) else value), key
@@ -330,3 +372,29 @@ def test_the_runs_of_a_set_share_their_time_axis(sweep, monkeypatch):
     for name in ("conservation", "stress_shares", "energy"):
         assert limits[name] == [(0.0, 2.0)], name
     assert limits["clusters"] != [(0.0, 2.0)]
+
+
+def test_cross_run_figures_draw_a_series_per_value_of_a_swept_key():
+    """The cross-run figure splits runs by the swept columns that vary (mu_k here; eta is the x axis,
+    never a series; 0.30000000000000004 is mu_k 0.3): each series' line goes through its own
+    realizations' means, where without the split the two frictions were pooled."""
+    from decco_warp.analysis.figures import plot_runs, split_columns
+
+    summaries = []
+    for mu_k, shift in ((0.0, 0.0), (0.1 + 0.2, 0.4)):
+        for eta, base in ((3.0, 1.2), (6.0, 0.8)):
+            for k, noise in enumerate((-0.01, 0.03)):
+                summaries.append({"run": f"mu{mu_k}_eta{eta}_r{k}", "mass_ratio": 0.25, "theta_deg": 0.0, "spin_kind": "none",
+                                  "eta": eta, "mu_k": mu_k, "restitution": 0.9, "largest_mass_ratio": base + shift + noise})  # fmt: skip
+    split = split_columns(summaries, ["eta", "mu_k", "restitution"])
+    assert split == ["mu_k"]
+    fig = plot_runs(summaries, "largest_mass_ratio", "m_lf / m_t", split=split)
+    labels = fig.axes[0].get_legend_handles_labels()[1]
+    assert labels == ["0 deg, mu_k 0", "0 deg, mu_k 0.3"]
+    means = [line for line in line_data(fig) if line[0].size == 2 and line[1].size == 2]
+    np.testing.assert_allclose(means[0][1], [1.21, 0.81])
+    assert any(np.allclose(y, [1.61, 1.21]) for _, y in means)
+    pooled = plot_runs(summaries, "largest_mass_ratio", "m_lf / m_t")
+    assert pooled.axes[0].get_legend_handles_labels()[1] == ["0 deg"]
+    np.testing.assert_allclose(line_data(pooled)[0][1], [1.41, 1.01])
+

@@ -43,7 +43,7 @@ def test_grid_expands_to_checked_run_specs(tmp_path):
     path = tmp_path / "s.toml"
     path.write_text(SWEEP.format(out=tmp_path))
     settings, runs = load_sweep(path)
-    assert settings["name"] == "grid" and len(runs) == 4
+    assert settings["name"] == "grid" and len(runs) == 4 and settings["swept"] == ["eta", "dt"]
     assert sorted(r["run"]["name"] for r in runs) == ["eta0.5_dt0.04", "eta0.5_dt5", "eta1_dt0.04", "eta1_dt5"]
     assert {(r["collision"]["eta"], r["params"]["dt"]) for r in runs} == {(0.5, 0.04), (0.5, 5.0), (1.0, 0.04), (1.0, 5.0)}
     assert all(r["run"]["out"] == str(tmp_path / "grid") for r in runs)
@@ -85,6 +85,13 @@ def test_sweep_runs_on_two_workers_reports_failures_and_resumes(tmp_path):
     assert all(r["reason"].startswith("step ") and "too long" in r["reason"] for r in failed), failed
     assert {float(r["eta"]) for r in failed} == {0.5, 1.0}
     assert all(float(r["largest_mass_ratio"]) > 0 for r in good)
+    # Every physics parameter is a column, each row with its run's own value (a failed run's too).
+    defaults = specs.resolve_spec({})["params"]
+    for row in rows.values():
+        assert float(row["dt"]) == (5.0 if row["status"] == "failed" else 0.04)
+        for key in ("k_in", "restitution", "mu_k", "mu_r", "G", "gravity_every"):
+            assert float(row[key]) == defaults[key], key
+        assert row["rolling_friction"] == defaults["rolling_friction"]
     assert (tmp_path / "grid" / "figures" / "largest_fragment.png").stat().st_size > 1000
     # Analysed, then the trajectory dropped: the analysis, the figures and the final checkpoint stay.
     for row in good:

@@ -53,9 +53,10 @@ KEY_DIGITS = 6
 #: 1/10 runs, whose ratio is 0.10031.
 WHERE_TOLERANCE = 0.01
 #: The columns that define a set-up: rows compared at one point must agree in each of these (where
-#: present) unless it is the ``by`` or ``at`` column.  (Summaries do not record restitution or the
-#: friction coefficients yet; they are checked once they do.)
-SETUP_COLUMNS = ("mass_ratio", "theta_deg", "k_in", "dt", "gravity_every", "eta_potential", "n_particles", "restitution", "mu_k", "mu_r")
+#: present: summaries older than the physics columns have no restitution, friction, G or law) unless
+#: it is the ``by`` or ``at`` column.
+SETUP_COLUMNS = ("mass_ratio", "theta_deg", "k_in", "dt", "gravity_every", "eta_potential", "n_particles", "restitution", "mu_k", "mu_r",
+                 "G", "rolling_friction")  # fmt: skip
 #: The group that ``spin_kind`` is compared against by default, where present.
 NO_SPIN = "none"
 #: Columns that a sweep's summary.csv gives each run beside its summary.json's (a run folder alone

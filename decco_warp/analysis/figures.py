@@ -233,23 +233,69 @@ def draw_law(ax, points: list[dict], colour, label: str) -> None:
         ax.plot(etas, [p["planets"] for p in known], linestyle=":", color=colour, label=f"{label}: LS12 planets (c* = 1.9)")
 
 
-def plot_runs(summaries: list[dict], metric: str, ylabel: str, x: str = "eta"):
+#: Set-up columns that never split runs into series of their own: the x axis (eta, or the speed that
+#: gave it), the angle and the kind of spin (each figure's own families), and what a realization draws
+#: (its orientation seed, its piles; spin axes count by their kind).
+NOT_SPLIT = ("eta", "speed", "theta_deg", "orientation_seed", "target_spin_axis", "projectile_spin_axis", "target_pile", "projectile_pile")
+
+
+def split_columns(summaries: list[dict], candidates) -> list[str]:
+    """Of the ``candidates`` (a sweep's swept columns, say), those that take more than one value
+    among ``summaries`` (numbers to 6 significant digits, compare.value_key) and are not NOT_SPLIT:
+    the columns whose values make series of their own."""
+    from .compare import value_key
+
+    return [c for c in dict.fromkeys(candidates) if c not in NOT_SPLIT and len({_key(value_key, s.get(c)) for s in summaries}) > 1]
+
+
+def _key(value_key, value):
+    """A value as a group's key: numbers rounded, lists (a spin axis) as tuples."""
+    return tuple(value) if isinstance(value, list) else value_key(value)
+
+
+def group_key(summary: dict, split: list[str]) -> tuple:
+    """The values of the ``split`` columns of a run, rounded (compare.value_key): runs with the same
+    key are realizations of one series."""
+    from .compare import value_key
+
+    return tuple(_key(value_key, summary.get(c)) for c in split)
+
+
+def group_label(key: tuple, split: list[str]) -> str:
+    """A series' values in words: "mu_k 0.3, restitution 0.5"."""
+    from .compare import label
+
+    return ", ".join(f"{c} {label(v)}" for c, v in zip(split, key))
+
+
+def family_order(key: tuple):
+    """Sort key of (angle, spin kind, *split values) over numbers, text and None together."""
+    return tuple((0, v, "") if isinstance(v, (int, float)) and not isinstance(v, bool) else (1, 0, str(v)) for v in key)
+
+
+def plot_runs(summaries: list[dict], metric: str, ylabel: str, x: str = "eta", split: list[str] = ()):
     """Cross-run figure (Fig. 3 / Fig. 9 style): ``metric`` vs eta (``x``: "eta", "eta_self" or
-    "eta_all"), one panel per mass ratio, a line per angle and kind of spin through each point's
-    mean; where a point has several realizations, each drawn faintly and a bar from the smallest to
-    the largest; unsettled points hollow; for m_lf/m_t, the Leinhardt & Stewart (2012) law at the
-    same set-ups (:func:`draw_law`).  Panels share their axes."""
+    "eta_all"), one panel per mass ratio, a line per angle, kind of spin and values of the ``split``
+    columns (a sweep's swept keys) through each point's mean; where a point has several
+    realizations, each drawn faintly and a bar from the smallest to the largest; unsettled points
+    hollow; for m_lf/m_t, the Leinhardt & Stewart (2012) law at the same set-ups (:func:`draw_law`).
+    Panels share their axes."""
     ratios = sorted({round(s["mass_ratio"], 3) for s in summaries})
     fig, axes = plt.subplots(1, len(ratios), figsize=(4.4 * len(ratios), 3.8), squeeze=False, sharey=True, sharex=True)
+
+    def family(s: dict) -> tuple:
+        return (s["theta_deg"], s.get("spin_kind") or "none", *group_key(s, split))
+
     for ax, ratio in zip(axes[0], ratios):
         mine = [s for s in summaries if round(s["mass_ratio"], 3) == ratio]
-        families = sorted({(s["theta_deg"], s.get("spin_kind") or "none") for s in mine})
-        for k, (angle, spins) in enumerate(families):
-            points = realization_points([s for s in mine if (s["theta_deg"], s.get("spin_kind") or "none") == (angle, spins)], metric, x)
+        families = sorted({family(s) for s in mine}, key=family_order)
+        for k, key in enumerate(families):
+            angle, spins = key[:2]
+            points = realization_points([s for s in mine if family(s) == key], metric, x)
             if not points:
                 continue
-            colour = plt.get_cmap("tab10")(k)
-            label = f"{angle:g} deg" + (f", {spins} spins" if spins != "none" else "")
+            colour = plt.get_cmap("tab10")(k % 10)
+            label = f"{angle:g} deg" + (f", {spins} spins" if spins != "none" else "") + (f", {group_label(key[2:], split)}" if split else "")
             draw_points(ax, points, colour, label)
             if metric == "largest_mass_ratio":
                 draw_law(ax, points, colour, label)
@@ -273,14 +319,16 @@ def size_change_value(summary: dict) -> tuple[float | None, float]:
     return summary.get("particle_size_change"), 0.0
 
 
-def plot_size_change(summaries: list[dict]):
+def plot_size_change(summaries: list[dict], split: list[str] = ()):
     """Fig. 6 style: the largest fragment's particle-size change (mean over the last 10 % of the run,
-    a bar of one standard deviation of its frames there) vs eta from every run, one panel per angle,
-    markers by mass ratio, constructive (m_lf > m_t) blue and destructive orange, unsettled hollow."""
-    angles = sorted({s["theta_deg"] for s in summaries})
-    fig, axes = plt.subplots(1, len(angles), figsize=(4.4 * len(angles), 3.8), squeeze=False, sharey=True, sharex=True)
-    for ax, angle in zip(axes[0], angles):
-        mine = [s for s in summaries if s["theta_deg"] == angle and size_change_value(s)[0] is not None]
+    a bar of one standard deviation of its frames there) vs eta from every run, one panel per angle
+    (and per values of the ``split`` columns), markers by mass ratio, constructive (m_lf > m_t) blue
+    and destructive orange, unsettled hollow."""
+    panels = sorted({(s["theta_deg"], *group_key(s, split)) for s in summaries}, key=family_order)
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.4 * len(panels), 3.8), squeeze=False, sharey=True, sharex=True)
+    for ax, panel in zip(axes[0], panels):
+        angle = panel[0]
+        mine = [s for s in summaries if (s["theta_deg"], *group_key(s, split)) == panel and size_change_value(s)[0] is not None]
         for ratio in sorted({round(s["mass_ratio"], 2) for s in mine}):
             runs = [s for s in mine if round(s["mass_ratio"], 2) == ratio]
             for constructive, colour in ((True, "C0"), (False, "C1")):
@@ -300,7 +348,7 @@ def plot_size_change(summaries: list[dict]):
         ax.axhline(0.0, color="0.6", linewidth=0.6)
         ax.set_xscale("log")
         ax.set_xlabel("eta = KE / |U|")
-        ax.set_title(f"theta = {angle:g} deg")
+        ax.set_title(f"theta = {angle:g} deg" + (f"\n{group_label(panel[1:], split)}" if split else ""))
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)
     axes[0][0].set_ylabel("largest fragment's mean grain mass change [%]")
@@ -308,7 +356,7 @@ def plot_size_change(summaries: list[dict]):
 
 
 CROSS_RUN_FIGURES = {
-    "largest_fragment": lambda summaries: plot_runs(summaries, "largest_mass_ratio", "m_lf / m_t"),
+    "largest_fragment": lambda summaries, split: plot_runs(summaries, "largest_mass_ratio", "m_lf / m_t", split=split),
     "particle_size_change": plot_size_change,
 }
 
@@ -318,11 +366,13 @@ def line_data(fig) -> list[tuple[np.ndarray, np.ndarray]]:
     return [(np.asarray(line.get_xdata()), np.asarray(line.get_ydata())) for ax in fig.axes for line in ax.lines]
 
 
-def write_cross_run(folder: Path, summaries: list[dict]) -> list[Path]:
-    """The cross-run figures of a set of analysed runs (those with an eta and a mass ratio)."""
+def write_cross_run(folder: Path, summaries: list[dict], split=()) -> list[Path]:
+    """The cross-run figures of a set of analysed runs (those with an eta and a mass ratio), their
+    series split by those of the columns ``split`` (a sweep's swept keys) that vary among them."""
     usable = [s for s in summaries if s.get("eta") is not None and s.get("mass_ratio") is not None]
     paths = []
     if usable:
+        columns = split_columns(usable, split)
         for name, plot in CROSS_RUN_FIGURES.items():
-            paths += save(plot(usable), folder / "figures", name)
+            paths += save(plot(usable, columns), folder / "figures", name)
     return paths
