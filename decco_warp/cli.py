@@ -425,7 +425,8 @@ def _report(result) -> None:
     # The run's totals and this session's costs apart: after a resume they are not the same steps.
     typer.echo(
         f"done: the run is at step {result.steps} ({result.time:.6g} s simulated); this session stepped "
-        f"{result.steps_this_session} steps in {result.wall_seconds:.1f} s wall, {result.stepping_seconds:.1f} s of it stepping"
+        f"{result.steps_this_session} steps in {result.session_wall_seconds:.1f} s wall, {result.session_stepping_seconds:.1f} s of it stepping"
+        + (f" ({result.wall_seconds:.1f} s wall over all the run's sessions)" if result.steps_this_session < result.steps else "")
     )
     typer.echo(f"outputs in {run_dir}/: spec.toml, trajectory.h5 (H5MD), trajectory.xdmf (for ParaView, VisIt), checkpoint.h5, run.log")
     typer.echo(f"inspect: h5ls -r {run_dir}/trajectory.h5   |   python: decco_warp.io.read_trajectory('{run_dir}/trajectory.h5')")
@@ -1052,8 +1053,12 @@ def sweep(
         def report(row: dict) -> None:
             bar.console.print(finished_line(row))
 
+        def stopping() -> None:
+            bar.console.print("stopping: each run stepping writes a checkpoint and ends (a second Ctrl-C stops at once, "
+                              "losing their work since their last checkpoints)", soft_wrap=True, highlight=False)  # fmt: skip
+
         try:
-            job.run(scheduler, workers, analysis_workers, gpus, on_row=report, on_progress=show)
+            job.run(scheduler, workers, analysis_workers, gpus, on_row=report, on_progress=show, on_stopping=stopping)
         except OSError as error:  # summary.csv could not be written: the runs' own folders are whole
             write_failed(error, f"the finished runs' folders and the last summary.csv are whole; {AGAIN}")
     try:

@@ -53,6 +53,7 @@ from . import resolution as resolutions
 from . import spec as specs
 from ._version import __version__
 from .folder import RunFolder
+from .stops import clear_request
 
 #: ``ensemble = "auto"`` on a GPU: runs go to a worker up to 8 at a time (fewer where that leaves a
 #: worker idle), and those of the same particle count up to ENSEMBLE_MAX_PARTICLES are stepped
@@ -309,33 +310,53 @@ def ensemble_groups(prepared, max_particles: int | None = None) -> list[list[int
     return list(groups.values())
 
 
-def simulate_batch(batch: list[dict], max_particles: int | None = None) -> list[dict]:
+def simulate_batch(batch: list[dict], max_particles: int | None = None, stop_file: str | None = None) -> list[dict]:
     """Run (or resume, or skip) several runs of a sweep on one Dask worker, those that share their
     Params and step advanced together as one ensemble (decco_warp/ensemble.py: each writes what it
-    would alone); never raises.  One row per run: ``status`` (ok, skipped (complete) or failed,
-    with ``reason``), the run folder, the device, and the run's own wall time over all its
-    sessions.  With ``max_particles`` only runs of the same particle count, up to that many, go
-    together."""
-    from .run import RUN_FAILURES, execute, execute_ensemble
+    would alone); never raises.  One row per run: ``status`` (ok, skipped (complete), failed with
+    ``reason``, or stopped), the run folder, the device, the run's own wall time over all its
+    sessions and this session's (``session_seconds``).  With ``max_particles`` only runs of the
+    same particle count, up to that many, go together.  Once ``stop_file`` exists (the sweep was
+    stopped) a stepping run checkpoints and ends as "stopped" (``step``: where), and a run not
+    started is left as "stopped" with ``step`` None."""
+    from .run import RUN_FAILURES, RunStopped, execute, execute_ensemble
+    from .stops import StopRequests
 
     device = _worker_device()
+    stop = StopRequests(stop_file)
+    if stop.signal is not None:  # asked to stop before this batch began: leave it whole
+        from .run import run_dir_of
+
+        return [{"run": spec["run"]["name"], "run_dir": str(run_dir_of(spec)), "device": device, "status": "stopped", "step": None}
+                for spec in batch]  # fmt: skip
     rows, prepared = zip(*(_prepare(spec, device) for spec in batch))
     rows = list(rows)
     for members in ensemble_groups(prepared, max_particles):
-        try:
-            if len(members) == 1:
-                outcomes = [execute(prepared[members[0]])]
-            else:
-                outcomes = execute_ensemble([prepared[k] for k in members])
-        except RUN_FAILURES as error:  # the run, or the ensemble as a whole (its device memory, ...)
-            outcomes = [error] * len(members)
+        if stop.signal is not None:
+            outcomes = [None] * len(members)  # not started
+        else:
+            try:
+                if len(members) == 1:
+                    outcomes = [execute(prepared[members[0]], stop_file=stop_file)]
+                else:
+                    outcomes = execute_ensemble([prepared[k] for k in members], stop_file=stop_file)
+            except RunStopped as stopped:
+                outcomes = [stopped]
+            except RUN_FAILURES as error:  # the run, or the ensemble as a whole (its device memory, ...)
+                outcomes = [error] * len(members)
         for k, outcome in zip(members, outcomes):
             rows[k]["ensemble"] = len(members)
-            if isinstance(outcome, BaseException):
+            rows[k]["resumed"] = prepared[k].resume
+            if outcome is None or isinstance(outcome, RunStopped):
+                rows[k].update(status="stopped", step=getattr(outcome, "step", None))
+                if outcome is None and prepared[k].lock is not None:  # prepared, never started: its folder is free
+                    prepared[k].lock.release()
+            elif isinstance(outcome, BaseException):
                 rows[k].update(status="failed", reason=" ".join(str(outcome).split()))
             else:
-                rows[k]["status"] = "ok"
+                rows[k].update(status="ok", session_seconds=round(outcome.session_wall_seconds, 3))
     return [_timed(row) for row in rows]
+
 
 
 def _complete_row(spec: dict) -> dict | None:
@@ -349,7 +370,8 @@ def _complete_row(spec: dict) -> dict | None:
             return None
     except (*RUN_FAILURES, specs.SpecError):
         return None
-    return _timed({"run": spec["run"]["name"], "run_dir": str(run_dir), "device": "auto", "status": "skipped (complete)"})
+    # Made before this sweep: where is not known here (its run.log says), so no device is claimed.
+    return _timed({"run": spec["run"]["name"], "run_dir": str(run_dir), "device": None, "status": "skipped (complete)"})
 
 
 def run_state(spec: dict) -> str:
@@ -464,11 +486,11 @@ def stepped_fraction(spec: dict) -> float:
     return 0.0 if progress is None else min(1.0, progress[0] / max(1, progress[1]))
 
 
-def _device_name(device: str) -> str:
+def _device_name(device: str | None) -> str:
     try:
         import warp as wp
 
-        return str(wp.get_device(device).name) if device != "auto" else ""
+        return str(wp.get_device(device).name) if device not in (None, "auto") else ""
     except Exception:  # the name is a label for the table, never a reason to fail
         return ""
 
@@ -532,6 +554,19 @@ def _worker_device() -> str | None:
     return os.environ.get(ENV_VARIABLE) or None
 
 
+#: The module each local worker loads as it starts (Dask's preload: its ``dask_setup``).
+WORKER_SETUP = "decco_warp.sweep"
+
+
+def dask_setup(worker) -> None:
+    """Dask's preload hook, in each local worker process as it starts: SIGINT and SIGTERM are left to
+    the sweep (decco_warp/stops.py, ``ignore_stops``), which asks the worker's runs to checkpoint
+    and end; a worker killed by the terminal's Ctrl-C would lose their work since the last one."""
+    from .stops import ignore_stops
+
+    ignore_stops()
+
+
 def local_cluster(workers: int, gpus: int):
     """A Dask LocalCluster of ``workers`` single-threaded processes, worker k pinned to cuda:(k mod
     gpus) (to the CPU without GPUs) through its own $DECCO_DEVICE, which it keeps if restarted."""
@@ -543,7 +578,8 @@ def local_cluster(workers: int, gpus: int):
     spec = cluster.new_spec
     for k in range(workers):
         env = {ENV_VARIABLE: f"cuda:{k % gpus}" if gpus > 0 else "cpu"}
-        cluster.worker_spec[k] = {"cls": spec["cls"], "options": {**spec["options"], "env": env}}
+        # WORKER_SETUP leaves Ctrl-C to the sweep, which stops the runs at checkpoints (run_sweep).
+        cluster.worker_spec[k] = {"cls": spec["cls"], "options": {**spec["options"], "env": env, "preload": [WORKER_SETUP]}}
     cluster.scale(workers)
     try:
         cluster.wait_for_workers(workers, timeout=WORKER_START_SECONDS)
@@ -565,15 +601,25 @@ def run_sweep(
     analysis_workers: int | None = None,
     gpus: int | None = None,
     on_progress=None,
+    stop_file=None,
+    on_stopping=None,
 ) -> list[dict]:
     """Simulate every run with Dask and analyse each here as it finishes; one row per run, in grid order.
     Local workers: one per GPU (the first ``gpus``, default all, see :func:`local_cluster`), else
     ``workers`` (default 2) on the CPU; a ``scheduler``'s workers each use their own device.
     ``on_progress(runs_stepped)`` hears, every PROGRESS_SECONDS and as runs finish, how many runs'
-    worth of steps are made (complete runs count whole, stepping ones by their last checkpoint)."""
+    worth of steps are made (complete runs count whole, stepping ones by their last checkpoint).
+
+    SIGINT or SIGTERM once the workers are up stops the sweep in order: the signal's name is written
+    to ``stop_file`` (a path every worker sees: the sweep folder), where each stepping run reads it,
+    writes a checkpoint and ends, and runs not started are left (``on_stopping()`` hears that this
+    began); the analyses under way finish, those not begun are left; then SweepStopped.  A second
+    signal stops at once, the work of the runs since their last checkpoints lost (KeyboardInterrupt)."""
     from distributed import Client, as_completed
 
     from .device import cuda_device_count, gpus_to_use
+    from .errors import SweepStopped
+    from .stops import StopRequests, ignore_stops, request_stop
 
     if scheduler:
         gpus = cuda_device_count()
@@ -587,9 +633,11 @@ def run_sweep(
         client = Client(cluster)
     # Analysis runs here, beside the workers, in fresh processes (its density on this machine's GPU if any).
     analysers = analysis_workers or max(1, (os.cpu_count() or 1) - (0 if gpus > 0 else simulating))
-    pool = ProcessPoolExecutor(max_workers=analysers, mp_context=multiprocessing.get_context("spawn"))
+    pool = ProcessPoolExecutor(max_workers=analysers, mp_context=multiprocessing.get_context("spawn"), initializer=ignore_stops)
     rows: list[dict | None] = [None] * len(runs)
     pending: dict[Future, tuple[int, dict]] = {}
+    stopped: list[dict] = []  # the rows of runs that a stop left part-way (or not started)
+    unanalysed: list[str] = []  # runs that finished stepping but whose analysis a stop left
 
     def finish(k: int, row: dict) -> None:
         rows[k] = row
@@ -599,12 +647,16 @@ def run_sweep(
     def collect() -> None:
         for future in [f for f in list(pending) if f.done()]:
             k, row = pending.pop(future)
+            if future.cancelled():
+                unanalysed.append(row["run"])
+                continue
             try:
                 summary = future.result()
                 finish(k, {**row, **{key: value for key, value in summary.items() if key not in SWEEP_OWN}, "run": row["run"]})
             except Exception as error:  # a damaged trajectory, a full disk: this run only
                 finish(k, {**row, "status": "failed", "reason": f"analysis: {' '.join(str(error).split())}"})
 
+    abandoned = False
     try:
         # Runs in grid order, `ensemble` at a time to a worker (neighbours in a grid mostly share
         # their piles and Params, and those are stepped together).
@@ -614,44 +666,64 @@ def run_sweep(
         todo = [k for k, row in done.items() if row is None]
         size, max_particles = ensemble_plan(settings.get("ensemble", 1), gpus, len(todo), simulating)
         batches = [todo[k : k + size] for k in range(0, len(todo), size)]
-        futures = {client.submit(simulate_batch, [runs[k] for k in batch], max_particles, pure=False): batch for batch in batches}
+        request = None if stop_file is None else str(stop_file)
+        futures = {client.submit(simulate_batch, [runs[k] for k in batch], max_particles, request, pure=False): batch for batch in batches}
         simulations = as_completed(futures)
         arrived = [([k for k, row in done.items() if row is not None], [row for row in done.values() if row is not None])]
         stepped = {k: 0.0 for k in todo}  # never lowered: a checkpoint being replaced reads as none
         looked = -math.inf
-        while not simulations.is_empty() or pending or arrived:
-            if on_progress is not None and time.monotonic() - looked >= PROGRESS_SECONDS:
-                looked = time.monotonic()
-                for k in todo:
-                    if stepped[k] < 1.0:
-                        stepped[k] = max(stepped[k], stepped_fraction(runs[k]))
-                on_progress(len(runs) - len(todo) + sum(stepped.values()))
-            # Poll both kinds of work, so that each run is reported as soon as its analysis ends.
-            for future in simulations.next_batch(block=False):
-                batch = futures[future]
-                try:
-                    arrived.append((batch, future.result()))
-                except Exception as error:  # a worker that died: record it, go on
-                    arrived.append((batch, [{"run": runs[k]["run"]["name"], "status": "failed", "reason": f"worker lost: {error}"} for k in batch]))
-            while arrived:
-                batch, results = arrived.pop(0)
-                for k, row in zip(batch, results):
-                    if k in stepped:
-                        stepped[k] = 1.0
-                        looked = -math.inf  # reported at the next poll
-                    collision = runs[k]["collision"]
-                    row.update(set_up_values(runs[k], settings.get("swept", [])))
-                    row.update(eta=collision.get("eta"), speed=collision.get("speed"), theta_deg=collision["theta_deg"])
-                    row.update(realization=realization_of(runs[k]), orientation_seed=collision.get("orientation_seed"))
-                    if row["status"] == "failed":
-                        finish(k, row)
-                    else:
-                        args = (row["run_dir"], settings["min_members"], settings["analyse_every"], settings["keep_trajectory"])
-                        pending[pool.submit(analyse_one, *args)] = (k, row)
-            collect()
-            time.sleep(POLL_SECONDS)
+        stopping = None  # the signal that stops the sweep, once one came
+        with StopRequests() as signals:
+            while not simulations.is_empty() or pending or arrived:
+                if signals.count > 1:  # asked twice: go at once
+                    abandoned = True
+                    raise KeyboardInterrupt
+                if signals.signal is not None and stopping is None:
+                    stopping = signals.signal
+                    if stop_file is not None:
+                        request_stop(stop_file, stopping)
+                    for future in pending:
+                        future.cancel()  # the analyses not begun; those under way finish
+                    if on_stopping is not None:
+                        on_stopping()
+                if on_progress is not None and time.monotonic() - looked >= PROGRESS_SECONDS:
+                    looked = time.monotonic()
+                    for k in todo:
+                        if stepped[k] < 1.0:
+                            stepped[k] = max(stepped[k], stepped_fraction(runs[k]))
+                    on_progress(len(runs) - len(todo) + sum(stepped.values()))
+                # Poll both kinds of work, so that each run is reported as soon as its analysis ends.
+                for future in simulations.next_batch(block=False):
+                    batch = futures[future]
+                    try:
+                        arrived.append((batch, future.result()))
+                    except Exception as error:  # a worker that died: record it, go on
+                        arrived.append((batch, [{"run": runs[k]["run"]["name"], "status": "failed", "reason": f"worker lost: {error}"} for k in batch]))
+                while arrived:
+                    batch, results = arrived.pop(0)
+                    for k, row in zip(batch, results):
+                        if k in stepped and row["status"] != "stopped":
+                            stepped[k] = 1.0
+                            looked = -math.inf  # reported at the next poll
+                        collision = runs[k]["collision"]
+                        row.update(set_up_values(runs[k], settings.get("swept", [])))
+                        row.update(eta=collision.get("eta"), speed=collision.get("speed"), theta_deg=collision["theta_deg"])
+                        row.update(realization=realization_of(runs[k]), orientation_seed=collision.get("orientation_seed"))
+                        if row["status"] == "stopped":
+                            stopped.append(row)
+                        elif row["status"] == "failed":
+                            finish(k, row)
+                        elif stopping is not None:
+                            unanalysed.append(row["run"])  # complete: the sweep run again analyses it
+                        else:
+                            args = (row["run_dir"], settings["min_members"], settings["analyse_every"], settings["keep_trajectory"])
+                            pending[pool.submit(analyse_one, *args)] = (k, row)
+                collect()
+                time.sleep(POLL_SECONDS)
+        if stopping is not None:
+            raise SweepStopped(stopping, stopped, unanalysed)
     finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+        pool.shutdown(wait=not abandoned, cancel_futures=True)
         client.close()
         if cluster is not None:
             cluster.close()
@@ -715,7 +787,8 @@ AGAIN = "free space, then run the sweep again: finished runs are skipped, a stop
 
 def finished_line(row: dict) -> str:
     """A run's line as the sweep reports it finished: its status (or why it failed), outcome and
-    deepest overlap, and its time on its device."""
+    deepest overlap, and its time: this session's on its device (and over all its sessions, for a
+    resumed run), or, for a run complete before this sweep, what it took then."""
     from .analysis.runs import outcome_text
 
     outcome = row["status"] if row["status"] != "failed" else f"FAILED: {row.get('reason', '')}"
@@ -723,7 +796,20 @@ def finished_line(row: dict) -> str:
     depth = row.get("deepest_overlap")
     detail += f", deepest overlap {depth:.2f}" if isinstance(depth, float) else ""
     together = f", {row['ensemble']} runs together" if (row.get("ensemble") or 1) > 1 else ""
-    return f"{row['run']}: {outcome}{detail} ({row.get('wall_seconds') or 0:.1f} s on {row.get('device')}{together})"
+    total = row.get("wall_seconds") or 0.0
+    if row["status"].startswith("skipped"):
+        spent = f"made before this sweep, in {total:.1f} s"
+    else:
+        session = row.get("session_seconds")
+        spent = f"{total if session is None else session:.1f} s on {row.get('device')}{together}"
+        if row.get("resumed") and session is not None:
+            spent += f"; {total:.1f} s over all its sessions"
+    return f"{row['run']}: {outcome}{detail} ({spent})"
+
+
+#: The file in a sweep's folder through which a stopped sweep asks its workers' runs to stop
+#: (decco_warp/stops.py): every worker writes into that folder, so every worker sees it.
+STOP_REQUEST = ".stop-request"
 
 
 class SweepJob:
@@ -746,6 +832,7 @@ class SweepJob:
         self.stepped = 0.0  # runs' worth of steps made (run_sweep's on_progress)
         self.rows: list[dict] | None = None  # every run's row, in grid order, once the sweep has run whole
         self.stopped = False
+        self.stop = None  # what the stop left (SweepStopped), once stopped with its workers up
         self.lock = None
 
     def claim(self) -> "SweepJob":
@@ -760,7 +847,12 @@ class SweepJob:
             self.lock = RunFolderLock(self.folder).acquire()
         except InputError as error:
             raise InputError(str(error).replace("run folder", "sweep folder")) from None
+        clear_request(self.stop_file)  # a request left by a sweep that was killed while it stopped
         return self
+
+    @property
+    def stop_file(self) -> Path:
+        return self.folder / STOP_REQUEST
 
     def release(self) -> None:
         self.lock.release()
@@ -773,12 +865,15 @@ class SweepJob:
     def progress_text(self) -> str:
         return f"{len(self.finished)}/{len(self.runs)} runs, {100 * self.stepped / len(self.runs):.0f} % of the steps made"
 
-    def run(self, scheduler=None, workers=None, analysis_workers=None, gpus=None, on_row=None, on_progress=None) -> bool:
+    def run(self, scheduler=None, workers=None, analysis_workers=None, gpus=None, on_row=None, on_progress=None, on_stopping=None) -> bool:
         """:func:`run_sweep` (its arguments), with SIGTERM (a batch scheduler's stop) taken as Ctrl-C.
         Each finished run's row is added to summary.csv, then told to ``on_row(row)``; ``on_progress()``
-        hears of each change of :attr:`completed`.  Returns False when stopped (the rows so far in
-        :attr:`finished`); OSError when summary.csv could not be written."""
+        hears of each change of :attr:`completed`; ``on_stopping()`` that a stop began (the running
+        runs checkpoint).  Returns False when stopped (the rows so far in :attr:`finished`, what the
+        stop left in :attr:`stop`); OSError when summary.csv could not be written."""
         import signal
+
+        from .errors import SweepStopped
 
         on_row, on_progress = on_row or (lambda row: None), on_progress or (lambda: None)
 
@@ -795,12 +890,16 @@ class SweepJob:
         previous = signal.signal(signal.SIGTERM, signal.default_int_handler)  # a batch scheduler's stop, as Ctrl-C
         try:
             self.rows = run_sweep(
-                self.settings, self.runs, scheduler, workers, report, analysis_workers=analysis_workers, gpus=gpus, on_progress=progress
-            )
-        except KeyboardInterrupt:
+                self.settings, self.runs, scheduler, workers, report, analysis_workers=analysis_workers, gpus=gpus,
+                on_progress=progress, stop_file=self.stop_file, on_stopping=on_stopping,
+            )  # fmt: skip
+        except SweepStopped as stop:
+            self.stopped, self.stop = True, stop
+        except KeyboardInterrupt:  # before the workers were up, or a second signal: nothing waited for
             self.stopped = True
         finally:
             signal.signal(signal.SIGTERM, previous)
+            clear_request(self.stop_file)
         return not self.stopped
 
     def save_record(self) -> Path:
@@ -808,14 +907,26 @@ class SweepJob:
         return write_record(self.folder, self.settings, self.rows or self.finished, time.perf_counter() - self.started)
 
     def stopped_line(self) -> str:
-        """What a stopped sweep kept, and how to go on."""
-        if len(self.finished) == len(self.runs):  # stopped while its workers shut down: nothing to continue
-            return (f"sweep stopped after its {len(self.runs)} runs had finished (summary.csv holds them), before its figures: "
+        """What a stopped sweep kept, and how to go on: the runs finished (in summary.csv, if any),
+        each run the stop ended with its checkpoint's step, the runs left to analyse."""
+        finished = len(self.finished)
+        table = f"summary.csv holds the {finished} finished" if finished else "no run had finished, so there is no summary.csv yet"
+        if finished == len(self.runs):  # stopped while its workers shut down: nothing to continue
+            return (f"sweep stopped after its {len(self.runs)} runs had finished ({table}), before its figures: "
                     "run it again to draw them (every run is skipped)")  # fmt: skip
-        return (
-            f"sweep stopped after {len(self.finished)} of {len(self.runs)} runs (summary.csv holds them); run it again to "
-            "continue: finished runs are skipped, the stopped one resumes from its checkpoint"
-        )
+        parts = [f"sweep stopped after {finished} of {len(self.runs)} runs ({table})"]
+        stop = self.stop
+        if stop is None:
+            parts.append("the runs stepping were not waited for: each keeps its last checkpoint")
+        else:
+            ended = [r for r in stop.stopped if r.get("step") is not None]
+            if ended:
+                parts.append(f"{len(ended)} stepping run(s) wrote a checkpoint where they stopped: "
+                             + ", ".join(f"{r['run']} at step {r['step']}" for r in ended))  # fmt: skip
+            if stop.unanalysed:
+                parts.append(f"{len(stop.unanalysed)} run(s) finished stepping but are not analysed yet ({', '.join(stop.unanalysed)})")
+        parts.append("run it again to continue: finished runs are skipped, stopped ones resume from their checkpoints")
+        return "; ".join(parts)
 
     def finish(self) -> Path:
         """Every run's summary.csv, in grid order, and the cross-run figures of those that did not fail."""

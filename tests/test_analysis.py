@@ -288,6 +288,11 @@ def test_resume_until_settled_extends_a_run_only_while_its_outcome_changes(tmp_p
     assert "settled at step 400" in result.stdout and "extending" not in result.stdout
     # The run's totals apart from this session's costs: a finished run resumed steps nothing.
     assert "done: the run is at step 400 (16 s simulated); this session stepped 0 steps in" in result.stdout
+    import re
+
+    times = re.search(r"this session stepped 0 steps in ([\d.]+) s wall.*\(([\d.]+) s wall over all the run's sessions\)", result.stdout)
+    session, total = float(times[1]), float(times[2])
+    assert session < 0.5 * total  # this session stepped nothing: the run's first session's time is not this one's
     result = cli("resume", str(tmp_path / "b"), "--until-settled", "--min-members", "1000000", "--max-steps", "600")
     assert result.returncode == 6, result.stderr
     assert "extending to step 500" in result.stdout and "extending to step 600" in result.stdout

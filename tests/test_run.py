@@ -116,9 +116,15 @@ def _frames(run_dir):
 
 def test_stopped_run_resumes_bit_identically(tmp_path):
     straight = start_run(_spec(tmp_path, "straight"))
-    start_run(_spec(tmp_path, "parts", steps=300))
+    first = start_run(_spec(tmp_path, "parts", steps=300))
+    began = time.perf_counter()
     resumed = resume_run(tmp_path / "parts", steps=600)
+    took = time.perf_counter() - began
     assert resumed.steps == 600 and resumed.steps_this_session == 300
+    # This session's time apart from the run's over all its sessions (the first one's, then this one's).
+    assert 0 < resumed.session_stepping_seconds < resumed.session_wall_seconds < took
+    assert resumed.wall_seconds == pytest.approx(first.wall_seconds + resumed.session_wall_seconds, abs=0.2)
+    assert first.session_wall_seconds == first.wall_seconds
     assert_same_run(_frames(straight.run_dir), _frames(tmp_path / "parts"))
     snap_a, _, _ = read_checkpoint(tmp_path / "straight" / "checkpoint.h5")
     snap_b, _, _ = read_checkpoint(tmp_path / "parts" / "checkpoint.h5")

@@ -113,6 +113,10 @@ def test_sweep_runs_on_two_workers_reports_failures_and_resumes(tmp_path):
     rows = _rows(tmp_path / "grid" / "summary.csv")
     assert sorted(r["status"] for r in rows.values()) == ["failed", "failed", "skipped (complete)", "skipped (complete)"]
     assert {name: rows[name]["analysis_seconds"] for name in took} == took
+    # A skipped run was made before: no device is claimed for it, and its line says what it took then.
+    assert all(rows[name]["device"] == "" for name in took)
+    skipped = [line for line in " ".join(again.stderr.split()).split(" eta") if "skipped (complete)" in line]
+    assert skipped and all("made before this sweep, in" in line and "on auto" not in line for line in skipped)
 
 
 def test_bad_sweep_files_are_exit_2(tmp_path):
@@ -212,6 +216,50 @@ def test_a_stopped_sweep_keeps_its_table_and_continues(tmp_path):
     assert len(rows) == 6 and all(rows[name]["status"] == "skipped (complete)" for name in done)
 
 
+def test_ctrl_c_on_a_sweep_checkpoints_its_running_runs_and_says_what_it_kept(tmp_path):
+    """Ctrl-C at a terminal signals every process of the sweep at once (its Dask workers and analysis
+    processes too): the running runs write a checkpoint at the step they reached (their last periodic
+    one is step 0 here) with a "stopped" line in run.log, the sweep ends with exit 3 and a line that
+    says so (and that no summary.csv exists yet: no run had finished), without Dask's "still alive,
+    killing" warnings; run again, the runs resume from those steps."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from decco_warp.io import read_checkpoint
+
+    path = tmp_path / "s.toml"
+    text = SWEEP.format(out=tmp_path).replace('"params.dt" = [0.04, 5.0]', "").replace('"collision.eta" = [0.5, 1.0]', '"params.mu_k" = [0.0, 0.6]')
+    text = text.replace("steps = 200\noutput_every = 50", "steps = 2000000\noutput_every = 1000\ncheckpoint_every = 1000000")
+    path.write_text(text + "[params]\ngravity_every = 10\n")
+    process = subprocess.Popen(
+        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", "sweep", str(path), "--workers", "2"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )  # fmt: skip
+    logs = [tmp_path / "grid" / name / "run.log" for name in ("mu_k0", "mu_k0.6")]
+    deadline = time.time() + 180
+    while time.time() < deadline and not all(log.is_file() and "frame: step 3000," in log.read_text() for log in logs):
+        time.sleep(0.2)
+    os.killpg(process.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole process group
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 3, stderr
+    assert "still alive" not in stderr and "Traceback" not in stderr, stderr
+    line = " ".join(stderr.split("decco-warp: ")[-1].split())
+    assert "after 0 of 2 runs (no run had finished, so there is no summary.csv yet)" in line and "summary.csv holds" not in line
+    assert not (tmp_path / "grid" / "summary.csv").exists()
+    steps = {}
+    for log in logs:
+        last = log.read_text().splitlines()[-1]
+        assert "stopped by SIGINT at step" in last, last
+        steps[log.parent.name] = int(last.split("at step ")[1].split(";")[0])
+        assert int(read_checkpoint(log.parent / "checkpoint.h5")[0]["step"]) == steps[log.parent.name] >= 3000
+        assert f"{log.parent.name} at step {steps[log.parent.name]}" in line
+    result = cli("sweep", str(path), "--check")
+    states = {line.split()[0]: line.split(None, 1)[1] for line in result.stdout.splitlines()[1:] if not line.startswith("   ")}
+    assert states == {name: f"resumes at step {step}" for name, step in steps.items()}
+
+
 def test_a_sweep_packs_runs_into_ensembles_with_the_results_of_runs_alone(tmp_path):
     """[sweep] ensemble = 4 hands the whole grid to one worker: the two runs of each dt are stepped
     together, the dt = 5 s pair blows up on its own (each with its own reason), and the others
@@ -274,6 +322,19 @@ def test_ensemble_auto_packs_small_runs_on_a_gpu_only_and_alike_in_size(tmp_path
     mixed = [{**r, "run": {**r["run"], "out": str(tmp_path / "c"), **extra}} for r, extra in zip(pair, ({"layout": "newton"}, {}))]
     assert [row["ensemble"] for row in simulate_batch(mixed)] == [1, 1]
     assert all(row["status"] == "ok" for row in together + alone)
+    # Stopped part-way (a stop requested before its first step: it checkpoints at its first stop), then
+    # resumed, a run's row gives this session's time beside the run's over all its sessions.
+    from decco_warp.errors import RunStopped
+    from decco_warp.run import execute, prepare_start
+    from decco_warp.sweep import finished_line
+
+    first = {**pair[0], "run": {**pair[0]["run"], "out": str(tmp_path / "d")}}
+    (tmp_path / "stop").write_text("SIGINT")
+    with pytest.raises(RunStopped):
+        execute(prepare_start(first), stop_file=tmp_path / "stop")
+    [row] = simulate_batch([first])
+    assert row["status"] == "ok" and row["resumed"] and 0 < row["session_seconds"] < row["wall_seconds"], row.get("reason")
+    assert f"{row['session_seconds']:.1f} s on cpu; {row['wall_seconds']:.1f} s over all its sessions" in finished_line(row)
 
 
 def test_auto_ensembles_group_runs_of_10000_particles_and_keep_larger_ones_alone():
