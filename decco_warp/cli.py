@@ -539,7 +539,7 @@ def _integer_or_auto(text: Optional[str], option: str):
 
 def _check(spec: dict) -> None:
     """``simulate --check``: the run's plan (its set-up, margins, predicted deepest overlap and resolved choices); exit 2 if it would be refused."""
-    from .costs import run_cost
+    from .costs import GRAVITY_EVERY_NOTE, run_cost
     from .plan import plan_start
 
     try:
@@ -549,6 +549,8 @@ def _check(spec: dict) -> None:
     for line in [*plan.lines(), *plan.choices()]:
         typer.echo(line)
     typer.echo(f"cost: {run_cost(plan.state.n, plan.params.gravity, plan.device, plan.steps, plan.params.gravity_every)}")
+    if plan.params.gravity_every > 1:
+        typer.echo(GRAVITY_EVERY_NOTE)
     if plan.run_dir.exists():
         typer.echo(f"note: run folder {plan.run_dir} exists (resume continues it, --overwrite replaces it)")
     if not plan.stability.stable and not plan.allow_unstable:

@@ -44,6 +44,7 @@ import os
 import platform
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -377,6 +378,11 @@ def _complete_row(spec: dict) -> dict | None:
 def run_state(spec: dict) -> str:
     """Where a sweep's run stands: "complete", "resumes at step K" (its checkpoint is short of its
     steps) or "to run"."""
+    return _standing(spec)[0]
+
+
+def _standing(spec: dict) -> tuple[str, int]:
+    """:func:`run_state` and the steps its folder holds already (0 where it has none)."""
     from .run import RUN_FAILURES, run_dir_of
 
     run_dir = run_dir_of(spec)
@@ -384,33 +390,59 @@ def run_state(spec: dict) -> str:
         folder = RunFolder(run_dir)
         progress = folder.progress()
     except (*RUN_FAILURES, specs.SpecError):  # the worker will report what is wrong with the folder
-        return "to run (its folder cannot be read)"
+        return "to run (its folder cannot be read)", 0
     if progress is not None and progress[0] >= progress[1]:
-        return "complete"
+        return "complete", progress[0]
     if progress is not None and folder.checkpoint.is_file():
-        return f"resumes at step {progress[0]}"
-    return "to run"
+        return f"resumes at step {progress[0]}", progress[0]
+    return "to run", 0
 
 
 def check_lines(settings: dict, runs: list[dict]) -> list[str]:
     """``sweep --check``: the sweep's runs and where each stands (:func:`run_state`), with, for each
-    one still to make, :func:`run_check`'s line."""
-    states = [run_state(run) for run in runs]
+    one still to make, :func:`run_check`'s line; then the cost of them all, and once what the
+    estimates at gravity_every > 1 rest on."""
+    from .costs import GRAVITY_EVERY_NOTE, duration
+
+    standing = [_standing(run) for run in runs]
+    states = [state for state, _ in standing]
     counts = {kind: sum(s.startswith(kind) for s in states) for kind in ("complete", "resumes", "to run")}
     lines = [f"sweep {settings['name']}: {len(runs)} runs into {Path(settings['out']) / settings['name']} "
              f"({counts['complete']} complete, {counts['resumes']} to resume, {counts['to run']} to run)"]  # fmt: skip
     width = max(len(run["run"]["name"]) for run in runs)
-    for run, state in zip(runs, states):
+    total, devices, clocked = 0.0, set(), False
+    for run, (state, done) in zip(runs, standing):
         lines.append(f"  {run['run']['name']:<{width}}  {state}")
         if not state.startswith("complete"):
-            lines.append(f"  {'':<{width}}  {run_check(run)}")
+            line, cost = run_check(run, done)
+            lines.append(f"  {'':<{width}}  {line}")
+            if cost is not None:
+                total += cost.seconds
+                devices.add(cost.device)
+                clocked = clocked or cost.gravity_every > 1
+    left = len(runs) - counts["complete"]
+    if left:
+        lines.append(f"cost: about {duration(total)} of stepping for the {left} run(s) to make or resume on {', '.join(sorted(devices)) or 'no device'} "
+                     "(the sum of the runs' lines; workers that share a device share its time; analysis not included)")  # fmt: skip
+    if clocked:
+        lines.append(GRAVITY_EVERY_NOTE)
     return lines
 
 
-def run_check(spec: dict) -> str:
-    """A line on a run still to make: its set-up's margins, its predicted deepest overlap and its
-    cost on this machine's device, or why it would be refused."""
-    from .costs import run_cost
+@dataclass
+class RunCost:
+    """What :func:`run_check` estimates a run still to make will take: ``seconds`` on ``device``."""
+
+    seconds: float
+    device: str
+    gravity_every: int
+
+
+def run_check(spec: dict, done: int = 0) -> tuple[str, RunCost | None]:
+    """A line on a run still to make (``done`` steps made already): its set-up's margins, its
+    predicted deepest overlap and its cost on this machine's device at its gravity_every, or why it
+    would be refused; and that cost (None for a run refused)."""
+    from .costs import run_cost, step_seconds
     from .plan import plan_start
     from .run import plan_fits
 
@@ -418,12 +450,15 @@ def run_check(spec: dict) -> str:
         plan = plan_start(spec)
         plan_fits(plan, plan.state.n, plan.steps)  # refused where its device has not the memory
     except ValueError as error:  # bad input: each input error of errors.py is a ValueError, as are Params' checks
-        return f"REFUSED: {error}"
+        return f"REFUSED: {error}", None
     stability = plan.stability
     refused = "" if stability.stable or plan.allow_unstable else f"; REFUSED: {'; '.join(stability.problems())}"
-    return (f"eta {plan.state.metadata['eta']:.3g}, margins: stiffness {stability.stiffness_margin:.3g} (>= 1), time step "
+    steps, every = max(0, plan.steps - done), plan.params.gravity_every
+    line = (f"eta {plan.state.metadata['eta']:.3g}, margins: stiffness {stability.stiffness_margin:.3g} (>= 1), time step "
             f"{stability.time_step_margin:.3g} (>= 10); predicted deepest overlap {plan.forecast.fraction:.2g}; "
-            f"{run_cost(plan.state.n, plan.params.gravity, plan.device, plan.steps, plan.params.gravity_every)}{refused}")  # fmt: skip
+            f"{run_cost(plan.state.n, plan.params.gravity, plan.device, steps, every)}{refused}")  # fmt: skip
+    cost = None if refused else RunCost(step_seconds(plan.state.n, plan.params.gravity, plan.device, every) * steps, plan.device, every)
+    return line, cost
 
 
 def select_runs(runs: list[dict], patterns: list[str]) -> list[dict]:
