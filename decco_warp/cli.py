@@ -574,7 +574,9 @@ def resume(
     max_steps: Optional[int] = typer.Option(
         None, "--max-steps", help="With --until-settled: the most steps the run may reach (default: 4 times its steps now)."
     ),
-    min_members: int = typer.Option(50, "--min-members", help="With --until-settled: smallest cluster, as for analyze."),
+    min_members: Optional[int] = typer.Option(
+        None, "--min-members", help="With --until-settled: smallest cluster, as for analyze (default: the run's own, else 50)."
+    ),
     rerun: Optional[str] = RerunOption,
     rerun_every: Optional[int] = RerunEveryOption,
     device: Optional[str] = DeviceOption,
@@ -591,8 +593,10 @@ def resume(
         return
     if steps is not None:
         fail("give --steps or --until-settled, not both")
-    if min_members < 1 or (max_steps is not None and max_steps < 1):
+    if min_members is not None and min_members < 1 or (max_steps is not None and max_steps < 1):
         fail("--min-members and --max-steps must be >= 1")
+    if min_members is None:  # the run's own: what it was analysed or swept with
+        min_members = RunFolder(run_dir).min_members()
 
     def advance(total: int | None) -> None:
         _report(_run_with_progress(prepare_resume, run_dir, steps=total, device=device, rerun=rerun, rerun_every=rerun_every))
@@ -718,7 +722,9 @@ def bench(
 @app.command()
 def analyze(
     path: Path = typer.Argument(..., help="A run folder (finished or still running), or a folder of run folders (a sweep)."),
-    min_members: int = typer.Option(50, "--min-members", help="Smallest cluster counted (paper Fig. 2: 50)."),
+    min_members: Optional[int] = typer.Option(
+        None, "--min-members", help="Smallest cluster counted (default: what each run was analysed or swept with, else 50 as the paper's Fig. 2)."
+    ),
     every: int = typer.Option(1, "--every", help="Analyse every Nth frame (the last one always)."),
     follow: bool = typer.Option(False, "--follow", help="Of a running run: analyse again as new frames arrive, until the run ends."),
     poll: float = typer.Option(10.0, "--poll", help="With --follow: seconds between looks for new frames."),
@@ -735,7 +741,7 @@ def analyze(
     from .io import FileFormatError
     from .watch import analyse_runs, check_analysable, find_runs, write_cross_run_results
 
-    if min_members < 1 or every < 1 or not poll > 0:
+    if min_members is not None and min_members < 1 or every < 1 or not poll > 0:
         fail("--min-members and --every must be >= 1, --poll > 0")
     try:
         device = resolve_device(device)

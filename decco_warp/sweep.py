@@ -53,7 +53,7 @@ import numpy as np
 from . import resolution as resolutions
 from . import spec as specs
 from ._version import __version__
-from .folder import RunFolder
+from .folder import SWEEP_RECORD, RunFolder
 from .stops import clear_request
 
 #: ``ensemble = "auto"`` on a GPU: runs go to a worker up to 8 at a time (fewer where that leaves a
@@ -810,7 +810,7 @@ def write_record(folder: Path, settings: dict, rows: list[dict], wall_seconds: f
         "warp": wp.config.version,
         "settings": settings,
     }
-    path = folder / "sweep.json"
+    path = folder / SWEEP_RECORD
     return write_atomic(path, json_text(record))
 
 

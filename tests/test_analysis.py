@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import cli
+from helpers import cli, cli_here
 
 import decco_warp as dw
 from decco_warp.analysis.figures import RUN_FIGURES, line_data
@@ -267,6 +267,37 @@ def test_analyze_of_a_set_of_runs_makes_the_cross_run_table_and_figures(sweep):
         assert (out / "figures" / f"{name}.png").stat().st_size > 1000
     summaries = json.loads((out / "summaries.json").read_text())
     assert sorted(s["eta"] for s in summaries) == pytest.approx([0.5, 1.0])
+
+
+def test_a_run_is_analysed_again_with_the_smallest_cluster_it_knows(sweep, tmp_path, monkeypatch):
+    """Without --min-members, analyze takes what the run was analysed with (summary.json: 20 here),
+    else what the sweep that made it used (its folder's sweep.json), else 50; so does resume
+    --until-settled, whose judgement would otherwise count other clusters."""
+    import shutil
+
+    from decco_warp.folder import MIN_MEMBERS, RunFolder
+
+    out, _ = sweep
+    analysed = tmp_path / "analysed"
+    shutil.copytree(out / "eta1", analysed)
+    swept = tmp_path / "sweep" / "eta1"
+    shutil.copytree(out / "eta1", swept, ignore=shutil.ignore_patterns("summary.json", "analysis.h5", "figures"))
+    (swept.parent / "sweep.json").write_text(json.dumps({"sweep": "s", "settings": {"min_members": 7}}))
+    bare = tmp_path / "bare"
+    shutil.copytree(swept, bare)
+    assert [RunFolder(p).min_members() for p in (analysed, swept, bare)] == [20, 7, MIN_MEMBERS]
+    for run_dir, expected in ((analysed, 20), (swept, 7), (bare, MIN_MEMBERS)):
+        result = cli("analyze", str(run_dir))
+        assert result.returncode == 0, result.stderr
+        assert json.loads((run_dir / "summary.json").read_text())["min_members"] == expected
+    import decco_warp.run
+
+    asked = []
+    monkeypatch.setattr(decco_warp.run, "resume_until_settled", lambda run_dir, advance, max_steps, min_members, *rest, **kw: asked.append(min_members))
+    for run_dir, expected in ((analysed, 20), (swept, 7)):
+        assert cli_here("resume", str(run_dir), "--until-settled").returncode == 0
+        assert cli_here("resume", str(run_dir), "--until-settled", "--min-members", "3").returncode == 0
+    assert asked == [20, 3, 7, 3]
 
 
 def test_analyze_refuses_a_folder_without_runs(tmp_path):
