@@ -456,6 +456,9 @@ def simulate(
     k_in: Optional[str] = typer.Option(
         None, "--k-in", help='Spring constant while approaching [dyne/cm], or "auto" (from the impact speed, eq. 12).'
     ),
+    restitution: Optional[float] = typer.Option(None, "--restitution", help="Coefficient of restitution, in (0, 1]."),
+    mu_k: Optional[float] = typer.Option(None, "--mu-k", help="Sliding friction coefficient, >= 0."),
+    mu_r: Optional[float] = typer.Option(None, "--mu-r", help="Rolling friction coefficient, >= 0."),
     max_overlap: Optional[float] = typer.Option(
         None, "--max-overlap", help="Stop the run when a contact is deeper than this fraction of the smaller radius."
     ),
@@ -503,7 +506,8 @@ def simulate(
             "piles": {"target": target, "projectile": projectile},
             "collision": collision,
             "params": {"dt": _number_or_auto(dt, "--dt"), "k_in": _number_or_auto(k_in, "--k-in"), "gravity": gravity,
-                       "gravity_every": _integer_or_auto(gravity_every, "--gravity-every")},
+                       "gravity_every": _integer_or_auto(gravity_every, "--gravity-every"), "restitution": restitution,
+                       "mu_k": mu_k, "mu_r": mu_r},
         }
         spec = specs.resolve_spec(raw, overrides)
     except specs.SpecError as error:

@@ -369,6 +369,31 @@ def test_help_prints_units_and_toml_tables_as_written():
     assert checked >= 5  # units of pile and simulate, the sweep's and piles' TOML tables
 
 
+def test_simulate_sets_the_contact_physics_as_pile_does(tmp_path):
+    """--restitution, --mu-k and --mu-r (pile's options) reach the run: its spec.toml, its checkpoint's
+    Params and the plan's physics line; a value out of range is one line and exit 2, nothing written."""
+    import tomllib
+
+    import typer
+
+    from decco_warp.cli import app
+
+    commands = typer.main.get_command(app).commands
+    physics = {"--restitution", "--mu-k", "--mu-r", "--k-in", "--dt"}
+    for name in ("simulate", "pile"):
+        assert physics <= {opt for param in commands[name].params for opt in param.opts}, name
+    args = ("--mu-k", "0.6", "--mu-r", "0.01", "--restitution", "0.5", "--steps", "20", "--output-every", "10", "--device", "cpu")
+    check = cli("simulate", *args, "--check")
+    assert check.returncode == 0 and "physics: restitution 0.5, mu_k 0.6, mu_r 0.01 (couple)" in check.stdout, check.stderr
+    result = cli("simulate", *args, "--out", str(tmp_path), "--name", "rough")
+    assert result.returncode == 0, result.stderr
+    params = tomllib.loads((tmp_path / "rough" / "spec.toml").read_text())["params"]
+    assert (params["mu_k"], params["mu_r"], params["restitution"]) == (0.6, 0.01, 0.5)
+    bad = cli("simulate", "--restitution", "1.5", "--out", str(tmp_path), "--name", "bad", "--device", "cpu")
+    assert bad.returncode == 2 and "restitution = 1.5: must be in (0, 1]" in bad.stderr and len(bad.stderr.splitlines()) == 1
+    assert not (tmp_path / "bad").exists()
+
+
 def test_check_estimates_the_cost_and_a_missing_folder_does_not_exist(tmp_path):
     """simulate --check and pile --check say what the job will cost on this device before any work,
     from the measured rate a step (the estimate's own line, checked against the cost model); a path
