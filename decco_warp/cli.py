@@ -365,7 +365,8 @@ def _rerun_observer(prepared, mode_text: str | None, every: int | None):
 
 
 def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: int | None = None, **kwargs):
-    """Prepare a run (every input problem exits with code 2, nothing written), then run it with a progress bar."""
+    """Prepare a run (every input problem exits with code 2, nothing written), then run it with a
+    progress bar; (its RunResult, the rerun recording it wrote or None)."""
     from .checks import InputError
     from .io import FileFormatError
     from .run import BlowUp, OutputError, RunError, RunStopped, execute
@@ -380,6 +381,7 @@ def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: in
     if prepared.note:
         typer.echo(prepared.note, err=True)
     logger, observers = _rerun_observer(prepared, rerun, rerun_every)
+    finished = False
     bar = _progress_bar("simulating", "step", "time", "overlap")
     try:
         with bar:
@@ -400,7 +402,8 @@ def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: in
 
             # The run's outcome is reported after the bar's last line, so that it ends the output.
             try:
-                return execute(prepared, progress=show, observers=observers)
+                result = execute(prepared, progress=show, observers=observers)
+                finished, stopped_by = True, None
             except (RunError, FileFormatError, InputError) as error:  # InputError: the folder's lock was taken
                 stopped_by = (str(error), EXIT_INPUT)
             except RunStopped as stopped:
@@ -409,18 +412,25 @@ def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: in
                 stopped_by = (f"the run blew up: {error}; the last checkpoint is kept", EXIT_BLOW_UP)
             except OutputError as error:
                 stopped_by = (str(error), EXIT_OUTPUT)
-        fail(*stopped_by)
+        if stopped_by is not None:
+            fail(*stopped_by)
     finally:
+        recording = None
         if logger is not None:
             try:
                 logger.close()
             except OSError as error:
                 write_failed(error, f"the run folder is as the run left it; {logger.path} is not written")
-            if getattr(logger, "path", None):
-                typer.echo(f"rerun recording: {logger.path} (view it with: rerun {logger.path})")
+            recording = getattr(logger, "path", None)
+            if recording and not finished:  # a finished run lists it with its outputs
+                typer.echo(f"rerun recording: {recording} (view it with: rerun {recording})")
+    return result, recording
 
 
-def _report(result) -> None:
+def _report(outcome) -> None:
+    """The end of simulate and resume: the run's totals and this session's, and what it wrote
+    (``outcome``: :func:`_run_with_progress`'s)."""
+    result, recording = outcome
     run_dir = result.run_dir
     # The run's totals and this session's costs apart: after a resume they are not the same steps.
     typer.echo(
@@ -428,7 +438,11 @@ def _report(result) -> None:
         f"{result.steps_this_session} steps in {result.session_wall_seconds:.1f} s wall, {result.session_stepping_seconds:.1f} s of it stepping"
         + (f" ({result.wall_seconds:.1f} s wall over all the run's sessions)" if result.steps_this_session < result.steps else "")
     )
-    typer.echo(f"outputs in {run_dir}/: spec.toml, trajectory.h5 (H5MD), trajectory.xdmf (for ParaView, VisIt), checkpoint.h5, run.log")
+    recorded = ""
+    if recording is not None:
+        inside = Path(recording).parent.resolve() == Path(run_dir).resolve()
+        recorded = f", {Path(recording).name if inside else recording} (rerun's recording: rerun {recording})"
+    typer.echo(f"outputs in {run_dir}/: spec.toml, trajectory.h5 (H5MD), trajectory.xdmf (for ParaView, VisIt), checkpoint.h5, run.log{recorded}")
     typer.echo(f"inspect: h5ls -r {run_dir}/trajectory.h5   |   python: decco_warp.io.read_trajectory('{run_dir}/trajectory.h5')")
 
 
@@ -815,25 +829,33 @@ def extract(
     from .checks import check_destination
     from .device import resolve_device
     from .io import save_pile
-    from .remnant import extract_fragment
+    from .remnant import check_options, fragment_of, loose_note, settle_fragment
 
     if out.exists() and not overwrite:
         fail(f"{out} already exists; use --overwrite to replace it")
     if not run_dir.is_dir():
         fail(missing(run_dir))
-    bar = _progress_bar("settling", "step", "ratio")
-    try:
+    try:  # every input, before the progress bar draws a line
         check_destination(out, "pile file")
         chosen = resolve_device(device)
+        check_options(spin, ke_threshold, max_steps)
+        state, source = fragment_of(run_dir, fragment)
+    except ValueError as error:  # bad input: each input error of errors.py is a ValueError, as are Params' checks
+        fail(str(error))
+    note = loose_note(state, fragment, settle)
+    if note:
+        typer.echo(note, err=True)
+    bar = _progress_bar("settling", "step", "ratio")
+    try:
         with bar:
             task = bar.add_task("fragment", total=None, step="", ratio="")
 
             def show(step: int, ratio: float) -> None:
                 bar.update(task, step=f"step {step}", ratio=f"internal KE/|U| {ratio:.3g} (settled < {ke_threshold:g})")
 
-            remnant = extract_fragment(run_dir, fragment, spin=spin, settle=settle, ke_threshold=ke_threshold,
-                                       max_steps=max_steps, device=chosen, progress=show)  # fmt: skip
-    except ValueError as error:  # bad input: each input error of errors.py is a ValueError, as are Params' checks
+            remnant = settle_fragment(state, source, spin=spin, settle=settle, ke_threshold=ke_threshold,
+                                      max_steps=max_steps, device=chosen, progress=show)  # fmt: skip
+    except ValueError as error:  # a fragment that did not settle within --max-steps
         fail(str(error))
     try:
         save_pile(remnant, out)

@@ -6,7 +6,7 @@ A sweep specification is a run specification plus a ``[sweep]`` table:
     name = "fig3-reduced"          # the sweep folder under out
     out = "runs/out"
     min_members = 50               # for the analysis of each run
-    analyse_every = 1              # analyse every Nth frame of a run (the last one always)
+    analyze_every = 1              # analyze every Nth frame of a run (the last one always)
     keep_trajectory = true         # false: delete trajectory.h5 once the run is analysed
     ensemble = "auto"              # runs handed to a worker at a time; those sharing Params step together
                                    # (auto: up to 8 at a time on a GPU, runs of the same particle count up to
@@ -530,7 +530,7 @@ def _device_name(device: str | None) -> str:
         return ""
 
 
-def analyse_one(run_dir: str, min_members: int, analyse_every: int, keep_trajectory: bool, device: str | None = None) -> dict:
+def analyse_one(run_dir: str, min_members: int, analyze_every: int, keep_trajectory: bool, device: str | None = None) -> dict:
     """Analyse a finished run (unless its summary.json is current), draw its figures, and
     drop its trajectory if asked; returns its summary (``analysis_seconds``: what the analysis
     took when it ran, also for a run found analysed).  Runs in a process of this machine; the
@@ -540,22 +540,24 @@ def analyse_one(run_dir: str, min_members: int, analyse_every: int, keep_traject
 
     # The run has finished: no one else should be writing there, nor analysing it (decco-warp analyze).
     with RunFolder(run_dir).lock(), AnalysisLock(run_dir):
-        return _analyse(Path(run_dir), min_members, analyse_every, keep_trajectory, device)
+        return _analyse(Path(run_dir), min_members, analyze_every, keep_trajectory, device)
 
 
-def _analyse(run_dir: Path, min_members: int, analyse_every: int, keep_trajectory: bool, device: str | None = None) -> dict:
+def _analyse(run_dir: Path, min_members: int, analyze_every: int, keep_trajectory: bool, device: str | None = None) -> dict:
     from .analysis.figures import draw_run
     from .analysis.runs import analyse_run
     from .device import resolve_device
 
     folder = RunFolder(run_dir)
     summary_path, trajectory = folder.summary, folder.trajectory
-    settings = {"min_members": min_members, "analyse_every": analyse_every}
+    settings = {"min_members": min_members, "analyze_every": analyze_every}
     previous = json.loads(summary_path.read_text()) if summary_path.is_file() else None
+    if previous is not None and "analyse_every" in previous:  # a summary of the key's earlier spelling
+        previous.setdefault("analyze_every", previous["analyse_every"])
     # A summary older than the settled verdict is analysed again (its finder stopped too early).
     current = previous is not None and "settled" in previous and all(previous.get(k) == v for k, v in settings.items())
     if trajectory.is_file() and not (current and summary_path.stat().st_mtime >= trajectory.stat().st_mtime):
-        analysis = analyse_run(run_dir, min_members=min_members, every=analyse_every, device=resolve_device(device))
+        analysis = analyse_run(run_dir, min_members=min_members, every=analyze_every, device=resolve_device(device))
         draw_run(analysis, run_dir)
         summary = analysis["summary"]
     elif previous is not None:
@@ -751,7 +753,7 @@ def run_sweep(
                         elif stopping is not None:
                             unanalysed.append(row["run"])  # complete: the sweep run again analyses it
                         else:
-                            args = (row["run_dir"], settings["min_members"], settings["analyse_every"], settings["keep_trajectory"])
+                            args = (row["run_dir"], settings["min_members"], settings["analyze_every"], settings["keep_trajectory"])
                             pending[pool.submit(analyse_one, *args)] = (k, row)
                 collect()
                 time.sleep(POLL_SECONDS)

@@ -22,7 +22,7 @@ name = "grid"
 out = "{out}"
 min_members = 20
 keep_trajectory = false
-analyse_every = 2
+analyze_every = 2
 [sweep.grid]
 "collision.eta" = [0.5, 1.0]
 "params.dt" = [0.04, 5.0]
@@ -50,6 +50,13 @@ def test_grid_expands_to_checked_run_specs(tmp_path):
     path.write_text(SWEEP.format(out=tmp_path).replace('"params.dt"', '"params.spin"'))
     with pytest.raises(specs.SpecError, match="not a sweepable"):
         load_sweep(path)
+    # The key spelled as the command (analyze); sweep files of its earlier spelling are read alike.
+    assert settings["analyze_every"] == 2
+    path.write_text(SWEEP.format(out=tmp_path).replace("analyze_every", "analyse_every"))
+    assert load_sweep(path)[0]["analyze_every"] == 2
+    path.write_text(SWEEP.format(out=tmp_path).replace("analyze_every = 2", "analyze_every = 2\nanalyse_every = 3"))
+    with pytest.raises(specs.SpecError, match="analyse_every is the earlier name of analyze_every"):
+        load_sweep(path)
 
 
 def test_a_repeated_set_up_runs_once(tmp_path):
@@ -59,7 +66,7 @@ def test_a_repeated_set_up_runs_once(tmp_path):
     grid = '''"collision.target_spin, collision.target_spin_axis" = [[0.0, "+z"], [0.0, "+x"], [0.5, "+z"], [0.5, "+x"]]
 '''
     text = SWEEP.format(out=tmp_path).replace('"collision.eta" = [0.5, 1.0]\n"params.dt" = [0.04, 5.0]\n', grid)
-    text = text.replace("analyse_every = 2", "analyse_every = 2\nrealizations = 2")
+    text = text.replace("analyze_every = 2", "analyze_every = 2\nrealizations = 2")
     path.write_text(text)
     settings, runs = load_sweep(path)
     names = [r["run"]["name"] for r in runs]
@@ -99,7 +106,7 @@ def test_sweep_runs_on_two_workers_reports_failures_and_resumes(tmp_path):
         assert not (run_dir / "trajectory.h5").exists() and not (run_dir / "trajectory.xdmf").exists()
         assert {"spec.toml", "run.log", "checkpoint.h5", "analysis.h5", "summary.json", "figures"} <= {p.name for p in run_dir.iterdir()}
         summary = json.loads((run_dir / "summary.json").read_text())
-        assert summary["analyse_every"] == 2 and summary["largest_mass_ratio"] == pytest.approx(float(row["largest_mass_ratio"]))
+        assert summary["analyze_every"] == 2 and summary["largest_mass_ratio"] == pytest.approx(float(row["largest_mass_ratio"]))
         assert float(row["deepest_overlap"]) > 0 and float(row["ledger_closure"]) < 1e-9 and int(row["n_particles"]) == 450
         assert 0 < float(row["stepping_seconds"]) < float(row["wall_seconds"])
     record = json.loads((tmp_path / "grid" / "sweep.json").read_text())
@@ -270,7 +277,7 @@ def test_a_sweep_packs_runs_into_ensembles_with_the_results_of_runs_alone(tmp_pa
     from decco_warp.run import start_run
 
     path = tmp_path / "s.toml"
-    path.write_text(SWEEP.format(out=tmp_path).replace("analyse_every = 2", "analyse_every = 2\nensemble = 4"))
+    path.write_text(SWEEP.format(out=tmp_path).replace("analyze_every = 2", "analyze_every = 2\nensemble = 4"))
     settings, runs = load_sweep(path)
     assert settings["ensemble"] == 4
     result = cli("sweep", str(path), "--workers", "1")
@@ -288,7 +295,7 @@ def test_a_sweep_packs_runs_into_ensembles_with_the_results_of_runs_alone(tmp_pa
         theirs = read_checkpoint(alone.run_dir / "checkpoint.h5")[0]
         assert all(np.array_equal(mine[key], theirs[key]) for key in ("positions", "velocities", "omegas", "work"))
     with pytest.raises(specs.SpecError, match="ensemble"):
-        path.write_text(SWEEP.format(out=tmp_path).replace("analyse_every = 2", "ensemble = 0"))
+        path.write_text(SWEEP.format(out=tmp_path).replace("analyze_every = 2", "ensemble = 0"))
         load_sweep(path)
 
 
@@ -310,7 +317,7 @@ def test_ensemble_auto_packs_small_runs_on_a_gpu_only_and_alike_in_size(tmp_path
     assert ensemble_plan("auto", 2, runs=0, workers=2) == (1, ENSEMBLE_MAX_PARTICLES)
     assert ensemble_plan(3, 0) == (3, None)
     for bad in ("many", 0, 2.5, True):
-        path.write_text(SWEEP.format(out=tmp_path).replace("analyse_every = 2", f"ensemble = {json.dumps(bad)}"))
+        path.write_text(SWEEP.format(out=tmp_path).replace("analyze_every = 2", f"ensemble = {json.dumps(bad)}"))
         with pytest.raises(specs.SpecError, match='ensemble = .*"auto"'):
             load_sweep(path)
     # Two runs alike in all but eta: together when small enough, each alone past the limit.
@@ -417,7 +424,7 @@ def test_sweep_check_costs_runs_at_their_own_gravity_clock_with_a_total_and_one_
 
     path = tmp_path / "s.toml"
     text = SWEEP.format(out=tmp_path).replace('"params.dt" = [0.04, 5.0]', "").replace('"collision.eta" = [0.5, 1.0]', '"params.mu_k" = [0.0, 0.6]')
-    path.write_text(text.replace("steps = 200", "steps = 50000").replace("analyse_every = 2", "analyse_every = 2\nrealizations = 3")
+    path.write_text(text.replace("steps = 200", "steps = 50000").replace("analyze_every = 2", "analyze_every = 2\nrealizations = 3")
                     + "[params]\ngravity_every = 10\n")  # fmt: skip
     result = cli("sweep", str(path), "--check")
     assert result.returncode == 0, result.stderr

@@ -46,7 +46,8 @@ def recorded(tmp_path_factory):
     result = cli("simulate", *STEPS, "--rerun", "save", "--out", str(out), "--device", "cpu")
     assert result.returncode == 0, result.stderr
     run_dir = out / "default"
-    assert "recording.rrd" in result.stdout
+    outputs = next(line for line in result.stdout.splitlines() if line.startswith("outputs in"))
+    assert ", recording.rrd (rerun's recording: " in outputs and (run_dir / "recording.rrd").is_file()  # listed with the run's outputs
     view = cli("view", str(run_dir), "--save", str(out / "replay.rrd"))
     assert view.returncode == 0, view.stderr
     return run_dir, out / "replay.rrd"

@@ -171,6 +171,31 @@ def parse_cell(text: str | None):
     return number if math.isfinite(number) else None
 
 
+#: The types a row's values may have: those of summary.json's (strict JSON) values.
+CELL_TYPES = (int, float, str, bool, type(None))
+
+
+def typed_row(row) -> dict:
+    """A run's row as :func:`compare` takes it: text cells (a ``csv.DictReader`` row's, every one
+    text) read as summary.csv's are (:func:`parse_cell`), the rest as they are; a value of another
+    type (a list, an array) is refused, naming the run and the column."""
+    if not isinstance(row, dict):
+        raise CompareError(f"a row must be a dict of a run's columns (summary.json's, or a csv.DictReader row); got {type(row).__name__}")
+    typed = {}
+    for key, value in row.items():
+        if key is None:  # csv.DictReader's cells past the header
+            continue
+        if isinstance(value, str):
+            value = parse_cell(value)
+        elif isinstance(value, np.generic):
+            value = value.item()
+        elif not isinstance(value, CELL_TYPES):
+            raise CompareError(f"run {row.get('run', '?')}: column {key} holds a {type(value).__name__}; "
+                               "a row's values are numbers, text, True/False or None (as summary.json's)")  # fmt: skip
+        typed[key] = value
+    return typed
+
+
 def parse_where(texts) -> dict[str, list]:
     """``COLUMN=VALUE[,VALUE...]`` strings as {column: values}; a column named twice takes the
     values of both."""
@@ -455,6 +480,7 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
     where = where or {}
     if not rows:
         raise CompareError("no runs to compare")
+    rows = [typed_row(row) for row in rows]
     options = {"--by": by, "--metric": metric, **({"--at": at} if at else {}), **{"--where": c for c in where}}
     _check_columns(rows, options)
     if resolve is not None and not (math.isfinite(resolve) and resolve > 0):

@@ -517,7 +517,7 @@ def summarise(name: str, analysis: dict, collision: dict, params: dict, n_partic
         "angular_momentum_drift": float(np.max(analysis["conservation"]["angular_momentum_drift"])),
         "ledger_closure": float(np.abs(analysis["energy"]["ledger_closure"]).max()),
         "min_members": int(min_members),
-        "analyse_every": int(every),
+        "analyze_every": int(every),
     }
     for column, value in spec_columns({**(spec or {}), "params": {**(spec or {}).get("params", {}), **params}}).items():
         summary.setdefault(column, value)  # the outcome's own columns (eta, speed, steps: what the run made) stand
@@ -641,7 +641,7 @@ def refresh_summary(run_dir, collision: dict, params: dict, piles: dict | None =
         target_mass=float(old["target_mass"]),
         predicted_overlap=old.get("predicted_overlap"),
         min_members=int(old["min_members"]),
-        every=int(old["analyse_every"]),
+        every=int(old.get("analyze_every", old.get("analyse_every"))),  # the key's earlier spelling too
         piles=piles,
         spec=spec,
     )
