@@ -981,6 +981,52 @@ def view(
         typer.echo(f"rerun: serving {logger.url}")
 
 
+# --- movie -------------------------------------------------------------------------------
+
+
+@app.command()
+def movie(
+    path: Path = typer.Argument(..., help="A run folder (finished, stopped or still running)."),
+    out: Optional[Path] = typer.Option(
+        None, "--out", "-o", help="The movie: .mp4 (needs ffmpeg; without it a .gif beside it) or .gif (default: RUN/figures/movie.mp4)."
+    ),
+    every: int = typer.Option(1, "--every", help="Use every Nth frame of the trajectory (the last one always)."),
+    fps: int = typer.Option(10, "--fps", help="Frames a second of the movie."),
+) -> None:
+    """Write a movie of a run without a display: its frames on the impact plane, spheres at true size,
+    coloured by cluster where analysed (else by pile)."""
+    from .analysis.movie import movie_path, write_movie
+    from .checks import check_destination
+    from .durable import WRITE_ERRNOS
+    from .io import FileFormatError
+
+    if not RunFolder(path).trajectory.is_file():
+        fail(missing(path) if not path.exists() else f"{path} is not a run folder with a {RunFolder.TRAJECTORY}")
+    if every < 1 or fps < 1:
+        fail("--every and --fps must be >= 1")
+    out = out if out is not None else RunFolder(path).path / "figures" / "movie.mp4"
+    try:
+        destination, note = movie_path(out)
+        check_destination(destination, "movie")
+    except ValueError as error:  # InputError is one
+        fail(str(error))
+    if note:
+        typer.echo(f"note: {note}", err=True)
+    bar = _progress_bar("drawing", "frames")
+    try:
+        with bar:
+            task = bar.add_task(path.name, total=None, frames="")
+            written, _ = write_movie(path, destination, every=every, fps=fps,
+                                     progress=lambda done, total: bar.update(task, total=total, completed=done, frames=f"{done}/{total}"))  # fmt: skip
+    except FileFormatError as error:
+        fail(str(error))
+    except OSError as error:
+        if error.errno not in WRITE_ERRNOS:
+            fail(" ".join(str(error).split()))
+        write_failed(error, f"{destination} is not written (a movie is renamed into place only when whole); the run is untouched")
+    typer.echo(f"wrote {written}")
+
+
 # --- export ------------------------------------------------------------------------------
 
 

@@ -269,6 +269,60 @@ def test_analyze_of_a_set_of_runs_makes_the_cross_run_table_and_figures(sweep):
     assert sorted(s["eta"] for s in summaries) == pytest.approx([0.5, 1.0])
 
 
+def test_a_run_s_fragment_history_and_debris_figures_show_its_analysis(sweep):
+    """largest_fragment_time draws the analysed frames' m_lf/m_t; debris_sizes every cluster and each
+    lone grain as a fragment, largest first, whose cumulative mass ends at the run's whole mass."""
+    from decco_warp.analysis.figures import debris_sizes
+
+    out, _ = sweep
+    analysis = read_analysis(out / "eta1" / "analysis.h5")
+    frames, final = analysis["frames"], analysis["final"]
+    (line,) = [line for line in line_data(RUN_FIGURES["largest_fragment_time"](analysis)) if line[0].size == frames["time"].size]
+    np.testing.assert_array_equal(line[0], frames["time"] / 3600.0)
+    np.testing.assert_array_equal(line[1], frames["largest_mass_ratio"])
+    masses, cumulative = debris_sizes(final)
+    lone = final["particle_mass"][final["label"] < 0]
+    assert masses.size == final["mass"].size + lone.size and np.all(np.diff(masses) <= 0)
+    assert masses[0] == final["mass"].max() and cumulative[-1] == pytest.approx(final["particle_mass"].sum(), rel=1e-12)
+    total = final["particle_mass"].sum()
+    drawn = line_data(RUN_FIGURES["debris_sizes"](analysis))
+    np.testing.assert_allclose(drawn[-1][0], masses / total, rtol=1e-12)
+    np.testing.assert_allclose(drawn[-1][1], cumulative / total, rtol=1e-12)
+    for name in ("largest_fragment_time", "debris_sizes"):
+        assert (out / "eta1" / "figures" / f"{name}.png").stat().st_size > 1000
+
+
+def test_a_set_of_runs_is_drawn_overlaid_in_time_and_as_intervals_of_its_realizations(sweep):
+    """The cross-run largest_fragment_time draws each run's own frames; largest_fragment_intervals
+    each point's mean with the 95 % Student's t interval of its realizations, computed here by hand."""
+    from scipy import stats
+
+    from decco_warp.analysis.figures import plot_histories, plot_intervals
+    from decco_warp.analysis.runs import read_history
+
+    out, _ = sweep
+    summaries = json.loads((out / "summaries.json").read_text())
+    histories = {s["run"]: read_history(out / s["run"]) for s in summaries}
+    lines = line_data(plot_histories(summaries, histories))
+    for s in summaries:
+        time, ratio = histories[s["run"]]
+        assert any(np.array_equal(x, time / 3600.0) and np.array_equal(y, ratio) for x, y in lines)
+    for name in ("largest_fragment_time", "largest_fragment_intervals"):
+        assert (out / "figures" / f"{name}.png").stat().st_size > 1000
+    rows = [{"run": f"r{k}", "mass_ratio": 0.5, "theta_deg": 22.0, "eta": eta, "mu_k": mu, "largest_mass_ratio": value}
+            for k, (eta, mu, value) in enumerate([(3.0, 0.0, 1.0), (3.0, 0.0, 1.2), (3.0, 0.0, 1.1), (6.0, 0.0, 0.5), (3.0, 0.3, 1.4)])]  # fmt: skip
+    fig = plot_intervals(rows, "largest_mass_ratio", "m_lf / m_t", split=["mu_k"])
+    bars = {c.get_label(): c for c in fig.axes[0].containers}
+    zero = bars["22 deg, mu_k 0"]
+    means = zero.lines[0].get_ydata()
+    np.testing.assert_allclose(means, [1.1, 0.5])
+    half = stats.t.ppf(0.975, 2) * np.std([1.0, 1.2, 1.1], ddof=1) / np.sqrt(3)
+    segments = zero.lines[2][0].get_segments()
+    np.testing.assert_allclose([segments[0][0][1], segments[0][1][1]], [1.1 - half, 1.1 + half], rtol=1e-12)
+    assert np.isnan(segments[1]).all() or len(segments) == 1  # one run at eta 6: no interval
+    np.testing.assert_allclose(bars["22 deg, mu_k 0.3"].lines[0].get_ydata(), [1.4])
+
+
 def test_a_run_is_analysed_again_with_the_smallest_cluster_it_knows(sweep, tmp_path, monkeypatch):
     """Without --min-members, analyze takes what the run was analysed with (summary.json: 20 here),
     else what the sweep that made it used (its folder's sweep.json), else 50; so does resume

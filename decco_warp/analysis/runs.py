@@ -601,6 +601,15 @@ def read_analysis(path) -> dict:
     return result
 
 
+def read_history(run_dir) -> tuple[np.ndarray, np.ndarray] | None:
+    """(time [s], m_lf/m_t) of a run's analysed frames, from its analysis.h5 (None without one)."""
+    path = RunFolder(run_dir).analysis
+    if not path.is_file():
+        return None
+    with h5py.File(path, "r") as f:
+        return f["frames/time"][()], f["frames/largest_mass_ratio"][()]
+
+
 def read_catalogue(path) -> dict[str, np.ndarray]:
     """The fragment catalogue of an analysis.h5 as columns, vectors split into _x, _y, _z and the
     composition into class_0, class_1, ...: ``pandas.DataFrame(read_catalogue(path))`` is a table
