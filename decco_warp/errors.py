@@ -129,6 +129,7 @@ class SweepStopped(DeccoError, RuntimeError):
 
     exit_code = EXIT_STOPPED
 
-    def __init__(self, signal_name: str, stopped: list[dict], unanalysed: list[str]):
+    def __init__(self, signal_name: str, stopped: list[dict], unanalysed: list[str], at_once: bool = False):
         self.signal_name, self.stopped, self.unanalysed = signal_name, stopped, unanalysed
+        self.at_once = at_once  # a second signal: the runs stepping were not waited for
         super().__init__(f"sweep stopped by {signal_name}")

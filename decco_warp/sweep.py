@@ -651,7 +651,8 @@ def run_sweep(
     to ``stop_file`` (a path every worker sees: the sweep folder), where each stepping run reads it,
     writes a checkpoint and ends, and runs not started are left (``on_stopping()`` hears that this
     began); the analyses under way finish, those not begun are left; then SweepStopped.  A second
-    signal stops at once, the work of the runs since their last checkpoints lost (KeyboardInterrupt)."""
+    signal stops at once, the work of the runs since their last checkpoints lost (SweepStopped with
+    ``at_once``).  A signal before the workers are up is a KeyboardInterrupt (nothing had started)."""
     from distributed import Client, as_completed
 
     from .device import cuda_device_count, gpus_to_use
@@ -694,6 +695,8 @@ def run_sweep(
                 finish(k, {**row, "status": "failed", "reason": f"analysis: {' '.join(str(error).split())}"})
 
     abandoned = False
+    signals = StopRequests()  # from here on, through the workers' closing, a signal stops in order
+    signals.__enter__()
     try:
         # Runs in grid order, `ensemble` at a time to a worker (neighbours in a grid mostly share
         # their piles and Params, and those are stepped together).
@@ -710,61 +713,80 @@ def run_sweep(
         stepped = {k: 0.0 for k in todo}  # never lowered: a checkpoint being replaced reads as none
         looked = -math.inf
         stopping = None  # the signal that stops the sweep, once one came
-        with StopRequests() as signals:
-            while not simulations.is_empty() or pending or arrived:
-                if signals.count > 1:  # asked twice: go at once
-                    abandoned = True
-                    raise KeyboardInterrupt
-                if signals.signal is not None and stopping is None:
-                    stopping = signals.signal
-                    if stop_file is not None:
-                        request_stop(stop_file, stopping)
-                    for future in pending:
-                        future.cancel()  # the analyses not begun; those under way finish
-                    if on_stopping is not None:
-                        on_stopping()
-                if on_progress is not None and time.monotonic() - looked >= PROGRESS_SECONDS:
-                    looked = time.monotonic()
-                    for k in todo:
-                        if stepped[k] < 1.0:
-                            stepped[k] = max(stepped[k], stepped_fraction(runs[k]))
-                    on_progress(len(runs) - len(todo) + sum(stepped.values()))
-                # Poll both kinds of work, so that each run is reported as soon as its analysis ends.
-                for future in simulations.next_batch(block=False):
-                    batch = futures[future]
-                    try:
-                        arrived.append((batch, future.result()))
-                    except Exception as error:  # a worker that died: record it, go on
-                        arrived.append((batch, [{"run": runs[k]["run"]["name"], "status": "failed", "reason": f"worker lost: {error}"} for k in batch]))
-                while arrived:
-                    batch, results = arrived.pop(0)
-                    for k, row in zip(batch, results):
-                        if k in stepped and row["status"] != "stopped":
-                            stepped[k] = 1.0
-                            looked = -math.inf  # reported at the next poll
-                        collision = runs[k]["collision"]
-                        row.update(set_up_values(runs[k], settings.get("swept", [])))
-                        row.update(eta=collision.get("eta"), speed=collision.get("speed"), theta_deg=collision["theta_deg"])
-                        row.update(realization=realization_of(runs[k]), orientation_seed=collision.get("orientation_seed"))
-                        if row["status"] == "stopped":
-                            stopped.append(row)
-                        elif row["status"] == "failed":
-                            finish(k, row)
-                        elif stopping is not None:
-                            unanalysed.append(row["run"])  # complete: the sweep run again analyses it
-                        else:
-                            args = (row["run_dir"], settings["min_members"], settings["analyze_every"], settings["keep_trajectory"])
-                            pending[pool.submit(analyse_one, *args)] = (k, row)
-                collect()
-                time.sleep(POLL_SECONDS)
+        while not simulations.is_empty() or pending or arrived:
+            if signals.count > 1:  # asked twice: go at once
+                abandoned = True
+                raise SweepStopped(stopping or signals.signal, stopped, unanalysed, at_once=True)
+            if signals.signal is not None and stopping is None:
+                stopping = signals.signal
+                if stop_file is not None:
+                    request_stop(stop_file, stopping)
+                for future in pending:
+                    future.cancel()  # the analyses not begun; those under way finish
+                if on_stopping is not None:
+                    on_stopping()
+            if on_progress is not None and time.monotonic() - looked >= PROGRESS_SECONDS:
+                looked = time.monotonic()
+                for k in todo:
+                    if stepped[k] < 1.0:
+                        stepped[k] = max(stepped[k], stepped_fraction(runs[k]))
+                on_progress(len(runs) - len(todo) + sum(stepped.values()))
+            # Poll both kinds of work, so that each run is reported as soon as its analysis ends.
+            for future in simulations.next_batch(block=False):
+                batch = futures[future]
+                try:
+                    arrived.append((batch, future.result()))
+                except Exception as error:  # a worker that died: record it, go on
+                    arrived.append((batch, [{"run": runs[k]["run"]["name"], "status": "failed", "reason": f"worker lost: {error}"} for k in batch]))
+            while arrived:
+                batch, results = arrived.pop(0)
+                for k, row in zip(batch, results):
+                    if k in stepped and row["status"] != "stopped":
+                        stepped[k] = 1.0
+                        looked = -math.inf  # reported at the next poll
+                    collision = runs[k]["collision"]
+                    row.update(set_up_values(runs[k], settings.get("swept", [])))
+                    row.update(eta=collision.get("eta"), speed=collision.get("speed"), theta_deg=collision["theta_deg"])
+                    row.update(realization=realization_of(runs[k]), orientation_seed=collision.get("orientation_seed"))
+                    if row["status"] == "stopped":
+                        stopped.append(row)
+                    elif row["status"] == "failed":
+                        finish(k, row)
+                    elif stopping is not None:
+                        unanalysed.append(row["run"])  # complete: the sweep run again analyses it
+                    else:
+                        args = (row["run_dir"], settings["min_members"], settings["analyze_every"], settings["keep_trajectory"])
+                        pending[pool.submit(analyse_one, *args)] = (k, row)
+            collect()
+            time.sleep(POLL_SECONDS)
         if stopping is not None:
             raise SweepStopped(stopping, stopped, unanalysed)
     finally:
-        pool.shutdown(wait=not abandoned, cancel_futures=True)
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        try:
+            pool.shutdown(wait=not abandoned, cancel_futures=True)
+            client.close()
+            if cluster is not None:
+                close_cluster(cluster, 0 if abandoned or signals.count > 1 else WORKER_CLOSE_SECONDS)
+        finally:
+            signals.__exit__(None, None, None)
     return rows
+
+
+#: How long a local worker may take to exit once idle (its interpreter and Warp shutting down on a
+#: loaded machine) before it is killed [s]; Dask's own 4 s ended sweeps with "still alive, killing".
+WORKER_CLOSE_SECONDS = 60.0
+
+
+def close_cluster(cluster, seconds: float) -> None:
+    """Close a local cluster, each worker given ``seconds`` to exit before it is killed (0: Dask's own
+    wait, as when the sweep stops at once)."""
+    if seconds > 0:
+        for nanny in list(cluster.workers.values()):
+            try:
+                cluster.sync(nanny.close, timeout=seconds, reason="sweep-done")
+            except Exception:  # one that cannot close in order is killed below
+                pass
+    cluster.close()
 
 
 #: How long local workers may take to start (a loaded machine) before the sweep gives up [s].
@@ -944,7 +966,7 @@ class SweepJob:
             )  # fmt: skip
         except SweepStopped as stop:
             self.stopped, self.stop = True, stop
-        except KeyboardInterrupt:  # before the workers were up, or a second signal: nothing waited for
+        except KeyboardInterrupt:  # before the workers were up: no run had started
             self.stopped = True
         finally:
             signal.signal(signal.SIGTERM, previous)
@@ -966,7 +988,9 @@ class SweepJob:
         parts = [f"sweep stopped after {finished} of {len(self.runs)} runs ({table})"]
         stop = self.stop
         if stop is None:
-            parts.append("the runs stepping were not waited for: each keeps its last checkpoint")
+            parts.append("it stopped before its workers were up, so no run had started")
+        elif stop.at_once:
+            parts.append("a second signal stopped it without waiting for the runs stepping: each keeps its last checkpoint")
         else:
             ended = [r for r in stop.stopped if r.get("step") is not None]
             if ended:

@@ -267,6 +267,27 @@ def test_ctrl_c_on_a_sweep_checkpoints_its_running_runs_and_says_what_it_kept(tm
     assert states == {name: f"resumes at step {step}" for name, step in steps.items()}
 
 
+def test_a_stopped_sweep_s_line_says_what_each_kind_of_stop_kept(tmp_path):
+    """Stopped in order: the runs checkpointed with their steps and those left unanalysed; by a second
+    signal: none waited for; before the workers were up: none started; summary.csv named only where
+    finished runs fill it."""
+    from decco_warp.errors import SweepStopped
+    from decco_warp.sweep import SweepJob
+
+    path = tmp_path / "s.toml"
+    path.write_text(SWEEP.format(out=tmp_path))
+    job = SweepJob(*load_sweep(path))
+    job.stopped, job.finished = True, [{"run": "eta0.5_dt0.04", "status": "ok"}]
+    job.stop = SweepStopped("SIGTERM", [{"run": "eta1_dt0.04", "step": 120}, {"run": "eta1_dt5", "step": None}], ["eta0.5_dt5"])
+    line = job.stopped_line()
+    assert "after 1 of 4 runs (summary.csv holds the 1 finished)" in line and "1 stepping run(s) wrote a checkpoint" in line
+    assert "eta1_dt0.04 at step 120" in line and "eta1_dt5" not in line and "not analysed yet (eta0.5_dt5)" in line
+    job.finished, job.stop = [], SweepStopped("SIGINT", [], [], at_once=True)
+    assert "no summary.csv yet" in job.stopped_line() and "without waiting for the runs stepping" in job.stopped_line()
+    job.stop = None
+    assert "before its workers were up, so no run had started" in job.stopped_line()
+
+
 def test_a_sweep_packs_runs_into_ensembles_with_the_results_of_runs_alone(tmp_path):
     """[sweep] ensemble = 4 hands the whole grid to one worker: the two runs of each dt are stepped
     together, the dt = 5 s pair blows up on its own (each with its own reason), and the others
