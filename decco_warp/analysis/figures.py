@@ -327,6 +327,48 @@ def family_order(key: tuple):
     return tuple((0, v, "") if isinstance(v, (int, float)) and not isinstance(v, bool) else (1, 0, str(v)) for v in key)
 
 
+def family_of(summary: dict, split: list[str]) -> tuple:
+    """A run's series: its angle, kind of spin and values of the ``split`` columns."""
+    return (summary.get("theta_deg"), summary.get("spin_kind") or "none", *group_key(summary, split))
+
+
+def family_label(key: tuple, split: list[str]) -> str:
+    """A series (:func:`family_of`) in words: "22 deg, parallel spins, mu_k 0.3"."""
+    angle, spins = key[:2]
+    return f"{angle:g} deg" + (f", {spins} spins" if spins != "none" else "") + (f", {group_label(key[2:], split)}" if split else "")
+
+
+def ratio_panels(summaries: list[dict], split: list[str]):
+    """A figure of a panel per mass ratio (sharing their axes), and for each panel (ax, ratio, its
+    series): (k, series key, its label, its runs), in order."""
+    ratios = sorted({round(s["mass_ratio"], 3) for s in summaries})
+    fig, axes = plt.subplots(1, len(ratios), figsize=(4.4 * len(ratios), 3.8), squeeze=False, sharey=True, sharex=True)
+    panels = []
+    for ax, ratio in zip(axes[0], ratios):
+        mine = [s for s in summaries if round(s["mass_ratio"], 3) == ratio]
+        keys = sorted({family_of(s, split) for s in mine}, key=family_order)
+        panels.append((ax, ratio, [(k, key, family_label(key, split), [s for s in mine if family_of(s, split) == key]) for k, key in enumerate(keys)]))
+    return fig, panels
+
+
+def series_points(panels, points_of, metric: str, x: str):
+    """Over :func:`ratio_panels`' panels, each series with points: (ax, k, series in its panel,
+    label, ``points_of(runs, metric, x)``)."""
+    for ax, _, series in panels:
+        for k, _, label, runs in series:
+            points = points_of(runs, metric, x)
+            if points:
+                yield ax, k, len(series), label, points
+
+
+def label_panel(ax, ratio: float, x: str) -> None:
+    """A mass ratio's panel: its title, its eta axis, its legend."""
+    ax.set_title(f"m_p / m_t = {ratio:g}")
+    ax.set_xlabel(ETA_LABELS.get(x, x))
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7)
+
+
 def plot_runs(summaries: list[dict], metric: str, ylabel: str, x: str = "eta", split: list[str] = ()):
     """Cross-run figure (Fig. 3 / Fig. 9 style): ``metric`` vs eta (``x``: "eta", "eta_self" or
     "eta_all"), one panel per mass ratio, a line per angle, kind of spin and values of the ``split``
@@ -334,30 +376,15 @@ def plot_runs(summaries: list[dict], metric: str, ylabel: str, x: str = "eta", s
     realizations, each drawn faintly and a bar from the smallest to the largest; unsettled points
     hollow; for m_lf/m_t, the Leinhardt & Stewart (2012) law at the same set-ups (:func:`draw_law`).
     Panels share their axes."""
-    ratios = sorted({round(s["mass_ratio"], 3) for s in summaries})
-    fig, axes = plt.subplots(1, len(ratios), figsize=(4.4 * len(ratios), 3.8), squeeze=False, sharey=True, sharex=True)
-
-    def family(s: dict) -> tuple:
-        return (s["theta_deg"], s.get("spin_kind") or "none", *group_key(s, split))
-
-    for ax, ratio in zip(axes[0], ratios):
-        mine = [s for s in summaries if round(s["mass_ratio"], 3) == ratio]
-        families = sorted({family(s) for s in mine}, key=family_order)
-        for k, key in enumerate(families):
-            angle, spins = key[:2]
-            points = realization_points([s for s in mine if family(s) == key], metric, x)
-            if not points:
-                continue
-            colour = plt.get_cmap("tab10")(k % 10)
-            label = f"{angle:g} deg" + (f", {spins} spins" if spins != "none" else "") + (f", {group_label(key[2:], split)}" if split else "")
-            draw_points(ax, points, colour, label)
-            if metric == "largest_mass_ratio":
-                draw_law(ax, points, colour, label)
-        ax.set_title(f"m_p / m_t = {ratio:g}")
-        ax.set_xlabel(ETA_LABELS.get(x, x))
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=7)
-    axes[0][0].set_ylabel(ylabel + "  (hollow: not settled)")
+    fig, panels = ratio_panels(summaries, split)
+    for ax, k, _, label, points in series_points(panels, realization_points, metric, x):
+        colour = plt.get_cmap("tab10")(k % 10)
+        draw_points(ax, points, colour, label)
+        if metric == "largest_mass_ratio":
+            draw_law(ax, points, colour, label)
+    for ax, ratio, _ in panels:
+        label_panel(ax, ratio, x)
+    fig.axes[0].set_ylabel(ylabel + "  (hollow: not settled)")
     return fig
 
 
@@ -431,35 +458,20 @@ def plot_intervals(summaries: list[dict], metric: str, ylabel: str, split: list[
     """A sweep's outcome against eta, a series per angle, kind of spin and values of the ``split``
     columns (its swept keys), each point the realizations' mean with its 95 % interval (Student's t;
     a point of one run without a bar, its n shown): what ``decco-warp compare --at eta`` compares."""
-    ratios = sorted({round(s["mass_ratio"], 3) for s in summaries})
-    fig, axes = plt.subplots(1, len(ratios), figsize=(4.4 * len(ratios), 3.8), squeeze=False, sharey=True, sharex=True)
-
-    def family(s: dict) -> tuple:
-        return (s["theta_deg"], s.get("spin_kind") or "none", *group_key(s, split))
-
-    for ax, ratio in zip(axes[0], ratios):
-        mine = [s for s in summaries if round(s["mass_ratio"], 3) == ratio]
-        families = sorted({family(s) for s in mine}, key=family_order)
-        for k, key in enumerate(families):
-            points = interval_points([s for s in mine if family(s) == key], metric, x)
-            if not points:
-                continue
-            angle, spins = key[:2]
-            label = f"{angle:g} deg" + (f", {spins} spins" if spins != "none" else "") + (f", {group_label(key[2:], split)}" if split else "")
-            colour = plt.get_cmap("tab10")(k % 10)
-            offset = 1.0 + 0.01 * (k - (len(families) - 1) / 2)  # series side by side, not on top of each other
-            at = np.array([p["at"] for p in points], dtype=float) * offset
-            means = np.array([p["mean"] for p in points])
-            minus = np.array([p["mean"] - p["low"] if p["low"] is not None else np.nan for p in points])
-            plus = np.array([p["high"] - p["mean"] if p["high"] is not None else np.nan for p in points])
-            ax.errorbar(at, means, yerr=[minus, plus], color=colour, marker="o", capsize=3, label=label)
-            for xv, yv, p in zip(at, means, points):
-                ax.annotate(f"n={p['n']}", (xv, yv), textcoords="offset points", xytext=(4, 4), fontsize=6, color=colour)
-        ax.set_title(f"m_p / m_t = {ratio:g}")
-        ax.set_xlabel(ETA_LABELS.get(x, x))
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=7)
-    axes[0][0].set_ylabel(ylabel + " (mean, 95 % interval)")
+    fig, panels = ratio_panels(summaries, split)
+    for ax, k, count, label, points in series_points(panels, interval_points, metric, x):
+        colour = plt.get_cmap("tab10")(k % 10)
+        offset = 1.0 + 0.01 * (k - (count - 1) / 2)  # series side by side, not on top of each other
+        at = np.array([p["at"] for p in points], dtype=float) * offset
+        means = np.array([p["mean"] for p in points])
+        minus = np.array([p["mean"] - p["low"] if p["low"] is not None else np.nan for p in points])
+        plus = np.array([p["high"] - p["mean"] if p["high"] is not None else np.nan for p in points])
+        ax.errorbar(at, means, yerr=[minus, plus], color=colour, marker="o", capsize=3, label=label)
+        for xv, yv, p in zip(at, means, points):
+            ax.annotate(f"n={p['n']}", (xv, yv), textcoords="offset points", xytext=(4, 4), fontsize=6, color=colour)
+    for ax, ratio, _ in panels:
+        label_panel(ax, ratio, x)
+    fig.axes[0].set_ylabel(ylabel + " (mean, 95 % interval)")
     return fig
 
 
@@ -467,19 +479,13 @@ def plot_histories(summaries: list[dict], histories: dict, split: list[str] = ()
     """m_lf/m_t against time of every run of a set, overlaid, a colour per angle, kind of spin and
     values of the ``split`` columns (``histories``: run name -> (time [s], m_lf/m_t) of its analysed frames)."""
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
-
-    def family(s: dict) -> tuple:
-        return (s.get("theta_deg"), s.get("spin_kind") or "none", *group_key(s, split))
-
-    families = sorted({family(s) for s in summaries if s.get("run") in histories}, key=family_order)
-    for k, key in enumerate(families):
+    drawn = [s for s in summaries if s.get("run") in histories]
+    for k, key in enumerate(sorted({family_of(s, split) for s in drawn}, key=family_order)):
         colour = plt.get_cmap("tab10")(k % 10)
-        runs = [s for s in summaries if s.get("run") in histories and family(s) == key]
+        runs = [s for s in drawn if family_of(s, split) == key]
         for n, s in enumerate(runs):
             time, ratio = histories[s["run"]]
-            angle, spins = key[:2]
-            label = (f"{angle:g} deg" + (f", {spins} spins" if spins != "none" else "") + (f", {group_label(key[2:], split)}" if split else "")
-                     + f" ({len(runs)} run{'s' if len(runs) > 1 else ''})") if n == 0 else None  # fmt: skip
+            label = f"{family_label(key, split)} ({len(runs)} run{'s' if len(runs) > 1 else ''})" if n == 0 else None
             ax.plot(np.asarray(time) / HOUR, ratio, color=colour, alpha=0.7, linewidth=1.0, label=label)
     ax.axhline(1.0, color="0.6", linewidth=0.6)
     ax.set_xlabel("time [h]")
