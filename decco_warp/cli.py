@@ -1086,7 +1086,9 @@ def sweep(
     only: Optional[List[str]] = typer.Option(
         None, "--only", help="Run only the runs whose names match this glob, e.g. '*eta6' (repeatable); complete runs stay in the table."
     ),
-    check: bool = typer.Option(False, "--check", help="List the runs and where each stands (complete, resumes, to run), then stop."),
+    check: bool = typer.Option(
+        False, "--check", help="List the runs and where each stands (complete, resumes, to run), each one's margins and cost and the sweep's, then stop."
+    ),
     resolution: Optional[float] = typer.Option(
         None, "--resolution", help="Replace [sweep] resolution: R x the particles (piles NAME_xR.h5), k_in and dt x R^(-1/3) unless scale_contacts = false."
     ),

@@ -179,8 +179,12 @@ def test_rows_of_a_csv_dict_reader_give_the_numbers_of_typed_rows(tmp_path):
     typed = cmp.compare(rows, "spin_kind", "largest_mass_ratio", at="eta", allow_single=True).as_dict()
     assert cmp.compare(texts, "spin_kind", "largest_mass_ratio", at="eta", allow_single=True).as_dict() == typed
     assert cmp.typed_row(texts[0])["settled"] is True and cmp.typed_row(texts[1])["reason"] is None
-    with pytest.raises(cmp.CompareError, match="run none_eta3_r0: column largest_mass_ratio holds a list"):
-        cmp.compare([{**rows[0], "largest_mass_ratio": [1.0]}, *rows[1:]], "spin_kind", "largest_mass_ratio")
+    with pytest.raises(cmp.CompareError, match="run none_eta3_r0: column largest_mass_ratio holds a dict"):
+        cmp.compare([{**rows[0], "largest_mass_ratio": {"value": 1.0}}, *rows[1:]], "spin_kind", "largest_mass_ratio")
+    # A vector spin axis (a list in summary.json) names a group as any value does.
+    axes = [{**row, "axis": [1.0, 0.0, 1.0] if row["spin_kind"] == "none" else "+z"} for row in rows]
+    groups = {g.group for p in cmp.compare(axes, "axis", "largest_mass_ratio", allow_single=True, allow_mixed=True).points for g in p.groups}
+    assert groups == {(1.0, 0.0, 1.0), "+z"}
 
 
 def test_where_picks_numbers_within_a_tolerance_and_the_reference_can_be_named():

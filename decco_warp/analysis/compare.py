@@ -177,8 +177,9 @@ CELL_TYPES = (int, float, str, bool, type(None))
 
 def typed_row(row) -> dict:
     """A run's row as :func:`compare` takes it: text cells (a ``csv.DictReader`` row's, every one
-    text) read as summary.csv's are (:func:`parse_cell`), the rest as they are; a value of another
-    type (a list, an array) is refused, naming the run and the column."""
+    text) read as summary.csv's are (:func:`parse_cell`), a list (a spin axis given as a vector) as
+    a tuple, so that it can name a group, the rest as they are; a value of another type (a dict, an
+    object) is refused, naming the run and the column."""
     if not isinstance(row, dict):
         raise CompareError(f"a row must be a dict of a run's columns (summary.json's, or a csv.DictReader row); got {type(row).__name__}")
     typed = {}
@@ -189,9 +190,11 @@ def typed_row(row) -> dict:
             value = parse_cell(value)
         elif isinstance(value, np.generic):
             value = value.item()
+        elif isinstance(value, (list, tuple, np.ndarray)):
+            value = tuple(np.asarray(value).tolist())
         elif not isinstance(value, CELL_TYPES):
             raise CompareError(f"run {row.get('run', '?')}: column {key} holds a {type(value).__name__}; "
-                               "a row's values are numbers, text, True/False or None (as summary.json's)")  # fmt: skip
+                               "a row's values are numbers, text, True/False, None or lists (as summary.json's)")  # fmt: skip
         typed[key] = value
     return typed
 
@@ -227,8 +230,10 @@ def label(key) -> str:
 
 
 def _order(key):
-    """Sort key over numbers and text together: numbers first."""
-    return (1, key) if isinstance(key, str) else (0, float(key))
+    """Sort key over numbers, text and tuples (vectors) together: numbers first."""
+    if isinstance(key, (int, float)) and not isinstance(key, bool):
+        return (0, float(key), "")
+    return (1, 0.0, key) if isinstance(key, str) else (2, 0.0, str(key))
 
 
 def _matches(value, wanted) -> bool:
@@ -522,7 +527,7 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
             raise CompareError(f"--reference {label(reference)}: no such {by} among the runs; they have: {', '.join(map(label, groups))}")
 
     result = []
-    for at_key in sorted(points, key=lambda k: _order(k) if k is not None else (0, 0.0)):
+    for at_key in sorted(points, key=lambda k: _order(k) if k is not None else (0, 0.0, "")):
         point = points[at_key]
         if not allow_mixed:  # the rows compared with each other: all at the point, or each group's against a value
             for members in ([row for members in point.values() for row in members],) if against is None else point.values():
