@@ -97,10 +97,52 @@ def check_destination(path, what: str, folder: bool = False) -> Path:
         target = path if folder else path.parent
         if not os.access(target, os.W_OK | os.X_OK):
             raise InputError(f"cannot write the {what} {path}: {target} is not writable")
+        _check_file_system(target, path, what)
         return path
     existing = path.parent
     while not existing.exists() and existing != existing.parent:
         existing = existing.parent
     if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
         raise InputError(f"cannot write the {what} {path}: {existing} is not a writable folder")
+    _check_file_system(existing, path, what)
     return path
+
+
+#: File systems that are the kernel's interfaces, where nothing can be stored: os.access() grants root
+#: writing there, and creating a folder fails only once the work has begun.
+KERNEL_FILE_SYSTEMS = {"proc", "sysfs", "devtmpfs", "devpts", "cgroup", "cgroup2", "debugfs", "tracefs", "securityfs", "configfs",
+                       "pstore", "bpf", "efivarfs", "fusectl", "mqueue", "binfmt_misc", "autofs", "rpc_pipefs", "nsfs"}  # fmt: skip
+
+
+def _check_file_system(folder: Path, path: Path, what: str) -> None:
+    """Refuse a destination whose ``folder`` is on a read-only file system or on one of the kernel's
+    (KERNEL_FILE_SYSTEMS: /proc, /sys, ...)."""
+    mount, kind = mount_of(folder)
+    if kind in KERNEL_FILE_SYSTEMS:
+        raise InputError(f"cannot write the {what} {path}: {mount} is the kernel's {kind} file system, not a place for files")
+    try:
+        read_only = bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
+    except OSError:
+        read_only = False  # cannot be told here: the write says
+    if read_only:
+        raise InputError(f"cannot write the {what} {path}: {mount} is a read-only file system")
+
+
+def mount_of(folder) -> tuple[str, str | None]:
+    """(mount point, file-system type) of the mount holding ``folder``, from /proc/self/mounts (the
+    longest mount point that contains it); (its path, None) where that cannot be read."""
+    real = os.path.realpath(folder)
+    best, kind = "/", None
+    try:
+        with open("/proc/self/mounts", encoding="utf-8", errors="replace") as mounts:
+            for line in mounts:
+                fields = line.split()
+                if len(fields) < 3:
+                    continue
+                point = fields[1].replace("\\040", " ")
+                inside = real == point or real.startswith(point.rstrip("/") + "/")
+                if inside and len(point) >= len(best):
+                    best, kind = point, fields[2]
+    except OSError:
+        return str(folder), None
+    return best, kind

@@ -428,7 +428,8 @@ def _rerun_observer(prepared, mode_text: str | None, every: int | None):
 
 
 def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: int | None = None, **kwargs):
-    """Prepare a run (every input problem exits with code 2, nothing written), then run it with a progress bar."""
+    """Prepare a run (every input problem exits with code 2, nothing written), then run it with a
+    progress bar; (its RunResult, the rerun recording it wrote or None)."""
     from .checks import InputError
     from .io import FileFormatError
     from .run import BlowUp, OutputError, RunError, RunStopped, execute
@@ -443,6 +444,7 @@ def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: in
     if prepared.note:
         typer.echo(prepared.note, err=True)
     logger, observers = _rerun_observer(prepared, rerun, rerun_every)
+    finished = False
     bar = _progress_bar("simulating", "step", "time", "overlap")
     try:
         with bar:
@@ -463,7 +465,8 @@ def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: in
 
             # The run's outcome is reported after the bar's last line, so that it ends the output.
             try:
-                return execute(prepared, progress=show, observers=observers)
+                result = execute(prepared, progress=show, observers=observers)
+                finished, stopped_by = True, None
             except (RunError, FileFormatError, InputError) as error:  # InputError: the folder's lock was taken
                 stopped_by = (str(error), EXIT_INPUT)
             except RunStopped as stopped:
@@ -472,25 +475,37 @@ def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: in
                 stopped_by = (f"the run blew up: {error}; the last checkpoint is kept", EXIT_BLOW_UP)
             except OutputError as error:
                 stopped_by = (str(error), EXIT_OUTPUT)
-        fail(*stopped_by)
+        if stopped_by is not None:
+            fail(*stopped_by)
     finally:
+        recording = None
         if logger is not None:
             try:
                 logger.close()
             except OSError as error:
                 write_failed(error, f"the run folder is as the run left it; {logger.path} is not written")
-            if getattr(logger, "path", None):
-                typer.echo(f"rerun recording: {logger.path} (view it with: rerun {logger.path})")
+            recording = getattr(logger, "path", None)
+            if recording and not finished:  # a finished run lists it with its outputs
+                typer.echo(f"rerun recording: {recording} (view it with: rerun {recording})")
+    return result, recording
 
 
-def _report(result) -> None:
+def _report(outcome) -> None:
+    """The end of simulate and resume: the run's totals and this session's, and what it wrote
+    (``outcome``: :func:`_run_with_progress`'s)."""
+    result, recording = outcome
     run_dir = result.run_dir
     # The run's totals and this session's costs apart: after a resume they are not the same steps.
     typer.echo(
         f"done: the run is at step {result.steps} ({result.time:.6g} s simulated); this session stepped "
-        f"{result.steps_this_session} steps in {result.wall_seconds:.1f} s wall, {result.stepping_seconds:.1f} s of it stepping"
+        f"{result.steps_this_session} steps in {result.session_wall_seconds:.1f} s wall, {result.session_stepping_seconds:.1f} s of it stepping"
+        + (f" ({result.wall_seconds:.1f} s wall over all the run's sessions)" if result.steps_this_session < result.steps else "")
     )
-    typer.echo(f"outputs in {run_dir}/: spec.toml, trajectory.h5 (H5MD), trajectory.xdmf (for ParaView, VisIt), checkpoint.h5, run.log")
+    recorded = ""
+    if recording is not None:
+        inside = Path(recording).parent.resolve() == Path(run_dir).resolve()
+        recorded = f", {Path(recording).name if inside else recording} (rerun's recording: rerun {recording})"
+    typer.echo(f"outputs in {run_dir}/: spec.toml, trajectory.h5 (H5MD), trajectory.xdmf (for ParaView, VisIt), checkpoint.h5, run.log{recorded}")
     typer.echo(f"inspect: h5ls -r {run_dir}/trajectory.h5   |   python: decco_warp.io.read_trajectory('{run_dir}/trajectory.h5')")
 
 
@@ -518,6 +533,9 @@ def simulate(
     k_in: Optional[str] = typer.Option(
         None, "--k-in", help='Spring constant while approaching [dyne/cm], or "auto" (from the impact speed, eq. 12).'
     ),
+    restitution: Optional[float] = typer.Option(None, "--restitution", help="Coefficient of restitution, in (0, 1]."),
+    mu_k: Optional[float] = typer.Option(None, "--mu-k", help="Sliding friction coefficient, >= 0."),
+    mu_r: Optional[float] = typer.Option(None, "--mu-r", help="Rolling friction coefficient, >= 0."),
     max_overlap: Optional[float] = typer.Option(
         None, "--max-overlap", help="Stop the run when a contact is deeper than this fraction of the smaller radius."
     ),
@@ -568,7 +586,8 @@ def simulate(
             "piles": {"target": target, "projectile": projectile},
             "collision": collision,
             "params": {"dt": _number_or_auto(dt, "--dt"), "k_in": _number_or_auto(k_in, "--k-in"), "gravity": gravity,
-                       "gravity_every": _integer_or_auto(gravity_every, "--gravity-every"), "contact_law": contact_law},
+                       "gravity_every": _integer_or_auto(gravity_every, "--gravity-every"), "contact_law": contact_law,
+                       "restitution": restitution, "mu_k": mu_k, "mu_r": mu_r},
         }
         spec = specs.resolve_spec(raw, overrides)
     except specs.SpecError as error:
@@ -604,7 +623,7 @@ def _integer_or_auto(text: Optional[str], option: str):
 
 def _check(spec: dict) -> None:
     """``simulate --check``: the run's plan (its set-up, margins, predicted deepest overlap and resolved choices); exit 2 if it would be refused."""
-    from .costs import run_cost
+    from .costs import GRAVITY_EVERY_NOTE, run_cost
     from .plan import plan_start
 
     try:
@@ -614,6 +633,8 @@ def _check(spec: dict) -> None:
     for line in [*plan.lines(), *plan.choices()]:
         typer.echo(line)
     typer.echo(f"cost: {run_cost(plan.state.n, plan.params.gravity, plan.device, plan.steps, plan.params.gravity_every)}")
+    if plan.params.gravity_every > 1:
+        typer.echo(GRAVITY_EVERY_NOTE)
     if plan.run_dir.exists():
         typer.echo(f"note: run folder {plan.run_dir} exists (resume continues it, --overwrite replaces it)")
     if not plan.stability.stable and not plan.allow_unstable:
@@ -637,7 +658,9 @@ def resume(
     max_steps: Optional[int] = typer.Option(
         None, "--max-steps", help="With --until-settled: the most steps the run may reach (default: 4 times its steps now)."
     ),
-    min_members: int = typer.Option(50, "--min-members", help="With --until-settled: smallest cluster, as for analyze."),
+    min_members: Optional[int] = typer.Option(
+        None, "--min-members", help="With --until-settled: smallest cluster, as for analyze (default: the run's own, else 50)."
+    ),
     rerun: Optional[str] = RerunOption,
     rerun_every: Optional[int] = RerunEveryOption,
     device: Optional[str] = DeviceOption,
@@ -654,8 +677,10 @@ def resume(
         return
     if steps is not None:
         fail("give --steps or --until-settled, not both")
-    if min_members < 1 or (max_steps is not None and max_steps < 1):
+    if min_members is not None and min_members < 1 or (max_steps is not None and max_steps < 1):
         fail("--min-members and --max-steps must be >= 1")
+    if min_members is None:  # the run's own: what it was analysed or swept with
+        min_members = RunFolder(run_dir).min_members()
 
     def advance(total: int | None) -> None:
         _report(_run_with_progress(prepare_resume, run_dir, steps=total, device=device, rerun=rerun, rerun_every=rerun_every))
@@ -782,7 +807,9 @@ def bench(
 @app.command()
 def analyze(
     path: Path = typer.Argument(..., help="A run folder (finished or still running), or a folder of run folders (a sweep)."),
-    min_members: int = typer.Option(50, "--min-members", help="Smallest cluster counted (paper Fig. 2: 50)."),
+    min_members: Optional[int] = typer.Option(
+        None, "--min-members", help="Smallest cluster counted (default: what each run was analysed or swept with, else 50 as the paper's Fig. 2)."
+    ),
     every: int = typer.Option(1, "--every", help="Analyse every Nth frame (the last one always)."),
     follow: bool = typer.Option(False, "--follow", help="Of a running run: analyse again as new frames arrive, until the run ends."),
     poll: float = typer.Option(10.0, "--poll", help="With --follow: seconds between looks for new frames."),
@@ -799,7 +826,7 @@ def analyze(
     from .io import FileFormatError
     from .watch import analyse_runs, check_analysable, find_runs, write_cross_run_results
 
-    if min_members < 1 or every < 1 or not poll > 0:
+    if min_members is not None and min_members < 1 or every < 1 or not poll > 0:
         fail("--min-members and --every must be >= 1, --poll > 0")
     try:
         device = resolve_device(device)
@@ -869,25 +896,33 @@ def extract(
     from .checks import check_destination
     from .device import resolve_device
     from .io import save_pile
-    from .remnant import extract_fragment
+    from .remnant import check_options, fragment_of, loose_note, settle_fragment
 
     if out.exists() and not overwrite:
         fail(f"{out} already exists; use --overwrite to replace it")
     if not run_dir.is_dir():
         fail(missing(run_dir))
-    bar = _progress_bar("settling", "step", "ratio")
-    try:
+    try:  # every input, before the progress bar draws a line
         check_destination(out, "pile file")
         chosen = resolve_device(device)
+        check_options(spin, ke_threshold, max_steps)
+        state, source = fragment_of(run_dir, fragment)
+    except ValueError as error:  # bad input: each input error of errors.py is a ValueError, as are Params' checks
+        fail(str(error))
+    note = loose_note(state, fragment, settle)
+    if note:
+        typer.echo(note, err=True)
+    bar = _progress_bar("settling", "step", "ratio")
+    try:
         with bar:
             task = bar.add_task("fragment", total=None, step="", ratio="")
 
             def show(step: int, ratio: float) -> None:
                 bar.update(task, step=f"step {step}", ratio=f"internal KE/|U| {ratio:.3g} (settled < {ke_threshold:g})")
 
-            remnant = extract_fragment(run_dir, fragment, spin=spin, settle=settle, ke_threshold=ke_threshold,
-                                       max_steps=max_steps, device=chosen, progress=show)  # fmt: skip
-    except ValueError as error:  # bad input: each input error of errors.py is a ValueError, as are Params' checks
+            remnant = settle_fragment(state, source, spin=spin, settle=settle, ke_threshold=ke_threshold,
+                                      max_steps=max_steps, device=chosen, progress=show)  # fmt: skip
+    except ValueError as error:  # a fragment that did not settle within --max-steps
         fail(str(error))
     try:
         save_pile(remnant, out)
@@ -934,7 +969,7 @@ def compare(
         help="Keep only the runs with one of these values in COLUMN (repeatable, every column must match; numbers within 1 %), e.g. --where mass_ratio=1 --where eta=3,6."
     ),
     allow_mixed: bool = typer.Option(
-        False, "--allow-mixed", help="Compare runs at one point that differ in a set-up column (mass_ratio, theta_deg, k_in, dt, eta_potential, n_particles) other than --by and --at."
+        False, "--allow-mixed", help="Compare runs at one point that differ in a set-up column (mass_ratio, theta_deg, k_in, dt, gravity_every, eta_potential, n_particles, restitution, mu_k, mu_r, G, rolling_friction) other than --by and --at."
     ),
     allow_single: bool = typer.Option(
         False, "--allow-single", help="Accept groups of one run: shown without spread or interval (without it, the table is printed and the command exits 2 naming them)."
@@ -1038,6 +1073,52 @@ def view(
         typer.echo(f"wrote {save_to} (view it with: rerun {save_to})")
     elif logger.url:
         typer.echo(f"rerun: serving {logger.url}")
+
+
+# --- movie -------------------------------------------------------------------------------
+
+
+@app.command()
+def movie(
+    path: Path = typer.Argument(..., help="A run folder (finished, stopped or still running)."),
+    out: Optional[Path] = typer.Option(
+        None, "--out", "-o", help="The movie: .mp4 (needs ffmpeg; without it a .gif beside it) or .gif (default: RUN/figures/movie.mp4)."
+    ),
+    every: int = typer.Option(1, "--every", help="Use every Nth frame of the trajectory (the last one always)."),
+    fps: int = typer.Option(10, "--fps", help="Frames a second of the movie."),
+) -> None:
+    """Write a movie of a run without a display: its frames on the impact plane, spheres at true size,
+    coloured by cluster where analysed (else by pile)."""
+    from .analysis.movie import movie_path, write_movie
+    from .checks import check_destination
+    from .durable import WRITE_ERRNOS
+    from .io import FileFormatError
+
+    if not RunFolder(path).trajectory.is_file():
+        fail(missing(path) if not path.exists() else f"{path} is not a run folder with a {RunFolder.TRAJECTORY}")
+    if every < 1 or fps < 1:
+        fail("--every and --fps must be >= 1")
+    out = out if out is not None else RunFolder(path).path / "figures" / "movie.mp4"
+    try:
+        destination, note = movie_path(out)
+        check_destination(destination, "movie")
+    except ValueError as error:  # InputError is one
+        fail(str(error))
+    if note:
+        typer.echo(f"note: {note}", err=True)
+    bar = _progress_bar("drawing", "frames")
+    try:
+        with bar:
+            task = bar.add_task(path.name, total=None, frames="")
+            written, _ = write_movie(path, destination, every=every, fps=fps,
+                                     progress=lambda done, total: bar.update(task, total=total, completed=done, frames=f"{done}/{total}"))  # fmt: skip
+    except FileFormatError as error:
+        fail(str(error))
+    except OSError as error:
+        if error.errno not in WRITE_ERRNOS:
+            fail(" ".join(str(error).split()))
+        write_failed(error, f"{destination} is not written (a movie is renamed into place only when whole); the run is untouched")
+    typer.echo(f"wrote {written}")
 
 
 # --- export ------------------------------------------------------------------------------
@@ -1176,7 +1257,9 @@ def sweep(
     only: Optional[List[str]] = typer.Option(
         None, "--only", help="Run only the runs whose names match this glob, e.g. '*eta6' (repeatable); complete runs stay in the table."
     ),
-    check: bool = typer.Option(False, "--check", help="List the runs and where each stands (complete, resumes, to run), then stop."),
+    check: bool = typer.Option(
+        False, "--check", help="List the runs and where each stands (complete, resumes, to run), each one's margins and cost and the sweep's, then stop."
+    ),
     resolution: Optional[float] = typer.Option(
         None, "--resolution", help="Replace [sweep] resolution: R x the particles (piles NAME_xR.h5), k_in and dt x R^(-1/3) unless scale_contacts = false."
     ),
@@ -1223,8 +1306,12 @@ def sweep(
         def report(row: dict) -> None:
             bar.console.print(finished_line(row))
 
+        def stopping() -> None:
+            bar.console.print("stopping: each run stepping writes a checkpoint and ends (a second Ctrl-C stops at once, "
+                              "losing their work since their last checkpoints)", soft_wrap=True, highlight=False)  # fmt: skip
+
         try:
-            job.run(scheduler, workers, analysis_workers, gpus, on_row=report, on_progress=show)
+            job.run(scheduler, workers, analysis_workers, gpus, on_row=report, on_progress=show, on_stopping=stopping)
         except OSError as error:  # summary.csv could not be written: the runs' own folders are whole
             write_failed(error, f"the finished runs' folders and the last summary.csv are whole; {AGAIN}")
     try:

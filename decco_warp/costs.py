@@ -32,15 +32,33 @@ GPU_STEP_FLOOR = 2e-5
 FORMATION_FREE_FALLS = (3.0, 10.0)
 
 
-def step_seconds(n: int, gravity: str, device: str) -> float:
-    """About how long one step of ``n`` particles takes on ``device`` [s]."""
+#: Gravity on its own clock (gravity_every = K > 1): a step costs the K = 1 step's gravity over K plus
+#: the contacts from the neighbour list, about this much a particle [s] (the list's rebuilds at the
+#: impact included).  2-core CPU: the default collision (450 particles) stepped 50 000 steps in 48.8 s
+#: at K = 1 and 6.2 s at K = 10 (0.124 ms a step, 0.101 of it gravity: 5e-8 s a particle).  H100,
+#: whole runs at K = 10: the Fig. 8 collision (6 250) 43.9 s and the 10 000-particle ones 51.8 to
+#: 59.5 s for 1e6 steps, gravity's share taken out: 4e-9 to 6e-9 s a particle.
+CPU_CONTACT_SECONDS_PER_PARTICLE = 5e-8
+GPU_CONTACT_SECONDS_PER_PARTICLE = 5e-9
+
+
+def step_seconds(n: int, gravity: str, device: str, gravity_every: int = 1) -> float:
+    """About how long one step of ``n`` particles takes on ``device`` [s], with gravity evaluated
+    every ``gravity_every`` steps (the contacts every step)."""
     if not device.startswith("cuda"):
-        return cpu_step_seconds(n, gravity)
+        step = cpu_step_seconds(n, gravity)
+        if gravity_every > 1:  # the same cores' share as the pair sums (engine.cpu_step_seconds)
+            step = step / gravity_every + CPU_CONTACT_SECONDS_PER_PARTICLE * n / (max(1, os.cpu_count() or 1) / 2.0)
+        return step
     if gravity == "tree":
-        return max(GPU_STEP_FLOOR, GPU_TREE_SECONDS_PER_PARTICLE * n)
-    size, rate = GPU_PAIRS_PER_S_AT
-    rate = min(GPU_PAIRS_PER_S_MAX, rate * math.sqrt(n / size))
-    return max(GPU_STEP_FLOOR, float(n) * float(n) / rate)
+        step = max(GPU_STEP_FLOOR, GPU_TREE_SECONDS_PER_PARTICLE * n)
+    else:
+        size, rate = GPU_PAIRS_PER_S_AT
+        rate = min(GPU_PAIRS_PER_S_MAX, rate * math.sqrt(n / size))
+        step = max(GPU_STEP_FLOOR, float(n) * float(n) / rate)
+    if gravity_every > 1:
+        step = max(GPU_STEP_FLOOR, step / gravity_every + GPU_CONTACT_SECONDS_PER_PARTICLE * n)
+    return step
 
 
 def duration(seconds: float) -> str:
@@ -55,16 +73,20 @@ def duration(seconds: float) -> str:
 
 
 def run_cost(n: int, gravity: str, device: str, steps: int, gravity_every: int = 1) -> str:
-    """One line: the wall time of ``steps`` steps of ``n`` particles on ``device``, and how it is made.
-    Gravity on its own clock (``gravity_every`` > 1) is not modelled: the K = 1 estimate is given,
-    with what whole runs measured."""
-    step = step_seconds(n, gravity, device)
+    """One line: the wall time of ``steps`` steps of ``n`` particles on ``device`` at ``gravity_every``
+    (:func:`step_seconds`), and how it is made."""
+    step = step_seconds(n, gravity, device, gravity_every)
     where = "an H100's rates" if device.startswith("cuda") else "this CPU"
-    line = f"about {duration(step * steps)} on {device} ({1e3 * step:.3g} ms a step x {steps} steps; {where}, docs/benchmarks.md)"
-    if gravity_every > 1:
-        line += (f"; the K = 1 rate: at gravity_every = {gravity_every} whole runs on an H100 stepped 1.8x to 2.3x as fast at "
-                 "6 250 particles and 2.3x to 3.8x at 10 000 (K = 5 to 50), a CPU less")  # fmt: skip
-    return line
+    clock = f" at gravity every {gravity_every} steps" if gravity_every > 1 else ""
+    return f"about {duration(step * steps)} on {device} ({1e3 * step:.3g} ms a step x {steps} steps{clock}; {where}, docs/benchmarks.md)"
+
+
+#: Said once where a cost is made at gravity_every > 1: how the estimate is made, and how far to trust it.
+GRAVITY_EVERY_NOTE = (
+    "note: at gravity every K steps a step is estimated as the K = 1 step's gravity over K plus the contacts "
+    "(measured whole runs: the default collision 7.9x as fast at K = 10 on a 2-core CPU, the paper's 2.0x to 3.1x on an H100); "
+    "a collision whose contacts churn rebuilds its neighbour list more often and takes longer"
+)
 
 
 def formation_steps(density: float, fill: float, dt: float) -> tuple[int, int]:

@@ -120,3 +120,16 @@ class FormationStopped(DeccoError, RuntimeError):
         self.signal_name, self.step, self.partial, self.timing = signal_name, step, partial, timing
         spent = f" (this session: {timing})" if timing else ""
         super().__init__(f"stopped by {signal_name} at step {step}; saved in {partial}: the same command continues{spent}")
+
+
+class SweepStopped(DeccoError, RuntimeError):
+    """SIGINT or SIGTERM arrived during a sweep: each run that was stepping wrote a checkpoint
+    (``stopped``: their rows, with the step), those not started were left; ``unanalysed``: runs
+    that had finished stepping but whose analysis had not begun (a sweep run again analyses them)."""
+
+    exit_code = EXIT_STOPPED
+
+    def __init__(self, signal_name: str, stopped: list[dict], unanalysed: list[str], at_once: bool = False):
+        self.signal_name, self.stopped, self.unanalysed = signal_name, stopped, unanalysed
+        self.at_once = at_once  # a second signal: the runs stepping were not waited for
+        super().__init__(f"sweep stopped by {signal_name}")

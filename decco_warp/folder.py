@@ -6,6 +6,7 @@
     folder.xdmf                                                      # the trajectory's XDMF description
     folder.lock()                                                    # its writers' lock (lock.py)
     folder.progress(), folder.complete()                             # how far it has stepped
+    folder.min_members()                                             # the smallest cluster it is analysed with
 
 Every module that opens a run's file asks a RunFolder for its path, so that the layout is spelled
 out here alone.
@@ -23,6 +24,10 @@ def _file(name: str) -> property:
 
 #: A folder of runs' table, a row per run (a sweep's, or ``decco-warp analyze`` of the folder).
 TABLE = "summary.csv"
+#: A sweep folder's record (its settings, among them the analysis's).
+SWEEP_RECORD = "sweep.json"
+#: The smallest cluster (in particles) of an analysis when nothing says otherwise: the paper's Fig. 2.
+MIN_MEMBERS = 50
 
 
 class RunFolder:
@@ -75,6 +80,20 @@ class RunFolder:
         """Whether the run has made every step its spec.toml asks for."""
         progress = self.progress()
         return progress is not None and progress[0] >= progress[1]
+
+    def min_members(self) -> int:
+        """The smallest cluster this run is analysed with: its summary.json's (its last analysis),
+        else that of the sweep that made it (the sweep.json of the folder above), else MIN_MEMBERS."""
+        for path, keys in ((self.summary, ("min_members",)), (self.path.parent / SWEEP_RECORD, ("settings", "min_members"))):
+            try:
+                value = json.loads(path.read_text())
+                for key in keys:
+                    value = value[key]
+            except (OSError, ValueError, KeyError, TypeError):
+                continue
+            if isinstance(value, int) and not isinstance(value, bool) and value >= 1:
+                return value
+        return MIN_MEMBERS
 
 
 def missing(path, what: str = "run folder") -> str:

@@ -75,17 +75,58 @@ def fragment_of(run_dir, fragment: int = 0) -> tuple[State, dict]:
     return state, {**source, "params": data.parameters.get("spec", {}).get("params", {})}
 
 
+#: A settled pile's grains fill 0.40 to 0.50 of the sphere that holds them (the shipped piles and the
+#: paper's; :func:`packing`); a "fragment" filling less than this is a loose swarm (grains bound by
+#: gravity, hardly touching: debris that the cluster finder's escape-speed rule keeps together).
+LOOSE_PACKING = 0.15
+
+
+def packing(state: State) -> float:
+    """The grains' volume over that of the sphere that holds them (radius: collision.pile_radius)."""
+    from .collision import pile_radius
+
+    return float((state.radii**3).sum() / pile_radius(state) ** 3)
+
+
+def loose_note(state: State, fragment: int, settle: bool) -> str | None:
+    """A warning for a fragment that is a loose swarm rather than a body (:data:`LOOSE_PACKING`),
+    saying what it is and what extracting it gives; None for a body."""
+    from .collision import pile_radius
+
+    fill = packing(state)
+    if fill >= LOOSE_PACKING:
+        return None
+    fate = ("settling lets it collapse under its own gravity into a pile first, which can take many steps" if settle
+            else "--no-settle writes it as the swarm it is")  # fmt: skip
+    return (f"warning: fragment {fragment} is a loose swarm, not a body: {state.n} grains spread over a radius of "
+            f"{pile_radius(state) / 1e5:.3g} km fill {fill:.2g} of that sphere (a settled pile fills 0.4 to 0.5); {fate}")
+
+
+def check_options(spin: str, ke_threshold: float, max_steps: int) -> None:
+    """Refuse (InputError) a ``spin`` choice, threshold or step limit that :func:`extract_fragment` cannot use."""
+    if spin not in SPIN_CHOICES:
+        raise InputError(f"--spin must be one of {', '.join(SPIN_CHOICES)}; got {spin!r}")
+    if not (isinstance(ke_threshold, (int, float)) and ke_threshold > 0) or not (isinstance(max_steps, int) and max_steps >= 0):
+        raise InputError("--ke-threshold must be > 0 and --max-steps >= 0")
+
+
 def extract_fragment(run_dir, fragment: int = 0, spin: str = "keep", settle: bool = True, ke_threshold: float = KE_THRESHOLD,
                      max_steps: int = 1_000_000, device: str | None = None, progress=None) -> State:  # fmt: skip
     """Cluster ``fragment`` of a run's last frame as a pile: centred, its bulk motion removed, its
     rigid spin kept or removed (``spin``), and with ``settle`` stepped alone (the run's own Params)
     until its internal kinetic energy is below ``ke_threshold`` |U| (at most ``max_steps`` steps;
-    ``progress(step, ratio)`` after each look).  Its metadata says where it came from."""
-    if spin not in SPIN_CHOICES:
-        raise InputError(f"--spin must be one of {', '.join(SPIN_CHOICES)}; got {spin!r}")
-    if not (isinstance(ke_threshold, (int, float)) and ke_threshold > 0) or not (isinstance(max_steps, int) and max_steps >= 0):
-        raise InputError("--ke-threshold must be > 0 and --max-steps >= 0")
+    ``progress(step, ratio)`` after each look).  Its metadata says where it came from.  In steps
+    (``decco-warp extract`` checks and warns before the work): :func:`check_options`,
+    :func:`fragment_of`, :func:`loose_note`, :func:`settle_fragment`."""
+    check_options(spin, ke_threshold, max_steps)
     state, source = fragment_of(run_dir, fragment)
+    return settle_fragment(state, source, spin, settle, ke_threshold, max_steps, device, progress)
+
+
+def settle_fragment(state: State, source: dict, spin: str = "keep", settle: bool = True, ke_threshold: float = KE_THRESHOLD,
+                    max_steps: int = 1_000_000, device: str | None = None, progress=None) -> State:  # fmt: skip
+    """:func:`extract_fragment`'s work on a fragment read by :func:`fragment_of` (its ``state`` and ``source``)."""
+    source = dict(source)
     params = Params.from_dict({k: v for k, v in source.pop("params").items() if k in Params.__dataclass_fields__})
     state = _centred(state, spin)
     steps, ratio = 0, None

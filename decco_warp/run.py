@@ -58,6 +58,10 @@ class RunResult:
     steps_this_session: int
     stepping_seconds: float = 0.0
     """Of the wall time over all sessions, the part spent stepping (the rest: frames, checkpoints, set-up)."""
+    session_wall_seconds: float = 0.0
+    """The wall time of this session alone (after a resume, the sessions before are not counted)."""
+    session_stepping_seconds: float = 0.0
+    """Of it, the part spent stepping."""
 
 
 # --- folders ----------------------------------------------------------------------------
@@ -254,21 +258,20 @@ Observer = tuple[int, Callable[[int, float, dict, dict], None]]
 
 
 def execute(
-    run: PreparedRun, progress: Callable[[RunProgress], None] | None = None, observers: list[Observer] | None = None
-) -> RunResult:
-    """Write the run folder (or continue it) and step the run to its end, holding its lock."""
+    run: PreparedRun, progress: Callable[[RunProgress], None] | None = None, observers: list[Observer] | None = None,
+    stop_file=None,
+) -> RunResult:  # fmt: skip
+    """Write the run folder (or continue it) and step the run to its end, holding its lock.  It stops
+    at a checkpoint (RunStopped) on SIGINT or SIGTERM, or once ``stop_file`` exists (a sweep's
+    request to its workers: decco_warp/stops.py)."""
     if not run.resume:
         run.run_dir.mkdir(parents=True, exist_ok=True)
     run.lock = run.lock or RunFolder(run.run_dir).lock()
     try:
         run.lock.acquire()  # a new folder: before anything in it is touched
-        return _execute(run, progress, observers)
+        return _advance(run.sim, _open_or_clean(run, progress, observers), stop_file)
     finally:
         run.lock.release()
-
-
-def _execute(run: PreparedRun, progress, observers) -> RunResult:
-    return _advance(run.sim, _open_or_clean(run, progress, observers))
 
 
 def _open_or_clean(run: PreparedRun, progress, observers) -> RunDriver:
@@ -367,11 +370,12 @@ def _open(run: PreparedRun, progress, observers, opened: list) -> RunDriver:
     return RunDriver(sim, trajectory, plan, run_dir, log, extra, progress, observers)
 
 
-def execute_ensemble(runs: list[PreparedRun]) -> list[RunResult | BaseException]:
+def execute_ensemble(runs: list[PreparedRun], stop_file=None) -> list[RunResult | BaseException]:
     """Step prepared runs together as one ensemble (decco_warp/ensemble.py): the same Params and
     step, any sizes.  Each run writes its own folder as if stepped alone (bit for bit), under its
-    own lock; one that fails (a blow-up, its output, a signal) ends with its error in the list
-    while the others go on.  Returns, per run, its RunResult or the error that ended it."""
+    own lock; one that fails (a blow-up, its output, a signal or ``stop_file``, as for
+    :func:`execute`) ends with its error in the list while the others go on.  Returns, per run,
+    its RunResult or the error that ended it."""
     from .ensemble import Ensemble
 
     outcomes: list[RunResult | BaseException | None] = [None] * len(runs)
@@ -392,7 +396,7 @@ def execute_ensemble(runs: list[PreparedRun]) -> list[RunResult | BaseException]
                 drivers[k].log(f"ensemble: stepped together with {len(others)} other run(s) in one set of launches: {', '.join(others)}")
             except (RunError, OSError, FileFormatError, OutputError) as error:
                 outcomes[k] = error
-        stop = StopRequests()
+        stop = StopRequests(stop_file)
         with stop:
             while active := [k for k, driver in drivers.items() if not driver.done and outcomes[k] is None]:
                 before = _time.perf_counter()
@@ -484,8 +488,8 @@ def _parse_toml(text: str) -> dict:
     return specs.tomllib.loads(text)
 
 
-def _advance(sim, driver: RunDriver) -> RunResult:
-    stop = StopRequests()
+def _advance(sim, driver: RunDriver, stop_file=None) -> RunResult:
+    stop = StopRequests(stop_file)
     try:
         with stop:
             while not driver.done:
@@ -687,7 +691,7 @@ class RunDriver:
         sim = self.sim
         return RunResult(
             self.run_dir, sim.step_count, sim.time, self.wall_before + self.wall, sim.step_count - self.first_step,
-            self.stepping_before + self.stepping,
+            self.stepping_before + self.stepping, self.wall, self.stepping,
         )  # fmt: skip
 
 

@@ -152,7 +152,7 @@ SWEEP_SCHEMA: dict[str, tuple[Any, Callable[[Any], bool], str]] = {
     "name": (None, lambda v: isinstance(v, str) and bool(_NAME.fullmatch(v)), "letters, digits, '.', '_' and '-'"),
     "out": ("runs/out", _any, ""),
     "min_members": (50, _count, "an integer >= 1"),
-    "analyse_every": (1, _count, "an integer >= 1"),
+    "analyze_every": (1, _count, "an integer >= 1"),
     "keep_trajectory": (True, lambda v: isinstance(v, bool), "true or false"),
     "ensemble": ("auto", lambda v: v == AUTO or _count(v), 'an integer >= 1 or "auto"'),
     "realizations": (1, _count, "an integer >= 1"),
@@ -161,11 +161,18 @@ SWEEP_SCHEMA: dict[str, tuple[Any, Callable[[Any], bool], str]] = {
 }
 #: What else a [sweep] table holds.
 SWEEP_TABLES = ("grid", "pile_alternatives")
+#: Keys of [sweep] by their earlier names, still read: {old: new}.
+SWEEP_RENAMED = {"analyse_every": "analyze_every"}
 
 
 def sweep_settings(sweep: dict, default_name: str) -> dict:
     """The checked settings of a [sweep] table (SWEEP_SCHEMA's defaults for what it omits; the name
     defaults to ``default_name``); SpecError names the first that is wrong."""
+    for old, new in SWEEP_RENAMED.items():  # the sweep files written before the key took the command's spelling
+        if old in sweep:
+            if new in sweep:
+                raise SpecError(f"[sweep] {old} is the earlier name of {new}: give one of them")
+            sweep = {**{k: v for k, v in sweep.items() if k != old}, new: sweep[old]}
     allowed = set(SWEEP_SCHEMA) | set(SWEEP_TABLES)
     unknown = sorted(set(sweep) - allowed)
     if unknown:

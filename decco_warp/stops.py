@@ -1,19 +1,35 @@
 """Stops that wait for a safe point: while active, SIGINT (Ctrl-C) and SIGTERM (a batch scheduler's
 stop) are noted instead of ending the process, so that long work (a run, a forming pile) can save
-a checkpoint first and then end."""
+a checkpoint first and then end.  A run stepped for a sweep on a Dask worker (a thread, which
+signals never reach) is asked to stop through a file instead: the sweep writes the signal's name
+into it (:func:`request_stop`), and the run's loop reads it where it would read a signal."""
 
 from __future__ import annotations
 
 import signal
 import threading
+from pathlib import Path
 
 
 class StopRequests:
-    """While active, SIGINT and SIGTERM are noted instead of killing the process."""
+    """While active, SIGINT and SIGTERM are noted instead of killing the process.  ``signal`` is the
+    first one noted, or the name in ``request_file`` once that exists (None: go on); ``count`` the
+    signals noted."""
 
-    def __init__(self):
-        self.signal: str | None = None
+    def __init__(self, request_file=None):
+        self.noted: str | None = None
+        self.count = 0
+        self.request_file = Path(request_file) if request_file is not None else None
         self._previous: dict = {}
+
+    @property
+    def signal(self) -> str | None:
+        if self.noted is None and self.request_file is not None:
+            try:
+                return self.request_file.read_text().strip() or "SIGINT"
+            except OSError:  # none asked for (or not readable just now: looked at again soon)
+                return None
+        return self.noted
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
@@ -22,8 +38,28 @@ class StopRequests:
         return self
 
     def _note(self, number, frame) -> None:
-        self.signal = signal.Signals(number).name
+        self.noted = self.noted or signal.Signals(number).name
+        self.count += 1
 
     def __exit__(self, *exc) -> None:
         for number, handler in self._previous.items():
             signal.signal(number, handler)
+
+
+def request_stop(request_file, signal_name: str) -> None:
+    """Ask the runs that watch ``request_file`` to stop at their next safe point, as ``signal_name`` would."""
+    Path(request_file).write_text(signal_name)
+
+
+def clear_request(request_file) -> None:
+    """Withdraw a stop request (one left by a sweep that was killed, say)."""
+    Path(request_file).unlink(missing_ok=True)
+
+
+def ignore_stops() -> None:
+    """In a helper process (a sweep's worker, an analysis process) that shares the terminal of its
+    parent: leave SIGINT and SIGTERM to the parent, which stops the work in order.  The terminal's
+    Ctrl-C reaches every process of its group at once; a worker that died of it would lose the work
+    of its run since the last checkpoint."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)

@@ -6,7 +6,7 @@ A sweep specification is a run specification plus a ``[sweep]`` table:
     name = "fig3-reduced"          # the sweep folder under out
     out = "runs/out"
     min_members = 50               # for the analysis of each run
-    analyse_every = 1              # analyse every Nth frame of a run (the last one always)
+    analyze_every = 1              # analyze every Nth frame of a run (the last one always)
     keep_trajectory = true         # false: delete trajectory.h5 once the run is analysed
     ensemble = "auto"              # runs handed to a worker at a time; those sharing Params step together
                                    # (auto: up to 8 at a time on a GPU, runs of the same particle count up to
@@ -44,6 +44,7 @@ import os
 import platform
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -52,7 +53,8 @@ import numpy as np
 from . import resolution as resolutions
 from . import spec as specs
 from ._version import __version__
-from .folder import RunFolder
+from .folder import SWEEP_RECORD, RunFolder
+from .stops import clear_request
 
 #: ``ensemble = "auto"`` on a GPU: runs go to a worker up to 8 at a time (fewer where that leaves a
 #: worker idle), and those of the same particle count up to ENSEMBLE_MAX_PARTICLES are stepped
@@ -67,9 +69,10 @@ ENSEMBLE_MAX_PARTICLES = 20_000
 SUMMARY_FIELDS = [
     "run", "status", "reason", "n_particles", "mass_ratio", "theta_deg", "eta", "speed", "spin_kind", "realization", "orientation_seed",
     "target_pile", "projectile_pile",
-    "k_in", "dt", "gravity_every", "steps",
+    "k_in", "dt", "restitution", "mu_k", "mu_r", "G", "rolling_friction", "gravity_every", "steps",
     "largest_mass_ratio", "settled", "settled_note", "largest_mass_ratio_late_low", "largest_mass_ratio_late_high",
     "ls12_largest_mass_ratio", "ls12_band_low", "ls12_band_high", "ls12_planets_largest_mass_ratio",
+    "speed_over_escape", "q_r", "q_rd_star", "q_r_over_q_rd_star",
     "eta_potential", "eta_self", "eta_all", "cross_potential", "contact_surface_speed", "contact_twist_rate",
     "particle_size_change", "particle_size_change_mass_weighted", "size_change_late", "size_change_late_std",
     "size_change_mass_weighted_late", "size_change_mass_weighted_late_std", "late_frames",
@@ -77,6 +80,33 @@ SUMMARY_FIELDS = [
     "momentum_drift", "angular_momentum_drift", "ledger_closure", "wall_seconds", "stepping_seconds", "analysis_seconds",
     "device", "device_name", "ensemble",
 ]  # fmt: skip
+
+
+def summary_fields(swept=()) -> list[str]:
+    """summary.csv's columns: SUMMARY_FIELDS, then every other key of [params] (a law added to the
+    specification is a column without a word here), then the columns of the keys a sweep varies
+    (``swept``, :func:`swept_columns`) that are not among them."""
+    fields = list(SUMMARY_FIELDS)
+    for column in (*specs.SCHEMA["params"], *swept):
+        if column not in fields:
+            fields.append(column)
+    return fields
+
+
+def swept_columns(grid_keys) -> list[str]:
+    """The summary columns of a grid's ``(table, key)`` pairs, in grid order (a run's summary.json
+    holds each: analysis.runs.spec_columns)."""
+    from .analysis.runs import spec_column
+
+    return list(dict.fromkeys(spec_column(table, key) for table, key in grid_keys))
+
+
+def set_up_values(spec: dict, swept: list[str]) -> dict:
+    """The [params] and the ``swept`` columns of a run as its own specification gives them, so that a
+    run that fails has them too (a run's analysis replaces them by those it was resolved to)."""
+    from .analysis.runs import spec_columns
+
+    return {column: value for column, value in spec_columns(spec).items() if column in swept or column in spec["params"]}
 
 
 def load_sweep(path, overrides: dict | None = None) -> tuple[dict, list[dict]]:
@@ -133,6 +163,7 @@ def load_sweep(path, overrides: dict | None = None) -> tuple[dict, list[dict]]:
     if len(set(names)) != len(names):
         raise specs.SpecError("[sweep.grid] gives two runs the same name; use values that differ in their text")
     runs, settings["same_as"] = _distinct(runs)
+    settings["swept"] = swept_columns(key for keys, _ in axes for key in keys)
     return settings, runs
 
 
@@ -280,33 +311,53 @@ def ensemble_groups(prepared, max_particles: int | None = None) -> list[list[int
     return list(groups.values())
 
 
-def simulate_batch(batch: list[dict], max_particles: int | None = None) -> list[dict]:
+def simulate_batch(batch: list[dict], max_particles: int | None = None, stop_file: str | None = None) -> list[dict]:
     """Run (or resume, or skip) several runs of a sweep on one Dask worker, those that share their
     Params and step advanced together as one ensemble (decco_warp/ensemble.py: each writes what it
-    would alone); never raises.  One row per run: ``status`` (ok, skipped (complete) or failed,
-    with ``reason``), the run folder, the device, and the run's own wall time over all its
-    sessions.  With ``max_particles`` only runs of the same particle count, up to that many, go
-    together."""
-    from .run import RUN_FAILURES, execute, execute_ensemble
+    would alone); never raises.  One row per run: ``status`` (ok, skipped (complete), failed with
+    ``reason``, or stopped), the run folder, the device, the run's own wall time over all its
+    sessions and this session's (``session_seconds``).  With ``max_particles`` only runs of the
+    same particle count, up to that many, go together.  Once ``stop_file`` exists (the sweep was
+    stopped) a stepping run checkpoints and ends as "stopped" (``step``: where), and a run not
+    started is left as "stopped" with ``step`` None."""
+    from .run import RUN_FAILURES, RunStopped, execute, execute_ensemble
+    from .stops import StopRequests
 
     device = _worker_device()
+    stop = StopRequests(stop_file)
+    if stop.signal is not None:  # asked to stop before this batch began: leave it whole
+        from .run import run_dir_of
+
+        return [{"run": spec["run"]["name"], "run_dir": str(run_dir_of(spec)), "device": device, "status": "stopped", "step": None}
+                for spec in batch]  # fmt: skip
     rows, prepared = zip(*(_prepare(spec, device) for spec in batch))
     rows = list(rows)
     for members in ensemble_groups(prepared, max_particles):
-        try:
-            if len(members) == 1:
-                outcomes = [execute(prepared[members[0]])]
-            else:
-                outcomes = execute_ensemble([prepared[k] for k in members])
-        except RUN_FAILURES as error:  # the run, or the ensemble as a whole (its device memory, ...)
-            outcomes = [error] * len(members)
+        if stop.signal is not None:
+            outcomes = [None] * len(members)  # not started
+        else:
+            try:
+                if len(members) == 1:
+                    outcomes = [execute(prepared[members[0]], stop_file=stop_file)]
+                else:
+                    outcomes = execute_ensemble([prepared[k] for k in members], stop_file=stop_file)
+            except RunStopped as stopped:
+                outcomes = [stopped]
+            except RUN_FAILURES as error:  # the run, or the ensemble as a whole (its device memory, ...)
+                outcomes = [error] * len(members)
         for k, outcome in zip(members, outcomes):
             rows[k]["ensemble"] = len(members)
-            if isinstance(outcome, BaseException):
+            rows[k]["resumed"] = prepared[k].resume
+            if outcome is None or isinstance(outcome, RunStopped):
+                rows[k].update(status="stopped", step=getattr(outcome, "step", None))
+                if outcome is None and prepared[k].lock is not None:  # prepared, never started: its folder is free
+                    prepared[k].lock.release()
+            elif isinstance(outcome, BaseException):
                 rows[k].update(status="failed", reason=" ".join(str(outcome).split()))
             else:
-                rows[k]["status"] = "ok"
+                rows[k].update(status="ok", session_seconds=round(outcome.session_wall_seconds, 3))
     return [_timed(row) for row in rows]
+
 
 
 def _complete_row(spec: dict) -> dict | None:
@@ -320,12 +371,18 @@ def _complete_row(spec: dict) -> dict | None:
             return None
     except (*RUN_FAILURES, specs.SpecError):
         return None
-    return _timed({"run": spec["run"]["name"], "run_dir": str(run_dir), "device": "auto", "status": "skipped (complete)"})
+    # Made before this sweep: where is not known here (its run.log says), so no device is claimed.
+    return _timed({"run": spec["run"]["name"], "run_dir": str(run_dir), "device": None, "status": "skipped (complete)"})
 
 
 def run_state(spec: dict) -> str:
     """Where a sweep's run stands: "complete", "resumes at step K" (its checkpoint is short of its
     steps) or "to run"."""
+    return _standing(spec)[0]
+
+
+def _standing(spec: dict) -> tuple[str, int]:
+    """:func:`run_state` and the steps its folder holds already (0 where it has none)."""
     from .run import RUN_FAILURES, run_dir_of
 
     run_dir = run_dir_of(spec)
@@ -333,33 +390,59 @@ def run_state(spec: dict) -> str:
         folder = RunFolder(run_dir)
         progress = folder.progress()
     except (*RUN_FAILURES, specs.SpecError):  # the worker will report what is wrong with the folder
-        return "to run (its folder cannot be read)"
+        return "to run (its folder cannot be read)", 0
     if progress is not None and progress[0] >= progress[1]:
-        return "complete"
+        return "complete", progress[0]
     if progress is not None and folder.checkpoint.is_file():
-        return f"resumes at step {progress[0]}"
-    return "to run"
+        return f"resumes at step {progress[0]}", progress[0]
+    return "to run", 0
 
 
 def check_lines(settings: dict, runs: list[dict]) -> list[str]:
     """``sweep --check``: the sweep's runs and where each stands (:func:`run_state`), with, for each
-    one still to make, :func:`run_check`'s line."""
-    states = [run_state(run) for run in runs]
+    one still to make, :func:`run_check`'s line; then the cost of them all, and once what the
+    estimates at gravity_every > 1 rest on."""
+    from .costs import GRAVITY_EVERY_NOTE, duration
+
+    standing = [_standing(run) for run in runs]
+    states = [state for state, _ in standing]
     counts = {kind: sum(s.startswith(kind) for s in states) for kind in ("complete", "resumes", "to run")}
     lines = [f"sweep {settings['name']}: {len(runs)} runs into {Path(settings['out']) / settings['name']} "
              f"({counts['complete']} complete, {counts['resumes']} to resume, {counts['to run']} to run)"]  # fmt: skip
     width = max(len(run["run"]["name"]) for run in runs)
-    for run, state in zip(runs, states):
+    total, devices, clocked = 0.0, set(), False
+    for run, (state, done) in zip(runs, standing):
         lines.append(f"  {run['run']['name']:<{width}}  {state}")
         if not state.startswith("complete"):
-            lines.append(f"  {'':<{width}}  {run_check(run)}")
+            line, cost = run_check(run, done)
+            lines.append(f"  {'':<{width}}  {line}")
+            if cost is not None:
+                total += cost.seconds
+                devices.add(cost.device)
+                clocked = clocked or cost.gravity_every > 1
+    left = len(runs) - counts["complete"]
+    if left:
+        lines.append(f"cost: about {duration(total)} of stepping for the {left} run(s) to make or resume on {', '.join(sorted(devices)) or 'no device'} "
+                     "(the sum of the runs' lines; workers that share a device share its time; analysis not included)")  # fmt: skip
+    if clocked:
+        lines.append(GRAVITY_EVERY_NOTE)
     return lines
 
 
-def run_check(spec: dict) -> str:
-    """A line on a run still to make: its set-up's margins, its predicted deepest overlap and its
-    cost on this machine's device, or why it would be refused."""
-    from .costs import run_cost
+@dataclass
+class RunCost:
+    """What :func:`run_check` estimates a run still to make will take: ``seconds`` on ``device``."""
+
+    seconds: float
+    device: str
+    gravity_every: int
+
+
+def run_check(spec: dict, done: int = 0) -> tuple[str, RunCost | None]:
+    """A line on a run still to make (``done`` steps made already): its set-up's margins, its
+    predicted deepest overlap and its cost on this machine's device at its gravity_every, or why it
+    would be refused; and that cost (None for a run refused)."""
+    from .costs import run_cost, step_seconds
     from .plan import plan_start
     from .run import plan_fits
 
@@ -367,12 +450,15 @@ def run_check(spec: dict) -> str:
         plan = plan_start(spec)
         plan_fits(plan, plan.state.n, plan.steps)  # refused where its device has not the memory
     except ValueError as error:  # bad input: each input error of errors.py is a ValueError, as are Params' checks
-        return f"REFUSED: {error}"
+        return f"REFUSED: {error}", None
     stability = plan.stability
     refused = "" if stability.stable or plan.allow_unstable else f"; REFUSED: {'; '.join(stability.problems())}"
-    return (f"eta {plan.state.metadata['eta']:.3g}, margins: stiffness {stability.stiffness_margin:.3g} (>= 1), time step "
+    steps, every = max(0, plan.steps - done), plan.params.gravity_every
+    line = (f"eta {plan.state.metadata['eta']:.3g}, margins: stiffness {stability.stiffness_margin:.3g} (>= 1), time step "
             f"{stability.time_step_margin:.3g} (>= 10); predicted deepest overlap {plan.forecast.fraction:.2g}; "
-            f"{run_cost(plan.state.n, plan.params.gravity, plan.device, plan.steps, plan.params.gravity_every)}{refused}")  # fmt: skip
+            f"{run_cost(plan.state.n, plan.params.gravity, plan.device, steps, every)}{refused}")  # fmt: skip
+    cost = None if refused else RunCost(step_seconds(plan.state.n, plan.params.gravity, plan.device, every) * steps, plan.device, every)
+    return line, cost
 
 
 def select_runs(runs: list[dict], patterns: list[str]) -> list[dict]:
@@ -435,16 +521,16 @@ def stepped_fraction(spec: dict) -> float:
     return 0.0 if progress is None else min(1.0, progress[0] / max(1, progress[1]))
 
 
-def _device_name(device: str) -> str:
+def _device_name(device: str | None) -> str:
     try:
         import warp as wp
 
-        return str(wp.get_device(device).name) if device != "auto" else ""
+        return str(wp.get_device(device).name) if device not in (None, "auto") else ""
     except Exception:  # the name is a label for the table, never a reason to fail
         return ""
 
 
-def analyse_one(run_dir: str, min_members: int, analyse_every: int, keep_trajectory: bool, device: str | None = None) -> dict:
+def analyse_one(run_dir: str, min_members: int, analyze_every: int, keep_trajectory: bool, device: str | None = None) -> dict:
     """Analyse a finished run (unless its summary.json is current), draw its figures, and
     drop its trajectory if asked; returns its summary (``analysis_seconds``: what the analysis
     took when it ran, also for a run found analysed).  Runs in a process of this machine; the
@@ -454,22 +540,24 @@ def analyse_one(run_dir: str, min_members: int, analyse_every: int, keep_traject
 
     # The run has finished: no one else should be writing there, nor analysing it (decco-warp analyze).
     with RunFolder(run_dir).lock(), AnalysisLock(run_dir):
-        return _analyse(Path(run_dir), min_members, analyse_every, keep_trajectory, device)
+        return _analyse(Path(run_dir), min_members, analyze_every, keep_trajectory, device)
 
 
-def _analyse(run_dir: Path, min_members: int, analyse_every: int, keep_trajectory: bool, device: str | None = None) -> dict:
+def _analyse(run_dir: Path, min_members: int, analyze_every: int, keep_trajectory: bool, device: str | None = None) -> dict:
     from .analysis.figures import draw_run
     from .analysis.runs import analyse_run
     from .device import resolve_device
 
     folder = RunFolder(run_dir)
     summary_path, trajectory = folder.summary, folder.trajectory
-    settings = {"min_members": min_members, "analyse_every": analyse_every}
+    settings = {"min_members": min_members, "analyze_every": analyze_every}
     previous = json.loads(summary_path.read_text()) if summary_path.is_file() else None
+    if previous is not None and "analyse_every" in previous:  # a summary of the key's earlier spelling
+        previous.setdefault("analyze_every", previous["analyse_every"])
     # A summary older than the settled verdict is analysed again (its finder stopped too early).
     current = previous is not None and "settled" in previous and all(previous.get(k) == v for k, v in settings.items())
     if trajectory.is_file() and not (current and summary_path.stat().st_mtime >= trajectory.stat().st_mtime):
-        analysis = analyse_run(run_dir, min_members=min_members, every=analyse_every, device=resolve_device(device))
+        analysis = analyse_run(run_dir, min_members=min_members, every=analyze_every, device=resolve_device(device))
         draw_run(analysis, run_dir)
         summary = analysis["summary"]
     elif previous is not None:
@@ -503,6 +591,19 @@ def _worker_device() -> str | None:
     return os.environ.get(ENV_VARIABLE) or None
 
 
+#: The module each local worker loads as it starts (Dask's preload: its ``dask_setup``).
+WORKER_SETUP = "decco_warp.sweep"
+
+
+def dask_setup(worker) -> None:
+    """Dask's preload hook, in each local worker process as it starts: SIGINT and SIGTERM are left to
+    the sweep (decco_warp/stops.py, ``ignore_stops``), which asks the worker's runs to checkpoint
+    and end; a worker killed by the terminal's Ctrl-C would lose their work since the last one."""
+    from .stops import ignore_stops
+
+    ignore_stops()
+
+
 def local_cluster(workers: int, gpus: int):
     """A Dask LocalCluster of ``workers`` single-threaded processes, worker k pinned to cuda:(k mod
     gpus) (to the CPU without GPUs) through its own $DECCO_DEVICE, which it keeps if restarted."""
@@ -514,7 +615,8 @@ def local_cluster(workers: int, gpus: int):
     spec = cluster.new_spec
     for k in range(workers):
         env = {ENV_VARIABLE: f"cuda:{k % gpus}" if gpus > 0 else "cpu"}
-        cluster.worker_spec[k] = {"cls": spec["cls"], "options": {**spec["options"], "env": env}}
+        # WORKER_SETUP leaves Ctrl-C to the sweep, which stops the runs at checkpoints (run_sweep).
+        cluster.worker_spec[k] = {"cls": spec["cls"], "options": {**spec["options"], "env": env, "preload": [WORKER_SETUP]}}
     cluster.scale(workers)
     try:
         cluster.wait_for_workers(workers, timeout=WORKER_START_SECONDS)
@@ -536,15 +638,26 @@ def run_sweep(
     analysis_workers: int | None = None,
     gpus: int | None = None,
     on_progress=None,
+    stop_file=None,
+    on_stopping=None,
 ) -> list[dict]:
     """Simulate every run with Dask and analyse each here as it finishes; one row per run, in grid order.
     Local workers: one per GPU (the first ``gpus``, default all, see :func:`local_cluster`), else
     ``workers`` (default 2) on the CPU; a ``scheduler``'s workers each use their own device.
     ``on_progress(runs_stepped)`` hears, every PROGRESS_SECONDS and as runs finish, how many runs'
-    worth of steps are made (complete runs count whole, stepping ones by their last checkpoint)."""
+    worth of steps are made (complete runs count whole, stepping ones by their last checkpoint).
+
+    SIGINT or SIGTERM once the workers are up stops the sweep in order: the signal's name is written
+    to ``stop_file`` (a path every worker sees: the sweep folder), where each stepping run reads it,
+    writes a checkpoint and ends, and runs not started are left (``on_stopping()`` hears that this
+    began); the analyses under way finish, those not begun are left; then SweepStopped.  A second
+    signal stops at once, the work of the runs since their last checkpoints lost (SweepStopped with
+    ``at_once``).  A signal before the workers are up is a KeyboardInterrupt (nothing had started)."""
     from distributed import Client, as_completed
 
     from .device import cuda_device_count, gpus_to_use
+    from .errors import SweepStopped
+    from .stops import StopRequests, ignore_stops, request_stop
 
     if scheduler:
         gpus = cuda_device_count()
@@ -558,9 +671,11 @@ def run_sweep(
         client = Client(cluster)
     # Analysis runs here, beside the workers, in fresh processes (its density on this machine's GPU if any).
     analysers = analysis_workers or max(1, (os.cpu_count() or 1) - (0 if gpus > 0 else simulating))
-    pool = ProcessPoolExecutor(max_workers=analysers, mp_context=multiprocessing.get_context("spawn"))
+    pool = ProcessPoolExecutor(max_workers=analysers, mp_context=multiprocessing.get_context("spawn"), initializer=ignore_stops)
     rows: list[dict | None] = [None] * len(runs)
     pending: dict[Future, tuple[int, dict]] = {}
+    stopped: list[dict] = []  # the rows of runs that a stop left part-way (or not started)
+    unanalysed: list[str] = []  # runs that finished stepping but whose analysis a stop left
 
     def finish(k: int, row: dict) -> None:
         rows[k] = row
@@ -570,12 +685,18 @@ def run_sweep(
     def collect() -> None:
         for future in [f for f in list(pending) if f.done()]:
             k, row = pending.pop(future)
+            if future.cancelled():
+                unanalysed.append(row["run"])
+                continue
             try:
                 summary = future.result()
-                finish(k, {**row, **{key: summary.get(key) for key in SUMMARY_FIELDS if key in summary}, "run": row["run"]})
+                finish(k, {**row, **{key: value for key, value in summary.items() if key not in SWEEP_OWN}, "run": row["run"]})
             except Exception as error:  # a damaged trajectory, a full disk: this run only
                 finish(k, {**row, "status": "failed", "reason": f"analysis: {' '.join(str(error).split())}"})
 
+    abandoned = False
+    signals = StopRequests()  # from here on, through the workers' closing, a signal stops in order
+    signals.__enter__()
     try:
         # Runs in grid order, `ensemble` at a time to a worker (neighbours in a grid mostly share
         # their piles and Params, and those are stepped together).
@@ -585,12 +706,25 @@ def run_sweep(
         todo = [k for k, row in done.items() if row is None]
         size, max_particles = ensemble_plan(settings.get("ensemble", 1), gpus, len(todo), simulating)
         batches = [todo[k : k + size] for k in range(0, len(todo), size)]
-        futures = {client.submit(simulate_batch, [runs[k] for k in batch], max_particles, pure=False): batch for batch in batches}
+        request = None if stop_file is None else str(stop_file)
+        futures = {client.submit(simulate_batch, [runs[k] for k in batch], max_particles, request, pure=False): batch for batch in batches}
         simulations = as_completed(futures)
         arrived = [([k for k, row in done.items() if row is not None], [row for row in done.values() if row is not None])]
         stepped = {k: 0.0 for k in todo}  # never lowered: a checkpoint being replaced reads as none
         looked = -math.inf
+        stopping = None  # the signal that stops the sweep, once one came
         while not simulations.is_empty() or pending or arrived:
+            if signals.count > 1:  # asked twice: go at once
+                abandoned = True
+                raise SweepStopped(stopping or signals.signal, stopped, unanalysed, at_once=True)
+            if signals.signal is not None and stopping is None:
+                stopping = signals.signal
+                if stop_file is not None:
+                    request_stop(stop_file, stopping)
+                for future in pending:
+                    future.cancel()  # the analyses not begun; those under way finish
+                if on_stopping is not None:
+                    on_stopping()
             if on_progress is not None and time.monotonic() - looked >= PROGRESS_SECONDS:
                 looked = time.monotonic()
                 for k in todo:
@@ -607,25 +741,52 @@ def run_sweep(
             while arrived:
                 batch, results = arrived.pop(0)
                 for k, row in zip(batch, results):
-                    if k in stepped:
+                    if k in stepped and row["status"] != "stopped":
                         stepped[k] = 1.0
                         looked = -math.inf  # reported at the next poll
                     collision = runs[k]["collision"]
+                    row.update(set_up_values(runs[k], settings.get("swept", [])))
                     row.update(eta=collision.get("eta"), speed=collision.get("speed"), theta_deg=collision["theta_deg"])
                     row.update(realization=realization_of(runs[k]), orientation_seed=collision.get("orientation_seed"))
-                    if row["status"] == "failed":
+                    if row["status"] == "stopped":
+                        stopped.append(row)
+                    elif row["status"] == "failed":
                         finish(k, row)
+                    elif stopping is not None:
+                        unanalysed.append(row["run"])  # complete: the sweep run again analyses it
                     else:
-                        args = (row["run_dir"], settings["min_members"], settings["analyse_every"], settings["keep_trajectory"])
+                        args = (row["run_dir"], settings["min_members"], settings["analyze_every"], settings["keep_trajectory"])
                         pending[pool.submit(analyse_one, *args)] = (k, row)
             collect()
             time.sleep(POLL_SECONDS)
+        if stopping is not None:
+            raise SweepStopped(stopping, stopped, unanalysed)
     finally:
-        pool.shutdown(wait=True, cancel_futures=True)
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        try:
+            pool.shutdown(wait=not abandoned, cancel_futures=True)
+            client.close()
+            if cluster is not None:
+                close_cluster(cluster, 0 if abandoned or signals.count > 1 else WORKER_CLOSE_SECONDS)
+        finally:
+            signals.__exit__(None, None, None)
     return rows
+
+
+#: How long a local worker may take to exit once idle (its interpreter and Warp shutting down on a
+#: loaded machine) before it is killed [s]; Dask's own 4 s ended sweeps with "still alive, killing".
+WORKER_CLOSE_SECONDS = 60.0
+
+
+def close_cluster(cluster, seconds: float) -> None:
+    """Close a local cluster, each worker given ``seconds`` to exit before it is killed (0: Dask's own
+    wait, as when the sweep stops at once)."""
+    if seconds > 0:
+        for nanny in list(cluster.workers.values()):
+            try:
+                cluster.sync(nanny.close, timeout=seconds, reason="sweep-done")
+            except Exception:  # one that cannot close in order is killed below
+                pass
+    cluster.close()
 
 
 #: How long local workers may take to start (a loaded machine) before the sweep gives up [s].
@@ -638,12 +799,18 @@ POLL_SECONDS = 0.2
 PROGRESS_SECONDS = 10.0
 
 
-def write_summary(folder: Path, rows: list[dict]) -> Path:
+#: The columns of a sweep's row that are the sweep's own (where and how the run went), which a
+#: run's summary.json does not replace.
+SWEEP_OWN = ("status", "reason", "realization", "wall_seconds", "stepping_seconds", "device", "device_name", "ensemble", "run_dir")
+
+
+def write_summary(folder: Path, rows: list[dict], swept=()) -> Path:
+    """summary.csv of ``rows``: :func:`summary_fields` (``swept``: the columns of the grid's keys)."""
     from .durable import write_table
     from .folder import TABLE
 
     folder.mkdir(parents=True, exist_ok=True)
-    return write_table(folder / TABLE, rows, SUMMARY_FIELDS, ignore_extra=True)  # a full disk leaves the previous table whole
+    return write_table(folder / TABLE, rows, summary_fields(swept), ignore_extra=True)  # a full disk leaves the previous table whole
 
 
 def write_record(folder: Path, settings: dict, rows: list[dict], wall_seconds: float) -> Path:
@@ -667,7 +834,7 @@ def write_record(folder: Path, settings: dict, rows: list[dict], wall_seconds: f
         "warp": wp.config.version,
         "settings": settings,
     }
-    path = folder / "sweep.json"
+    path = folder / SWEEP_RECORD
     return write_atomic(path, json_text(record))
 
 
@@ -679,7 +846,8 @@ AGAIN = "free space, then run the sweep again: finished runs are skipped, a stop
 
 def finished_line(row: dict) -> str:
     """A run's line as the sweep reports it finished: its status (or why it failed), outcome and
-    deepest overlap, and its time on its device."""
+    deepest overlap, and its time: this session's on its device (and over all its sessions, for a
+    resumed run), or, for a run complete before this sweep, what it took then."""
     from .analysis.runs import outcome_text
 
     outcome = row["status"] if row["status"] != "failed" else f"FAILED: {row.get('reason', '')}"
@@ -687,7 +855,32 @@ def finished_line(row: dict) -> str:
     depth = row.get("deepest_overlap")
     detail += f", deepest overlap {depth:.2f}" if isinstance(depth, float) else ""
     together = f", {row['ensemble']} runs together" if (row.get("ensemble") or 1) > 1 else ""
-    return f"{row['run']}: {outcome}{detail} ({row.get('wall_seconds') or 0:.1f} s on {row.get('device')}{together})"
+    total = row.get("wall_seconds") or 0.0
+    if row["status"].startswith("skipped"):
+        spent = f"made before this sweep, in {total:.1f} s"
+    else:
+        session = row.get("session_seconds")
+        spent = f"{total if session is None else session:.1f} s on {row.get('device')}{together}"
+        if row.get("resumed") and session is not None:
+            spent += f"; {total:.1f} s over all its sessions"
+    return f"{row['run']}: {outcome}{detail} ({spent})"
+
+
+def histories_of(run_dirs: dict) -> dict:
+    """run name -> (time, m_lf/m_t) of its analysed frames, for the runs (name -> folder) analysed."""
+    from .analysis.runs import read_history
+
+    histories = {}
+    for name, run_dir in run_dirs.items():
+        history = read_history(run_dir) if run_dir else None
+        if history is not None:
+            histories[name] = history
+    return histories
+
+
+#: The file in a sweep's folder through which a stopped sweep asks its workers' runs to stop
+#: (decco_warp/stops.py): every worker writes into that folder, so every worker sees it.
+STOP_REQUEST = ".stop-request"
 
 
 class SweepJob:
@@ -710,6 +903,7 @@ class SweepJob:
         self.stepped = 0.0  # runs' worth of steps made (run_sweep's on_progress)
         self.rows: list[dict] | None = None  # every run's row, in grid order, once the sweep has run whole
         self.stopped = False
+        self.stop = None  # what the stop left (SweepStopped), once stopped with its workers up
         self.lock = None
 
     def claim(self) -> "SweepJob":
@@ -724,7 +918,12 @@ class SweepJob:
             self.lock = RunFolderLock(self.folder).acquire()
         except InputError as error:
             raise InputError(str(error).replace("run folder", "sweep folder")) from None
+        clear_request(self.stop_file)  # a request left by a sweep that was killed while it stopped
         return self
+
+    @property
+    def stop_file(self) -> Path:
+        return self.folder / STOP_REQUEST
 
     def release(self) -> None:
         self.lock.release()
@@ -737,18 +936,21 @@ class SweepJob:
     def progress_text(self) -> str:
         return f"{len(self.finished)}/{len(self.runs)} runs, {100 * self.stepped / len(self.runs):.0f} % of the steps made"
 
-    def run(self, scheduler=None, workers=None, analysis_workers=None, gpus=None, on_row=None, on_progress=None) -> bool:
+    def run(self, scheduler=None, workers=None, analysis_workers=None, gpus=None, on_row=None, on_progress=None, on_stopping=None) -> bool:
         """:func:`run_sweep` (its arguments), with SIGTERM (a batch scheduler's stop) taken as Ctrl-C.
         Each finished run's row is added to summary.csv, then told to ``on_row(row)``; ``on_progress()``
-        hears of each change of :attr:`completed`.  Returns False when stopped (the rows so far in
-        :attr:`finished`); OSError when summary.csv could not be written."""
+        hears of each change of :attr:`completed`; ``on_stopping()`` that a stop began (the running
+        runs checkpoint).  Returns False when stopped (the rows so far in :attr:`finished`, what the
+        stop left in :attr:`stop`); OSError when summary.csv could not be written."""
         import signal
+
+        from .errors import SweepStopped
 
         on_row, on_progress = on_row or (lambda row: None), on_progress or (lambda: None)
 
         def report(row: dict) -> None:
             self.finished.append(row)
-            write_summary(self.folder, self.finished)  # as runs finish, so that a stopped sweep keeps its table
+            write_summary(self.folder, self.finished, self.swept)  # as runs finish, so that a stopped sweep keeps its table
             on_row(row)
             on_progress()
 
@@ -759,12 +961,16 @@ class SweepJob:
         previous = signal.signal(signal.SIGTERM, signal.default_int_handler)  # a batch scheduler's stop, as Ctrl-C
         try:
             self.rows = run_sweep(
-                self.settings, self.runs, scheduler, workers, report, analysis_workers=analysis_workers, gpus=gpus, on_progress=progress
-            )
-        except KeyboardInterrupt:
+                self.settings, self.runs, scheduler, workers, report, analysis_workers=analysis_workers, gpus=gpus,
+                on_progress=progress, stop_file=self.stop_file, on_stopping=on_stopping,
+            )  # fmt: skip
+        except SweepStopped as stop:
+            self.stopped, self.stop = True, stop
+        except KeyboardInterrupt:  # before the workers were up: no run had started
             self.stopped = True
         finally:
             signal.signal(signal.SIGTERM, previous)
+            clear_request(self.stop_file)
         return not self.stopped
 
     def save_record(self) -> Path:
@@ -772,22 +978,42 @@ class SweepJob:
         return write_record(self.folder, self.settings, self.rows or self.finished, time.perf_counter() - self.started)
 
     def stopped_line(self) -> str:
-        """What a stopped sweep kept, and how to go on."""
-        if len(self.finished) == len(self.runs):  # stopped while its workers shut down: nothing to continue
-            return (f"sweep stopped after its {len(self.runs)} runs had finished (summary.csv holds them), before its figures: "
+        """What a stopped sweep kept, and how to go on: the runs finished (in summary.csv, if any),
+        each run the stop ended with its checkpoint's step, the runs left to analyse."""
+        finished = len(self.finished)
+        table = f"summary.csv holds the {finished} finished" if finished else "no run had finished, so there is no summary.csv yet"
+        if finished == len(self.runs):  # stopped while its workers shut down: nothing to continue
+            return (f"sweep stopped after its {len(self.runs)} runs had finished ({table}), before its figures: "
                     "run it again to draw them (every run is skipped)")  # fmt: skip
-        return (
-            f"sweep stopped after {len(self.finished)} of {len(self.runs)} runs (summary.csv holds them); run it again to "
-            "continue: finished runs are skipped, the stopped one resumes from its checkpoint"
-        )
+        parts = [f"sweep stopped after {finished} of {len(self.runs)} runs ({table})"]
+        stop = self.stop
+        if stop is None:
+            parts.append("it stopped before its workers were up, so no run had started")
+        elif stop.at_once:
+            parts.append("a second signal stopped it without waiting for the runs stepping: each keeps its last checkpoint")
+        else:
+            ended = [r for r in stop.stopped if r.get("step") is not None]
+            if ended:
+                parts.append(f"{len(ended)} stepping run(s) wrote a checkpoint where they stopped: "
+                             + ", ".join(f"{r['run']} at step {r['step']}" for r in ended))  # fmt: skip
+            if stop.unanalysed:
+                parts.append(f"{len(stop.unanalysed)} run(s) finished stepping but are not analysed yet ({', '.join(stop.unanalysed)})")
+        parts.append("run it again to continue: finished runs are skipped, stopped ones resume from their checkpoints")
+        return "; ".join(parts)
 
     def finish(self) -> Path:
         """Every run's summary.csv, in grid order, and the cross-run figures of those that did not fail."""
         from .analysis.figures import write_cross_run
 
-        summary = write_summary(self.folder, self.rows)
-        write_cross_run(self.folder, [r for r in self.rows if r.get("status") != "failed"])
+        summary = write_summary(self.folder, self.rows, self.swept)
+        done = [r for r in self.rows if r.get("status") != "failed"]
+        write_cross_run(self.folder, done, self.swept, histories=histories_of({r["run"]: r.get("run_dir") for r in done}))
         return summary
+
+    @property
+    def swept(self) -> list[str]:
+        """The columns of the keys the grid varies."""
+        return self.settings.get("swept", [])
 
     @property
     def failed(self) -> list[dict]:

@@ -4,7 +4,7 @@ folder of runs, which then share one time axis and get a cross-run table and fig
 
     runs = find_runs(path)                      # the run itself, or the run folders in it
     check_analysable(path, runs)                # before the first analysis
-    results = list(analyse_runs(runs, min_members=50))
+    results = list(analyse_runs(runs))           # each run's own min_members (or 50)
     if len(runs) > 1:
         write_cross_run_results(path, [result.summary for result in results])
 """
@@ -132,7 +132,7 @@ def analyse_folder(
 
 def analyse_runs(
     runs: list[Path],
-    min_members: int = 50,
+    min_members: int | None = None,
     every: int = 1,
     device: str | None = None,
     follow: bool = False,
@@ -145,26 +145,41 @@ def analyse_runs(
     ``follow``: a running run is analysed again as each new frame arrives (looked for every ``poll``
     seconds) until it ends, ``on_follow(run_dir, step analysed to)`` told before each wait.
     ``on_run(run_dir)``, as a run's analysis begins, returns its progress callback (or None).
+    ``min_members``: the smallest cluster; None: each run's own (RunFolder.min_members: what it
+    was analysed or swept with).
     Raises what the analysis meets: FileFormatError, RunFolderBusy (another analysis), OSError."""
     end_time = planned_end(runs) if len(runs) > 1 else None
     for run_dir in runs:
         progress = on_run(run_dir) if on_run is not None else None
+        smallest = min_members if min_members is not None else RunFolder(run_dir).min_members()
         with AnalysisLock(run_dir):
-            result = analyse_folder(run_dir, min_members, every, device, end_time, progress)
+            result = analyse_folder(run_dir, smallest, every, device, end_time, progress)
             while follow and result.live:
                 if on_follow is not None:
                     on_follow(run_dir, result.summary["steps"])
                 wait_for_frame(run_dir, result.summary["steps"], poll)
-                result = analyse_folder(run_dir, min_members, every, device, end_time, progress)
+                result = analyse_folder(run_dir, smallest, every, device, end_time, progress)
         yield result
 
 
+#: Beside [params], the set-up keys whose values make series of their own in the cross-run figures
+#: of a folder of runs (where they vary among its runs): not a sweep, so what varies is found.
+SPLIT_COLLISION = ("target_spin", "projectile_spin", "gap", "eta_potential", "precision", "resolution")
+
+
 def write_cross_run_results(path, summaries: list[dict]) -> None:
-    """A folder of runs' summary.csv (a row per run), cross-run figures (figures/) and
-    summaries.json, each whole or absent."""
+    """A folder of runs' summary.csv (a row per run), cross-run figures (figures/, series split by
+    the set-up columns that differ among the runs) and summaries.json, each whole or absent."""
     from .analysis.figures import write_cross_run
+    from .analysis.runs import read_history
+    from .spec import SCHEMA
 
     path = Path(path)
-    write_table(path / TABLE, summaries, list(summaries[0]))
-    write_cross_run(path, summaries)
+    write_table(path / TABLE, summaries, list(dict.fromkeys(key for summary in summaries for key in summary)))
+    histories = {}
+    for summary in summaries:  # the runs of a folder are its subfolders, named as their summaries' run
+        history = read_history(path / summary["run"])
+        if history is not None:
+            histories[summary["run"]] = history
+    write_cross_run(path, summaries, split=[*SCHEMA["params"], *SPLIT_COLLISION], histories=histories)
     write_atomic(path / "summaries.json", json_text(summaries))

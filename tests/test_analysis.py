@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import cli
+from helpers import cli, cli_here
 
 import decco_warp as dw
 from decco_warp.analysis.figures import RUN_FIGURES, line_data
@@ -169,6 +169,47 @@ def test_summary_is_strict_json_with_both_etas_the_laws_and_the_verdict(sweep):
     _strict((out / "summaries.json").read_text())
 
 
+def test_a_summary_carries_every_parameter_of_its_run_and_the_impact_in_ls12_terms(sweep):
+    """Every key of the run's resolved [params] (and its [collision] and [run] set-up) is a column of
+    summary.json with spec.toml's value; the impact speed over the mutual escape speed, Q_R and
+    Q_R / Q*_RD agree with the same numbers computed here from the set-up's masses, radii and speed,
+    and Q_R / Q*_RD with the LS12 column (below 1.8 Q*_RD the law is M_lr / M_tot = 1 - Q_R / 2 Q*_RD)."""
+    import tomllib
+
+    out, _ = sweep
+    for run_dir in (out / "eta0.5", out / "eta1"):
+        summary = _strict((run_dir / "summary.json").read_text())
+        spec = tomllib.loads((run_dir / "spec.toml").read_text())
+        for key, value in spec["params"].items():
+            assert summary[key] == value, key
+        for key in ("gap", "target_spin", "projectile_spin_axis", "eta_potential"):
+            assert summary[key] == spec["collision"][key], key
+        assert summary["run_device"] == spec["run"]["device"] and summary["precision"] == spec["run"]["precision"]
+        meta = dw.read_trajectory(run_dir / "trajectory.h5").parameters["collision"]
+        m_t, m_p, r_t, r_p = meta["target_mass"], meta["projectile_mass"], meta["target_radius"], meta["projectile_radius"]
+        escape = np.sqrt(2 * spec["params"]["G"] * (m_t + m_p) / (r_t + r_p))
+        assert summary["speed_over_escape"] == pytest.approx(meta["speed"] / escape, rel=1e-12)
+        reduced = m_t * m_p / (m_t + m_p)
+        assert summary["q_r"] == pytest.approx(0.5 * reduced * meta["speed"] ** 2 / (m_t + m_p), rel=1e-12)
+        ratio = summary["q_r"] / summary["q_rd_star"]
+        assert summary["q_r_over_q_rd_star"] == pytest.approx(ratio, rel=1e-12) and ratio < 1.8
+        assert summary["ls12_largest_mass_ratio"] * m_t / (m_t + m_p) == pytest.approx(1 - ratio / 2, rel=1e-12)
+
+
+def test_ratios_and_spreads_are_stored_without_round_off():
+    """eta computed back from a set-up for eta 3 reads 2.9999999999999996: kept as 3; the spread of
+    equal values (whose float mean is not always that value) is 0, any real spread its std."""
+    from decco_warp.analysis.runs import rounded, spread
+
+    assert rounded(2.9999999999999996) == 3.0 and rounded(0.1 + 0.2) == 0.3 and rounded(None) is None
+    assert rounded(2.284224635012422) == pytest.approx(2.284224635012422, rel=1e-11)  # 12 significant digits
+    equal = np.full(7, 0.1)
+    assert np.std(equal) > 0 and spread(equal) == 0.0  # the float mean of seven 0.1 is not 0.1
+    assert spread(np.array([1.0, 2.0, 4.0])) == np.std([1.0, 2.0, 4.0])
+    assert 100 * ((0.1 * 7 / 7) / (0.1 * 3 / 3) - 1) != 0 and particle_size_change(0.1 * 7, 7, 0.1 * 3, 3) == 0.0
+    assert particle_size_change(1.0, 1, 1.0, 2) == pytest.approx(100.0)
+
+
 def test_a_run_without_any_cluster_writes_null_not_nan(tmp_path):
     """No cluster of min_members at the end: m_lf/m_t is 0 and the size change does not exist, which
     strict JSON says as null; the CLI line says the result is not settled."""
@@ -209,7 +250,8 @@ def test_a_summary_is_refreshed_from_analysis_h5_alone(sweep, tmp_path):
     shutil.copytree(out / "eta1", kept, ignore=shutil.ignore_patterns("trajectory.h5", "checkpoint.h5"))
     before = json.loads((kept / "summary.json").read_text())
     parameters = dw.read_trajectory(out / "eta1" / "trajectory.h5").parameters
-    after = refresh_summary(kept, parameters["collision"], parameters["spec"]["params"], piles=parameters["spec"]["piles"])
+    spec = parameters["spec"]
+    after = refresh_summary(kept, parameters["collision"], spec["params"], piles=spec["piles"], spec=spec)
     assert _strict((kept / "summary.json").read_text()) == after
     for key, value in before.items():
         assert after[key] == (pytest.approx(value, rel=1e-12) if isinstance(value, float) else value), key
@@ -225,6 +267,91 @@ def test_analyze_of_a_set_of_runs_makes_the_cross_run_table_and_figures(sweep):
         assert (out / "figures" / f"{name}.png").stat().st_size > 1000
     summaries = json.loads((out / "summaries.json").read_text())
     assert sorted(s["eta"] for s in summaries) == pytest.approx([0.5, 1.0])
+
+
+def test_a_run_s_fragment_history_and_debris_figures_show_its_analysis(sweep):
+    """largest_fragment_time draws the analysed frames' m_lf/m_t; debris_sizes every cluster and each
+    lone grain as a fragment, largest first, whose cumulative mass ends at the run's whole mass."""
+    from decco_warp.analysis.figures import debris_sizes
+
+    out, _ = sweep
+    analysis = read_analysis(out / "eta1" / "analysis.h5")
+    frames, final = analysis["frames"], analysis["final"]
+    (line,) = [line for line in line_data(RUN_FIGURES["largest_fragment_time"](analysis)) if line[0].size == frames["time"].size]
+    np.testing.assert_array_equal(line[0], frames["time"] / 3600.0)
+    np.testing.assert_array_equal(line[1], frames["largest_mass_ratio"])
+    masses, cumulative = debris_sizes(final)
+    lone = final["particle_mass"][final["label"] < 0]
+    assert masses.size == final["mass"].size + lone.size and np.all(np.diff(masses) <= 0)
+    assert masses[0] == final["mass"].max() and cumulative[-1] == pytest.approx(final["particle_mass"].sum(), rel=1e-12)
+    total = final["particle_mass"].sum()
+    drawn = line_data(RUN_FIGURES["debris_sizes"](analysis))
+    np.testing.assert_allclose(drawn[-1][0], masses / total, rtol=1e-12)
+    np.testing.assert_allclose(drawn[-1][1], cumulative / total, rtol=1e-12)
+    for name in ("largest_fragment_time", "debris_sizes"):
+        assert (out / "eta1" / "figures" / f"{name}.png").stat().st_size > 1000
+
+
+def test_a_set_of_runs_is_drawn_overlaid_in_time_and_as_intervals_of_its_realizations(sweep):
+    """The cross-run largest_fragment_time draws each run's own frames; largest_fragment_intervals
+    each point's mean with the 95 % Student's t interval of its realizations, computed here by hand."""
+    from scipy import stats
+
+    from decco_warp.analysis.figures import plot_histories, plot_intervals
+    from decco_warp.analysis.runs import read_history
+
+    out, _ = sweep
+    summaries = json.loads((out / "summaries.json").read_text())
+    histories = {s["run"]: read_history(out / s["run"]) for s in summaries}
+    lines = line_data(plot_histories(summaries, histories))
+    for s in summaries:
+        time, ratio = histories[s["run"]]
+        assert any(np.array_equal(x, time / 3600.0) and np.array_equal(y, ratio) for x, y in lines)
+    for name in ("largest_fragment_time", "largest_fragment_intervals"):
+        assert (out / "figures" / f"{name}.png").stat().st_size > 1000
+    rows = [{"run": f"r{k}", "mass_ratio": 0.5, "theta_deg": 22.0, "eta": eta, "mu_k": mu, "largest_mass_ratio": value}
+            for k, (eta, mu, value) in enumerate([(3.0, 0.0, 1.0), (3.0, 0.0, 1.2), (3.0, 0.0, 1.1), (6.0, 0.0, 0.5), (3.0, 0.3, 1.4)])]  # fmt: skip
+    fig = plot_intervals(rows, "largest_mass_ratio", "m_lf / m_t", split=["mu_k"])
+    bars = {c.get_label(): c for c in fig.axes[0].containers}
+    zero = bars["22 deg, mu_k 0"]
+    means = zero.lines[0].get_ydata()
+    np.testing.assert_allclose(means, [1.1, 0.5])
+    half = stats.t.ppf(0.975, 2) * np.std([1.0, 1.2, 1.1], ddof=1) / np.sqrt(3)
+    segments = zero.lines[2][0].get_segments()
+    np.testing.assert_allclose([segments[0][0][1], segments[0][1][1]], [1.1 - half, 1.1 + half], rtol=1e-12)
+    assert np.isnan(segments[1]).all() or len(segments) == 1  # one run at eta 6: no interval
+    np.testing.assert_allclose(bars["22 deg, mu_k 0.3"].lines[0].get_ydata(), [1.4])
+
+
+def test_a_run_is_analysed_again_with_the_smallest_cluster_it_knows(sweep, tmp_path, monkeypatch):
+    """Without --min-members, analyze takes what the run was analysed with (summary.json: 20 here),
+    else what the sweep that made it used (its folder's sweep.json), else 50; so does resume
+    --until-settled, whose judgement would otherwise count other clusters."""
+    import shutil
+
+    from decco_warp.folder import MIN_MEMBERS, RunFolder
+
+    out, _ = sweep
+    analysed = tmp_path / "analysed"
+    shutil.copytree(out / "eta1", analysed)
+    swept = tmp_path / "sweep" / "eta1"
+    shutil.copytree(out / "eta1", swept, ignore=shutil.ignore_patterns("summary.json", "analysis.h5", "figures"))
+    (swept.parent / "sweep.json").write_text(json.dumps({"sweep": "s", "settings": {"min_members": 7}}))
+    bare = tmp_path / "bare"
+    shutil.copytree(swept, bare)
+    assert [RunFolder(p).min_members() for p in (analysed, swept, bare)] == [20, 7, MIN_MEMBERS]
+    for run_dir, expected in ((analysed, 20), (swept, 7), (bare, MIN_MEMBERS)):
+        result = cli("analyze", str(run_dir))
+        assert result.returncode == 0, result.stderr
+        assert json.loads((run_dir / "summary.json").read_text())["min_members"] == expected
+    import decco_warp.run
+
+    asked = []
+    monkeypatch.setattr(decco_warp.run, "resume_until_settled", lambda run_dir, advance, max_steps, min_members, *rest, **kw: asked.append(min_members))
+    for run_dir, expected in ((analysed, 20), (swept, 7)):
+        assert cli_here("resume", str(run_dir), "--until-settled").returncode == 0
+        assert cli_here("resume", str(run_dir), "--until-settled", "--min-members", "3").returncode == 0
+    assert asked == [20, 3, 7, 3]
 
 
 def test_analyze_refuses_a_folder_without_runs(tmp_path):
@@ -246,6 +373,11 @@ def test_resume_until_settled_extends_a_run_only_while_its_outcome_changes(tmp_p
     assert "settled at step 400" in result.stdout and "extending" not in result.stdout
     # The run's totals apart from this session's costs: a finished run resumed steps nothing.
     assert "done: the run is at step 400 (16 s simulated); this session stepped 0 steps in" in result.stdout
+    import re
+
+    times = re.search(r"this session stepped 0 steps in ([\d.]+) s wall.*\(([\d.]+) s wall over all the run's sessions\)", result.stdout)
+    session, total = float(times[1]), float(times[2])
+    assert session < 0.5 * total  # this session stepped nothing: the run's first session's time is not this one's
     result = cli("resume", str(tmp_path / "b"), "--until-settled", "--min-members", "1000000", "--max-steps", "600")
     assert result.returncode == 6, result.stderr
     assert "extending to step 500" in result.stdout and "extending to step 600" in result.stdout
@@ -330,3 +462,29 @@ def test_the_runs_of_a_set_share_their_time_axis(sweep, monkeypatch):
     for name in ("conservation", "stress_shares", "energy"):
         assert limits[name] == [(0.0, 2.0)], name
     assert limits["clusters"] != [(0.0, 2.0)]
+
+
+def test_cross_run_figures_draw_a_series_per_value_of_a_swept_key():
+    """The cross-run figure splits runs by the swept columns that vary (mu_k here; eta is the x axis,
+    never a series; 0.30000000000000004 is mu_k 0.3): each series' line goes through its own
+    realizations' means, where without the split the two frictions were pooled."""
+    from decco_warp.analysis.figures import plot_runs, split_columns
+
+    summaries = []
+    for mu_k, shift in ((0.0, 0.0), (0.1 + 0.2, 0.4)):
+        for eta, base in ((3.0, 1.2), (6.0, 0.8)):
+            for k, noise in enumerate((-0.01, 0.03)):
+                summaries.append({"run": f"mu{mu_k}_eta{eta}_r{k}", "mass_ratio": 0.25, "theta_deg": 0.0, "spin_kind": "none",
+                                  "eta": eta, "mu_k": mu_k, "restitution": 0.9, "largest_mass_ratio": base + shift + noise})  # fmt: skip
+    split = split_columns(summaries, ["eta", "mu_k", "restitution"])
+    assert split == ["mu_k"]
+    fig = plot_runs(summaries, "largest_mass_ratio", "m_lf / m_t", split=split)
+    labels = fig.axes[0].get_legend_handles_labels()[1]
+    assert labels == ["0 deg, mu_k 0", "0 deg, mu_k 0.3"]
+    means = [line for line in line_data(fig) if line[0].size == 2 and line[1].size == 2]
+    np.testing.assert_allclose(means[0][1], [1.21, 0.81])
+    assert any(np.allclose(y, [1.61, 1.21]) for _, y in means)
+    pooled = plot_runs(summaries, "largest_mass_ratio", "m_lf / m_t")
+    assert pooled.axes[0].get_legend_handles_labels()[1] == ["0 deg"]
+    np.testing.assert_allclose(line_data(pooled)[0][1], [1.41, 1.01])
+

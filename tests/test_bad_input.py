@@ -201,6 +201,23 @@ def test_every_writing_command_refuses_an_unwritable_destination_up_front(tmp_pa
     assert blocker.read_text() == "not a folder" and not (tmp_path / "ok.h5").exists()
 
 
+@pytest.mark.parametrize("kernel", ["/proc", "/sys"])
+def test_a_destination_on_the_kernel_s_file_systems_is_refused_in_one_line_before_any_work(tmp_path, kernel):
+    """/proc and /sys are the kernel's (proc, sysfs): os.access() lets root write there and the
+    folder fails only once created (a traceback under /sys, exit 5 without a path under /proc,
+    after the progress bar).  Refused by the up-front check: one line, exit 2, nothing drawn."""
+    from decco_warp.checks import mount_of
+
+    if mount_of(kernel)[1] not in ("proc", "sysfs"):
+        pytest.skip(f"{kernel} is not the kernel's file system here")
+    for args in (["simulate", "--out", f"{kernel}/decco", "--steps", "10", "--device", "cpu"],
+                 ["pile", "--particles", "10", "--out", f"{kernel}/decco.h5", "--device", "cpu"]):  # fmt: skip
+        result = cli(*args)
+        assert result.returncode == 2 and result.stdout == "", (args, result.stderr)
+        assert result.stderr.strip().splitlines() == [result.stderr.strip()] and "Traceback" not in result.stderr
+        assert f"{kernel} is the kernel's {mount_of(kernel)[1]} file system" in result.stderr and f"{kernel}/decco" in result.stderr
+
+
 def test_unwritable_output_folder_is_refused_before_any_work(tmp_path):
     locked = tmp_path / "locked"
     locked.mkdir()

@@ -55,8 +55,33 @@ def test_a_remnant_collides_again(first, tmp_path):
     assert result.returncode == 0, result.stderr
     data = dw.read_trajectory(tmp_path / "second" / "trajectory.h5")
     assert int((data.static["pile_id"] == 0).sum()) == pile.n and data.parameters["piles"]["target_file"] == str(remnant.resolve())
-    for args, message in ((["--fragment", "7"], "--fragment must be one of"), (["--spin", "both"], "--spin must be one of")):
+    assert "loose swarm" not in result.stderr  # a body, not debris
+    for args, message in ((["--fragment", "7"], "--fragment must be one of"), (["--spin", "both"], "--spin must be one of"),
+                          (["--ke-threshold", "0"], "--ke-threshold must be > 0")):  # fmt: skip
         result = cli("extract", str(first), "--out", str(tmp_path / "x.h5"), *args)
         assert result.returncode == 2 and message in result.stderr, result.stderr
+        assert result.stderr.strip().splitlines() == [result.stderr.strip()] and not result.stdout  # no progress line first
     result = cli("extract", str(tmp_path / "nowhere"), "--out", str(tmp_path / "x.h5"))
     assert result.returncode == 2 and "does not exist" in result.stderr
+
+
+def test_a_loose_swarm_is_told_from_a_body():
+    """22 grains spread through a sphere of 119 km fill ~2 % of it: a swarm, and the warning says so
+    (with what extracting it does); a settled pile (the shipped ones fill 0.40 and 0.41) is a body."""
+    from decco_warp.collision import pile_radius
+    from decco_warp.remnant import LOOSE_PACKING, loose_note, packing
+    from decco_warp.run import builtin_pile
+
+    rng = np.random.default_rng(3)
+    directions = rng.normal(size=(22, 3))
+    positions = directions / np.linalg.norm(directions, axis=1)[:, None] * 1.0e7 * rng.uniform(0.2, 1.0, (22, 1)) ** (1 / 3)
+    radii = rng.choice([0.75e6, 1.5e6, 2.25e6], size=22)
+    swarm = dw.State.from_arrays(positions, np.zeros((22, 3)), np.zeros((22, 3)), radii, 4 / 3 * np.pi * 2.7 * radii**3)
+    fill = packing(swarm)
+    assert fill == pytest.approx((radii**3).sum() / pile_radius(swarm) ** 3) and fill < LOOSE_PACKING
+    note = loose_note(swarm, 3, settle=True)
+    assert note.startswith("warning: fragment 3 is a loose swarm, not a body: 22 grains") and f"{pile_radius(swarm) / 1e5:.3g} km" in note
+    assert "collapse" in note and "as the swarm it is" in loose_note(swarm, 3, settle=False)
+    for which in ("target", "projectile"):
+        pile = dw.load_pile(builtin_pile(which))
+        assert packing(pile) > 2 * LOOSE_PACKING and loose_note(pile, 0, settle=True) is None

@@ -116,9 +116,15 @@ def _frames(run_dir):
 
 def test_stopped_run_resumes_bit_identically(tmp_path):
     straight = start_run(_spec(tmp_path, "straight"))
-    start_run(_spec(tmp_path, "parts", steps=300))
+    first = start_run(_spec(tmp_path, "parts", steps=300))
+    began = time.perf_counter()
     resumed = resume_run(tmp_path / "parts", steps=600)
+    took = time.perf_counter() - began
     assert resumed.steps == 600 and resumed.steps_this_session == 300
+    # This session's time apart from the run's over all its sessions (the first one's, then this one's).
+    assert 0 < resumed.session_stepping_seconds < resumed.session_wall_seconds < took
+    assert resumed.wall_seconds == pytest.approx(first.wall_seconds + resumed.session_wall_seconds, abs=0.2)
+    assert first.session_wall_seconds == first.wall_seconds
     assert_same_run(_frames(straight.run_dir), _frames(tmp_path / "parts"))
     snap_a, _, _ = read_checkpoint(tmp_path / "straight" / "checkpoint.h5")
     snap_b, _, _ = read_checkpoint(tmp_path / "parts" / "checkpoint.h5")
@@ -361,6 +367,31 @@ def test_help_prints_units_and_toml_tables_as_written():
                 assert token in shown, (name, param.name, token)
                 checked += 1
     assert checked >= 5  # units of pile and simulate, the sweep's and piles' TOML tables
+
+
+def test_simulate_sets_the_contact_physics_as_pile_does(tmp_path):
+    """--restitution, --mu-k and --mu-r (pile's options) reach the run: its spec.toml, its checkpoint's
+    Params and the plan's physics line; a value out of range is one line and exit 2, nothing written."""
+    import tomllib
+
+    import typer
+
+    from decco_warp.cli import app
+
+    commands = typer.main.get_command(app).commands
+    physics = {"--restitution", "--mu-k", "--mu-r", "--k-in", "--dt"}
+    for name in ("simulate", "pile"):
+        assert physics <= {opt for param in commands[name].params for opt in param.opts}, name
+    args = ("--mu-k", "0.6", "--mu-r", "0.01", "--restitution", "0.5", "--steps", "20", "--output-every", "10", "--device", "cpu")
+    check = cli("simulate", *args, "--check")
+    assert check.returncode == 0 and "physics: restitution 0.5, mu_k 0.6, mu_r 0.01 (couple)" in check.stdout, check.stderr
+    result = cli("simulate", *args, "--out", str(tmp_path), "--name", "rough")
+    assert result.returncode == 0, result.stderr
+    params = tomllib.loads((tmp_path / "rough" / "spec.toml").read_text())["params"]
+    assert (params["mu_k"], params["mu_r"], params["restitution"]) == (0.6, 0.01, 0.5)
+    bad = cli("simulate", "--restitution", "1.5", "--out", str(tmp_path), "--name", "bad", "--device", "cpu")
+    assert bad.returncode == 2 and "restitution = 1.5: must be in (0, 1]" in bad.stderr and len(bad.stderr.splitlines()) == 1
+    assert not (tmp_path / "bad").exists()
 
 
 def test_check_estimates_the_cost_and_a_missing_folder_does_not_exist(tmp_path):

@@ -56,3 +56,20 @@ def test_largest_mass_ratio_from_a_collision_record():
     q_star = scaling.disruption_energy(6e22, 1.5e22, 2.03e7, 1.29e7, 0.0)
     collision["kinetic_energy"] = q_star * 7.5e22  # Q_R = Q*: half the total mass stays
     assert scaling.largest_mass_ratio(collision) == pytest.approx(0.5 * 7.5e22 / 6e22, rel=1e-12)
+
+
+def test_the_impact_in_ls12_terms_from_a_collision_record():
+    """Equal masses head-on at twice the mutual escape speed: Q_R = 1/2 (M/4) V^2 / M, and against
+    Q*_RD,1 by hand; without gravity there is no escape speed nor Q*_RD; without the record, None."""
+    mass, radius = 6e22, 2e7
+    escape = math.sqrt(2 * G_CGS * 2 * mass / (2 * radius))
+    speed = 2 * escape
+    collision = {"target_mass": mass, "projectile_mass": mass, "target_radius": radius, "projectile_radius": radius,
+                 "theta_deg": 0.0, "speed": speed, "kinetic_energy": 0.5 * (mass / 2) * speed**2}  # fmt: skip
+    columns = scaling.impact_columns(collision)
+    q_r = 0.5 * (mass / 2) * speed**2 / (2 * mass)
+    q_star = 5.0 * 0.8 * math.pi * G_CGS * (3 * 2 * mass / (4 * math.pi)) ** (2 / 3)
+    assert columns["speed_over_escape"] == pytest.approx(2.0, rel=1e-12) and columns["q_r"] == pytest.approx(q_r, rel=1e-12)
+    assert columns["q_rd_star"] == pytest.approx(q_star, rel=1e-12) and columns["q_r_over_q_rd_star"] == pytest.approx(q_r / q_star, rel=1e-12)
+    assert scaling.impact_columns(collision, G=0.0) == {"speed_over_escape": None, "q_r": pytest.approx(q_r), "q_rd_star": None, "q_r_over_q_rd_star": None}
+    assert scaling.impact_columns({"theta_deg": 0.0}) == dict.fromkeys(scaling.IMPACT_COLUMNS)

@@ -22,7 +22,7 @@ name = "grid"
 out = "{out}"
 min_members = 20
 keep_trajectory = false
-analyse_every = 2
+analyze_every = 2
 [sweep.grid]
 "collision.eta" = [0.5, 1.0]
 "params.dt" = [0.04, 5.0]
@@ -43,12 +43,19 @@ def test_grid_expands_to_checked_run_specs(tmp_path):
     path = tmp_path / "s.toml"
     path.write_text(SWEEP.format(out=tmp_path))
     settings, runs = load_sweep(path)
-    assert settings["name"] == "grid" and len(runs) == 4
+    assert settings["name"] == "grid" and len(runs) == 4 and settings["swept"] == ["eta", "dt"]
     assert sorted(r["run"]["name"] for r in runs) == ["eta0.5_dt0.04", "eta0.5_dt5", "eta1_dt0.04", "eta1_dt5"]
     assert {(r["collision"]["eta"], r["params"]["dt"]) for r in runs} == {(0.5, 0.04), (0.5, 5.0), (1.0, 0.04), (1.0, 5.0)}
     assert all(r["run"]["out"] == str(tmp_path / "grid") for r in runs)
     path.write_text(SWEEP.format(out=tmp_path).replace('"params.dt"', '"params.spin"'))
     with pytest.raises(specs.SpecError, match="not a sweepable"):
+        load_sweep(path)
+    # The key spelled as the command (analyze); sweep files of its earlier spelling are read alike.
+    assert settings["analyze_every"] == 2
+    path.write_text(SWEEP.format(out=tmp_path).replace("analyze_every", "analyse_every"))
+    assert load_sweep(path)[0]["analyze_every"] == 2
+    path.write_text(SWEEP.format(out=tmp_path).replace("analyze_every = 2", "analyze_every = 2\nanalyse_every = 3"))
+    with pytest.raises(specs.SpecError, match="analyse_every is the earlier name of analyze_every"):
         load_sweep(path)
 
 
@@ -59,7 +66,7 @@ def test_a_repeated_set_up_runs_once(tmp_path):
     grid = '''"collision.target_spin, collision.target_spin_axis" = [[0.0, "+z"], [0.0, "+x"], [0.5, "+z"], [0.5, "+x"]]
 '''
     text = SWEEP.format(out=tmp_path).replace('"collision.eta" = [0.5, 1.0]\n"params.dt" = [0.04, 5.0]\n', grid)
-    text = text.replace("analyse_every = 2", "analyse_every = 2\nrealizations = 2")
+    text = text.replace("analyze_every = 2", "analyze_every = 2\nrealizations = 2")
     path.write_text(text)
     settings, runs = load_sweep(path)
     names = [r["run"]["name"] for r in runs]
@@ -85,6 +92,13 @@ def test_sweep_runs_on_two_workers_reports_failures_and_resumes(tmp_path):
     assert all(r["reason"].startswith("step ") and "too long" in r["reason"] for r in failed), failed
     assert {float(r["eta"]) for r in failed} == {0.5, 1.0}
     assert all(float(r["largest_mass_ratio"]) > 0 for r in good)
+    # Every physics parameter is a column, each row with its run's own value (a failed run's too).
+    defaults = specs.resolve_spec({})["params"]
+    for row in rows.values():
+        assert float(row["dt"]) == (5.0 if row["status"] == "failed" else 0.04)
+        for key in ("k_in", "restitution", "mu_k", "mu_r", "G", "gravity_every"):
+            assert float(row[key]) == defaults[key], key
+        assert row["rolling_friction"] == defaults["rolling_friction"]
     assert (tmp_path / "grid" / "figures" / "largest_fragment.png").stat().st_size > 1000
     # Analysed, then the trajectory dropped: the analysis, the figures and the final checkpoint stay.
     for row in good:
@@ -92,7 +106,7 @@ def test_sweep_runs_on_two_workers_reports_failures_and_resumes(tmp_path):
         assert not (run_dir / "trajectory.h5").exists() and not (run_dir / "trajectory.xdmf").exists()
         assert {"spec.toml", "run.log", "checkpoint.h5", "analysis.h5", "summary.json", "figures"} <= {p.name for p in run_dir.iterdir()}
         summary = json.loads((run_dir / "summary.json").read_text())
-        assert summary["analyse_every"] == 2 and summary["largest_mass_ratio"] == pytest.approx(float(row["largest_mass_ratio"]))
+        assert summary["analyze_every"] == 2 and summary["largest_mass_ratio"] == pytest.approx(float(row["largest_mass_ratio"]))
         assert float(row["deepest_overlap"]) > 0 and float(row["ledger_closure"]) < 1e-9 and int(row["n_particles"]) == 450
         assert 0 < float(row["stepping_seconds"]) < float(row["wall_seconds"])
     record = json.loads((tmp_path / "grid" / "sweep.json").read_text())
@@ -106,6 +120,10 @@ def test_sweep_runs_on_two_workers_reports_failures_and_resumes(tmp_path):
     rows = _rows(tmp_path / "grid" / "summary.csv")
     assert sorted(r["status"] for r in rows.values()) == ["failed", "failed", "skipped (complete)", "skipped (complete)"]
     assert {name: rows[name]["analysis_seconds"] for name in took} == took
+    # A skipped run was made before: no device is claimed for it, and its line says what it took then.
+    assert all(rows[name]["device"] == "" for name in took)
+    skipped = [line for line in " ".join(again.stderr.split()).split(" eta") if "skipped (complete)" in line]
+    assert skipped and all("made before this sweep, in" in line and "on auto" not in line for line in skipped)
 
 
 def test_bad_sweep_files_are_exit_2(tmp_path):
@@ -205,6 +223,71 @@ def test_a_stopped_sweep_keeps_its_table_and_continues(tmp_path):
     assert len(rows) == 6 and all(rows[name]["status"] == "skipped (complete)" for name in done)
 
 
+def test_ctrl_c_on_a_sweep_checkpoints_its_running_runs_and_says_what_it_kept(tmp_path):
+    """Ctrl-C at a terminal signals every process of the sweep at once (its Dask workers and analysis
+    processes too): the running runs write a checkpoint at the step they reached (their last periodic
+    one is step 0 here) with a "stopped" line in run.log, the sweep ends with exit 3 and a line that
+    says so (and that no summary.csv exists yet: no run had finished), without Dask's "still alive,
+    killing" warnings; run again, the runs resume from those steps."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from decco_warp.io import read_checkpoint
+
+    path = tmp_path / "s.toml"
+    text = SWEEP.format(out=tmp_path).replace('"params.dt" = [0.04, 5.0]', "").replace('"collision.eta" = [0.5, 1.0]', '"params.mu_k" = [0.0, 0.6]')
+    text = text.replace("steps = 200\noutput_every = 50", "steps = 2000000\noutput_every = 1000\ncheckpoint_every = 1000000")
+    path.write_text(text + "[params]\ngravity_every = 10\n")
+    process = subprocess.Popen(
+        [sys.executable, "-c", "from decco_warp.cli import main_entry; main_entry()", "sweep", str(path), "--workers", "2"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )  # fmt: skip
+    logs = [tmp_path / "grid" / name / "run.log" for name in ("mu_k0", "mu_k0.6")]
+    deadline = time.time() + 180
+    while time.time() < deadline and not all(log.is_file() and "frame: step 3000," in log.read_text() for log in logs):
+        time.sleep(0.2)
+    os.killpg(process.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole process group
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 3, stderr
+    assert "still alive" not in stderr and "Traceback" not in stderr, stderr
+    line = " ".join(stderr.split("decco-warp: ")[-1].split())
+    assert "after 0 of 2 runs (no run had finished, so there is no summary.csv yet)" in line and "summary.csv holds" not in line
+    assert not (tmp_path / "grid" / "summary.csv").exists()
+    steps = {}
+    for log in logs:
+        last = log.read_text().splitlines()[-1]
+        assert "stopped by SIGINT at step" in last, last
+        steps[log.parent.name] = int(last.split("at step ")[1].split(";")[0])
+        assert int(read_checkpoint(log.parent / "checkpoint.h5")[0]["step"]) == steps[log.parent.name] >= 3000
+        assert f"{log.parent.name} at step {steps[log.parent.name]}" in line
+    result = cli("sweep", str(path), "--check")
+    states = {line.split()[0]: line.split(None, 1)[1] for line in result.stdout.splitlines()[1:] if line.startswith("  ") and not line.startswith("   ")}
+    assert states == {name: f"resumes at step {step}" for name, step in steps.items()}
+
+
+def test_a_stopped_sweep_s_line_says_what_each_kind_of_stop_kept(tmp_path):
+    """Stopped in order: the runs checkpointed with their steps and those left unanalysed; by a second
+    signal: none waited for; before the workers were up: none started; summary.csv named only where
+    finished runs fill it."""
+    from decco_warp.errors import SweepStopped
+    from decco_warp.sweep import SweepJob
+
+    path = tmp_path / "s.toml"
+    path.write_text(SWEEP.format(out=tmp_path))
+    job = SweepJob(*load_sweep(path))
+    job.stopped, job.finished = True, [{"run": "eta0.5_dt0.04", "status": "ok"}]
+    job.stop = SweepStopped("SIGTERM", [{"run": "eta1_dt0.04", "step": 120}, {"run": "eta1_dt5", "step": None}], ["eta0.5_dt5"])
+    line = job.stopped_line()
+    assert "after 1 of 4 runs (summary.csv holds the 1 finished)" in line and "1 stepping run(s) wrote a checkpoint" in line
+    assert "eta1_dt0.04 at step 120" in line and "eta1_dt5" not in line and "not analysed yet (eta0.5_dt5)" in line
+    job.finished, job.stop = [], SweepStopped("SIGINT", [], [], at_once=True)
+    assert "no summary.csv yet" in job.stopped_line() and "without waiting for the runs stepping" in job.stopped_line()
+    job.stop = None
+    assert "before its workers were up, so no run had started" in job.stopped_line()
+
+
 def test_a_sweep_packs_runs_into_ensembles_with_the_results_of_runs_alone(tmp_path):
     """[sweep] ensemble = 4 hands the whole grid to one worker: the two runs of each dt are stepped
     together, the dt = 5 s pair blows up on its own (each with its own reason), and the others
@@ -215,7 +298,7 @@ def test_a_sweep_packs_runs_into_ensembles_with_the_results_of_runs_alone(tmp_pa
     from decco_warp.run import start_run
 
     path = tmp_path / "s.toml"
-    path.write_text(SWEEP.format(out=tmp_path).replace("analyse_every = 2", "analyse_every = 2\nensemble = 4"))
+    path.write_text(SWEEP.format(out=tmp_path).replace("analyze_every = 2", "analyze_every = 2\nensemble = 4"))
     settings, runs = load_sweep(path)
     assert settings["ensemble"] == 4
     result = cli("sweep", str(path), "--workers", "1")
@@ -233,7 +316,7 @@ def test_a_sweep_packs_runs_into_ensembles_with_the_results_of_runs_alone(tmp_pa
         theirs = read_checkpoint(alone.run_dir / "checkpoint.h5")[0]
         assert all(np.array_equal(mine[key], theirs[key]) for key in ("positions", "velocities", "omegas", "work"))
     with pytest.raises(specs.SpecError, match="ensemble"):
-        path.write_text(SWEEP.format(out=tmp_path).replace("analyse_every = 2", "ensemble = 0"))
+        path.write_text(SWEEP.format(out=tmp_path).replace("analyze_every = 2", "ensemble = 0"))
         load_sweep(path)
 
 
@@ -255,7 +338,7 @@ def test_ensemble_auto_packs_small_runs_on_a_gpu_only_and_alike_in_size(tmp_path
     assert ensemble_plan("auto", 2, runs=0, workers=2) == (1, ENSEMBLE_MAX_PARTICLES)
     assert ensemble_plan(3, 0) == (3, None)
     for bad in ("many", 0, 2.5, True):
-        path.write_text(SWEEP.format(out=tmp_path).replace("analyse_every = 2", f"ensemble = {json.dumps(bad)}"))
+        path.write_text(SWEEP.format(out=tmp_path).replace("analyze_every = 2", f"ensemble = {json.dumps(bad)}"))
         with pytest.raises(specs.SpecError, match='ensemble = .*"auto"'):
             load_sweep(path)
     # Two runs alike in all but eta: together when small enough, each alone past the limit.
@@ -267,6 +350,19 @@ def test_ensemble_auto_packs_small_runs_on_a_gpu_only_and_alike_in_size(tmp_path
     mixed = [{**r, "run": {**r["run"], "out": str(tmp_path / "c"), **extra}} for r, extra in zip(pair, ({"layout": "newton"}, {}))]
     assert [row["ensemble"] for row in simulate_batch(mixed)] == [1, 1]
     assert all(row["status"] == "ok" for row in together + alone)
+    # Stopped part-way (a stop requested before its first step: it checkpoints at its first stop), then
+    # resumed, a run's row gives this session's time beside the run's over all its sessions.
+    from decco_warp.errors import RunStopped
+    from decco_warp.run import execute, prepare_start
+    from decco_warp.sweep import finished_line
+
+    first = {**pair[0], "run": {**pair[0]["run"], "out": str(tmp_path / "d")}}
+    (tmp_path / "stop").write_text("SIGINT")
+    with pytest.raises(RunStopped):
+        execute(prepare_start(first), stop_file=tmp_path / "stop")
+    [row] = simulate_batch([first])
+    assert row["status"] == "ok" and row["resumed"] and 0 < row["session_seconds"] < row["wall_seconds"], row.get("reason")
+    assert f"{row['session_seconds']:.1f} s on cpu; {row['wall_seconds']:.1f} s over all its sessions" in finished_line(row)
 
 
 def test_auto_ensembles_group_runs_of_10000_particles_and_keep_larger_ones_alone():
@@ -344,6 +440,30 @@ def test_committed_results_are_runs_of_the_shipped_sweeps(folder, sweeps, overri
         assert spec["run"]["steps"] == run["run"]["steps"]
 
 
+def test_sweep_check_costs_runs_at_their_own_gravity_clock_with_a_total_and_one_note(tmp_path):
+    """gravity_every = 10 on a CPU: each run's cost is that of a step at K = 10 (the K = 1 step's
+    gravity over 10 plus the contacts), which stands to the K = 1 step as whole runs measured it (the
+    default collision, 450 particles: 48.8 s against 6.2 s of stepping on a 2-core CPU, 7.9x; here
+    within 15 %); a total for the sweep sums them; the note on how K > 1 is estimated is said once."""
+    import re
+
+    from decco_warp.costs import GRAVITY_EVERY_NOTE, step_seconds
+
+    path = tmp_path / "s.toml"
+    text = SWEEP.format(out=tmp_path).replace('"params.dt" = [0.04, 5.0]', "").replace('"collision.eta" = [0.5, 1.0]', '"params.mu_k" = [0.0, 0.6]')
+    path.write_text(text.replace("steps = 200", "steps = 50000").replace("analyze_every = 2", "analyze_every = 2\nrealizations = 3")
+                    + "[params]\ngravity_every = 10\n")  # fmt: skip
+    result = cli("sweep", str(path), "--check")
+    assert result.returncode == 0, result.stderr
+    k10, k1 = step_seconds(450, "all-pairs", "cpu", 10), step_seconds(450, "all-pairs", "cpu", 1)
+    assert k1 / k10 == pytest.approx(48.8 / 6.2, rel=0.15)
+    costs = re.findall(r"; about ([\d.]+) s on cpu \(([\d.]+) ms a step x 50000 steps at gravity every 10 steps", result.stdout)
+    assert len(costs) == 6 and all(float(ms) == pytest.approx(1e3 * k10, rel=0.01) for _, ms in costs)
+    total = re.search(r"^cost: about ([\d.]+) (s|min) of stepping for the 6 run\(s\) to make or resume on cpu", result.stdout, re.M)
+    assert total and float(total[1]) * (60 if total[2] == "min" else 1) == pytest.approx(6 * 50000 * k10, rel=0.05)
+    assert result.stdout.count(GRAVITY_EVERY_NOTE) == 1 and result.stdout.count("note:") == 1
+
+
 def test_sweep_check_lists_where_runs_stand_and_only_runs_a_part(tmp_path):
     """`--check` lists the runs and their state without starting anything; `--only` steps the runs
     whose names match, while complete runs stay in summary.csv; a pattern matching nothing is refused."""
@@ -359,7 +479,7 @@ def test_sweep_check_lists_where_runs_stand_and_only_runs_a_part(tmp_path):
     assert result.returncode == 0, result.stderr
     assert list(_rows(tmp_path / "grid" / "summary.csv")) == ["eta0.5_dt0.04"]
     result = cli("sweep", str(path), "--check")
-    listed = [line for line in result.stdout.splitlines()[1:] if not line.startswith("   ")]
+    listed = [line for line in result.stdout.splitlines()[1:] if line.startswith("  ") and not line.startswith("   ")]
     lines = {line.split()[0]: line.split(None, 1)[1] for line in listed}
     assert lines == {"eta0.5_dt0.04": "complete", "eta0.5_dt5": "to run", "eta1_dt0.04": "to run", "eta1_dt5": "to run"}
     # Each run still to make: its margins, predicted overlap and cost (dt = 5 s: eq. 17's margin far below 10,
@@ -379,7 +499,7 @@ def test_sweep_check_lists_where_runs_stand_and_only_runs_a_part(tmp_path):
     spec_file.write_text(spec_file.read_text().replace("steps = 200", "steps = 400"))
     result = cli("sweep", str(path), "--check", "--only", "eta1_dt0.04")
     assert result.returncode == 0, result.stderr
-    lines = {line.split()[0]: line.split(None, 1)[1] for line in result.stdout.splitlines()[1:] if not line.startswith("   ")}
+    lines = {line.split()[0]: line.split(None, 1)[1] for line in result.stdout.splitlines()[1:] if line.startswith("  ") and not line.startswith("   ")}
     assert lines == {"eta0.5_dt0.04": "complete", "eta1_dt0.04": "resumes at step 200"}
     assert "1 complete, 1 to resume, 0 to run" in result.stdout
     # The progress a sweep reports while its runs step: each run by its last checkpoint.

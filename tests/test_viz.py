@@ -46,7 +46,8 @@ def recorded(tmp_path_factory):
     result = cli("simulate", *STEPS, "--rerun", "save", "--out", str(out), "--device", "cpu")
     assert result.returncode == 0, result.stderr
     run_dir = out / "default"
-    assert "recording.rrd" in result.stdout
+    outputs = next(line for line in result.stdout.splitlines() if line.startswith("outputs in"))
+    assert ", recording.rrd (rerun's recording: " in outputs and (run_dir / "recording.rrd").is_file()  # listed with the run's outputs
     view = cli("view", str(run_dir), "--save", str(out / "replay.rrd"))
     assert view.returncode == 0, view.stderr
     return run_dir, out / "replay.rrd"
@@ -125,3 +126,30 @@ def test_view_mode_save_writes_the_recording_into_the_run_folder(recorded, tmp_p
     again, _ = read_recording(run_dir / "recording.rrd")
     live, _ = read_recording(recorded[0] / "recording.rrd")
     assert set(again) == set(live)
+
+
+def test_a_movie_of_a_run_is_written_without_a_display(recorded, tmp_path, monkeypatch):
+    """`decco-warp movie` draws every frame (or every Nth, the last always) into a file, without a
+    display: an mp4 where ffmpeg is, else a GIF beside it with a note saying so; each movie frame
+    is one of the run's, the last one titled with the run's last step."""
+    from PIL import Image
+
+    import decco_warp.analysis.movie as movies
+
+    from helpers import cli_here
+
+    run_dir, _ = recorded
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.setattr(movies, "ffmpeg_available", lambda: False)
+    data = dw.read_trajectory(run_dir / "trajectory.h5")
+    result = cli_here("movie", str(run_dir), "--out", str(tmp_path / "run.mp4"), "--every", "2")
+    assert result.returncode == 0, result.stderr
+    assert "ffmpeg is not installed" in result.stderr and f"wrote {tmp_path / 'run.gif'}" in result.stdout
+    assert not (tmp_path / "run.mp4").exists()
+    with Image.open(tmp_path / "run.gif") as movie:
+        assert movie.n_frames == len(range(0, data.step.size, 2)) + (0 if (data.step.size - 1) % 2 == 0 else 1)
+    result = cli_here("movie", str(run_dir), "--out", str(tmp_path / "run.gif"))
+    with Image.open(tmp_path / "run.gif") as movie:
+        assert result.returncode == 0 and movie.n_frames == data.step.size and "note" not in result.stderr
+    bad = cli_here("movie", str(run_dir), "--out", str(tmp_path / "run.avi"))
+    assert bad.returncode == 2 and "written as .mp4 or .gif" in bad.stderr and not bad.stdout

@@ -53,9 +53,10 @@ KEY_DIGITS = 6
 #: 1/10 runs, whose ratio is 0.10031.
 WHERE_TOLERANCE = 0.01
 #: The columns that define a set-up: rows compared at one point must agree in each of these (where
-#: present) unless it is the ``by`` or ``at`` column.  (Summaries do not record restitution or the
-#: friction coefficients yet; they are checked once they do.)
-SETUP_COLUMNS = ("mass_ratio", "theta_deg", "k_in", "dt", "gravity_every", "eta_potential", "n_particles", "restitution", "mu_k", "mu_r")
+#: present: summaries older than the physics columns have no restitution, friction, G or law) unless
+#: it is the ``by`` or ``at`` column.
+SETUP_COLUMNS = ("mass_ratio", "theta_deg", "k_in", "dt", "gravity_every", "eta_potential", "n_particles", "restitution", "mu_k", "mu_r",
+                 "G", "rolling_friction")  # fmt: skip
 #: The group that ``spin_kind`` is compared against by default, where present.
 NO_SPIN = "none"
 #: Columns that a sweep's summary.csv gives each run beside its summary.json's (a run folder alone
@@ -170,6 +171,34 @@ def parse_cell(text: str | None):
     return number if math.isfinite(number) else None
 
 
+#: The types a row's values may have: those of summary.json's (strict JSON) values.
+CELL_TYPES = (int, float, str, bool, type(None))
+
+
+def typed_row(row) -> dict:
+    """A run's row as :func:`compare` takes it: text cells (a ``csv.DictReader`` row's, every one
+    text) read as summary.csv's are (:func:`parse_cell`), a list (a spin axis given as a vector) as
+    a tuple, so that it can name a group, the rest as they are; a value of another type (a dict, an
+    object) is refused, naming the run and the column."""
+    if not isinstance(row, dict):
+        raise CompareError(f"a row must be a dict of a run's columns (summary.json's, or a csv.DictReader row); got {type(row).__name__}")
+    typed = {}
+    for key, value in row.items():
+        if key is None:  # csv.DictReader's cells past the header
+            continue
+        if isinstance(value, str):
+            value = parse_cell(value)
+        elif isinstance(value, np.generic):
+            value = value.item()
+        elif isinstance(value, (list, tuple, np.ndarray)):
+            value = tuple(np.asarray(value).tolist())
+        elif not isinstance(value, CELL_TYPES):
+            raise CompareError(f"run {row.get('run', '?')}: column {key} holds a {type(value).__name__}; "
+                               "a row's values are numbers, text, True/False, None or lists (as summary.json's)")  # fmt: skip
+        typed[key] = value
+    return typed
+
+
 def parse_where(texts) -> dict[str, list]:
     """``COLUMN=VALUE[,VALUE...]`` strings as {column: values}; a column named twice takes the
     values of both."""
@@ -201,8 +230,10 @@ def label(key) -> str:
 
 
 def _order(key):
-    """Sort key over numbers and text together: numbers first."""
-    return (1, key) if isinstance(key, str) else (0, float(key))
+    """Sort key over numbers, text and tuples (vectors) together: numbers first."""
+    if isinstance(key, (int, float)) and not isinstance(key, bool):
+        return (0, float(key), "")
+    return (1, 0.0, key) if isinstance(key, str) else (2, 0.0, str(key))
 
 
 def _matches(value, wanted) -> bool:
@@ -454,6 +485,7 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
     where = where or {}
     if not rows:
         raise CompareError("no runs to compare")
+    rows = [typed_row(row) for row in rows]
     options = {"--by": by, "--metric": metric, **({"--at": at} if at else {}), **{"--where": c for c in where}}
     _check_columns(rows, options)
     if resolve is not None and not (math.isfinite(resolve) and resolve > 0):
@@ -495,7 +527,7 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
             raise CompareError(f"--reference {label(reference)}: no such {by} among the runs; they have: {', '.join(map(label, groups))}")
 
     result = []
-    for at_key in sorted(points, key=lambda k: _order(k) if k is not None else (0, 0.0)):
+    for at_key in sorted(points, key=lambda k: _order(k) if k is not None else (0, 0.0, "")):
         point = points[at_key]
         if not allow_mixed:  # the rows compared with each other: all at the point, or each group's against a value
             for members in ([row for members in point.values() for row in members],) if against is None else point.values():

@@ -150,11 +150,63 @@ def plot_energy(analysis: dict):
     return fig
 
 
+def plot_largest_fragment_time(analysis: dict):
+    """m_lf/m_t against time, each analysed frame a point on the line; the late window (the last
+    10 % of the run, where the settled verdict is judged) shaded."""
+    from .runs import late_window
+
+    frames = analysis["frames"]
+    t = np.asarray(frames["time"]) / HOUR
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    ax.plot(t, frames["largest_mass_ratio"], marker=".", color="C0")
+    late = late_window(frames["time"])
+    if late.size:
+        ax.axvspan(t[late[0]], t[-1], color="0.85", zorder=0, label="late window (settled verdict)")
+        ax.legend(fontsize=8, loc="best")
+    ax.axhline(1.0, color="0.6", linewidth=0.6)
+    ax.set_xlabel("time [h]")
+    ax.set_ylabel("m_lf / m_t")
+    settled = analysis.get("summary", {}).get("settled")
+    ax.set_title("largest fragment over the target's mass" + ("" if settled is None else ", settled" if settled else ", NOT settled"))
+    return fig
+
+
+def debris_sizes(final: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The debris size distribution of a run's last frame: fragment masses in decreasing order (every
+    cluster, and each grain in no cluster as a fragment of its own) [g], and the cumulative mass of
+    the fragments at least that massive [g]."""
+    masses = np.concatenate([np.asarray(final["mass"], dtype=float), np.asarray(final["particle_mass"], dtype=float)[np.asarray(final["label"]) < 0]])
+    masses = np.sort(masses)[::-1]
+    return masses, np.cumsum(masses)
+
+
+def plot_debris_sizes(analysis: dict):
+    """The debris size distribution at the last frame: the cumulative mass of the fragments of mass
+    >= m, over the total, against m over the total (log), each grain in no cluster a fragment of one grain."""
+    final = analysis["final"]
+    masses, cumulative = debris_sizes(final)
+    total = float(np.asarray(final["particle_mass"], dtype=float).sum())
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    ax.step(masses / total, cumulative / total, where="post", color="C0")
+    ax.plot(masses / total, cumulative / total, linestyle="", marker=".", color="C0")
+    ax.set_xscale("log")
+    ax.set_ylim(0.0, 1.02)
+    ax.invert_xaxis()
+    ax.set_xlabel("fragment mass m / M_tot")
+    ax.set_ylabel("mass in fragments of >= m, / M_tot")
+    minimum = analysis.get("summary", {}).get("min_members")
+    clusters = f"clusters of >= {minimum} grains" if minimum else "clusters"
+    ax.set_title(f"debris at t = {final['time'] / HOUR:.3g} h ({clusters}; lone grains each a fragment)", fontsize=9)
+    return fig
+
+
 RUN_FIGURES = {
     "clusters": plot_clusters,
     "conservation": plot_conservation,
     "stress_shares": plot_stress_shares,
     "energy": plot_energy,
+    "largest_fragment_time": plot_largest_fragment_time,
+    "debris_sizes": plot_debris_sizes,
 }
 
 
@@ -166,8 +218,10 @@ def draw_run(analysis: dict, run_dir: Path, end_time: float | None = None) -> li
     for name, plot in RUN_FIGURES.items():
         if name == "clusters" and "positions" not in analysis.get("final", {}):
             continue  # a lean analysis.h5 (runs/results/lean.py) keeps no final positions
+        if name == "debris_sizes" and "particle_mass" not in analysis.get("final", {}):
+            continue
         fig = plot(analysis)
-        if end_time is not None and name != "clusters":
+        if end_time is not None and name not in ("clusters", "debris_sizes"):
             for ax in fig.axes:
                 ax.set_xlim(0.0, end_time / HOUR)
         paths += save(fig, Path(run_dir) / "figures", name)
@@ -233,31 +287,104 @@ def draw_law(ax, points: list[dict], colour, label: str) -> None:
         ax.plot(etas, [p["planets"] for p in known], linestyle=":", color=colour, label=f"{label}: LS12 planets (c* = 1.9)")
 
 
-def plot_runs(summaries: list[dict], metric: str, ylabel: str, x: str = "eta"):
-    """Cross-run figure (Fig. 3 / Fig. 9 style): ``metric`` vs eta (``x``: "eta", "eta_self" or
-    "eta_all"), one panel per mass ratio, a line per angle and kind of spin through each point's
-    mean; where a point has several realizations, each drawn faintly and a bar from the smallest to
-    the largest; unsettled points hollow; for m_lf/m_t, the Leinhardt & Stewart (2012) law at the
-    same set-ups (:func:`draw_law`).  Panels share their axes."""
+#: Set-up columns that never split runs into series of their own: the x axis (eta, or the speed that
+#: gave it), the angle and the kind of spin (each figure's own families), and what a realization draws
+#: (its orientation seed, its piles; spin axes count by their kind).
+NOT_SPLIT = ("eta", "speed", "theta_deg", "orientation_seed", "target_spin_axis", "projectile_spin_axis", "target_pile", "projectile_pile")
+
+
+def split_columns(summaries: list[dict], candidates) -> list[str]:
+    """Of the ``candidates`` (a sweep's swept columns, say), those that take more than one value
+    among ``summaries`` (numbers to 6 significant digits, compare.value_key) and are not NOT_SPLIT:
+    the columns whose values make series of their own."""
+    from .compare import value_key
+
+    return [c for c in dict.fromkeys(candidates) if c not in NOT_SPLIT and len({_key(value_key, s.get(c)) for s in summaries}) > 1]
+
+
+def _key(value_key, value):
+    """A value as a group's key: numbers rounded, lists (a spin axis) as tuples."""
+    return tuple(value) if isinstance(value, list) else value_key(value)
+
+
+def group_key(summary: dict, split: list[str]) -> tuple:
+    """The values of the ``split`` columns of a run, rounded (compare.value_key): runs with the same
+    key are realizations of one series."""
+    from .compare import value_key
+
+    return tuple(_key(value_key, summary.get(c)) for c in split)
+
+
+def group_label(key: tuple, split: list[str]) -> str:
+    """A series' values in words: "mu_k 0.3, restitution 0.5"."""
+    from .compare import label
+
+    return ", ".join(f"{c} {label(v)}" for c, v in zip(split, key))
+
+
+def family_order(key: tuple):
+    """Sort key of (angle, spin kind, *split values) over numbers, text and None together."""
+    return tuple((0, v, "") if isinstance(v, (int, float)) and not isinstance(v, bool) else (1, 0, str(v)) for v in key)
+
+
+def family_of(summary: dict, split: list[str]) -> tuple:
+    """A run's series: its angle, kind of spin and values of the ``split`` columns."""
+    return (summary.get("theta_deg"), summary.get("spin_kind") or "none", *group_key(summary, split))
+
+
+def family_label(key: tuple, split: list[str]) -> str:
+    """A series (:func:`family_of`) in words: "22 deg, parallel spins, mu_k 0.3"."""
+    angle, spins = key[:2]
+    return f"{angle:g} deg" + (f", {spins} spins" if spins != "none" else "") + (f", {group_label(key[2:], split)}" if split else "")
+
+
+def ratio_panels(summaries: list[dict], split: list[str]):
+    """A figure of a panel per mass ratio (sharing their axes), and for each panel (ax, ratio, its
+    series): (k, series key, its label, its runs), in order."""
     ratios = sorted({round(s["mass_ratio"], 3) for s in summaries})
     fig, axes = plt.subplots(1, len(ratios), figsize=(4.4 * len(ratios), 3.8), squeeze=False, sharey=True, sharex=True)
+    panels = []
     for ax, ratio in zip(axes[0], ratios):
         mine = [s for s in summaries if round(s["mass_ratio"], 3) == ratio]
-        families = sorted({(s["theta_deg"], s.get("spin_kind") or "none") for s in mine})
-        for k, (angle, spins) in enumerate(families):
-            points = realization_points([s for s in mine if (s["theta_deg"], s.get("spin_kind") or "none") == (angle, spins)], metric, x)
-            if not points:
-                continue
-            colour = plt.get_cmap("tab10")(k)
-            label = f"{angle:g} deg" + (f", {spins} spins" if spins != "none" else "")
-            draw_points(ax, points, colour, label)
-            if metric == "largest_mass_ratio":
-                draw_law(ax, points, colour, label)
-        ax.set_title(f"m_p / m_t = {ratio:g}")
-        ax.set_xlabel(ETA_LABELS.get(x, x))
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=7)
-    axes[0][0].set_ylabel(ylabel + "  (hollow: not settled)")
+        keys = sorted({family_of(s, split) for s in mine}, key=family_order)
+        panels.append((ax, ratio, [(k, key, family_label(key, split), [s for s in mine if family_of(s, split) == key]) for k, key in enumerate(keys)]))
+    return fig, panels
+
+
+def series_points(panels, points_of, metric: str, x: str):
+    """Over :func:`ratio_panels`' panels, each series with points: (ax, k, series in its panel,
+    label, ``points_of(runs, metric, x)``)."""
+    for ax, _, series in panels:
+        for k, _, label, runs in series:
+            points = points_of(runs, metric, x)
+            if points:
+                yield ax, k, len(series), label, points
+
+
+def label_panel(ax, ratio: float, x: str) -> None:
+    """A mass ratio's panel: its title, its eta axis, its legend."""
+    ax.set_title(f"m_p / m_t = {ratio:g}")
+    ax.set_xlabel(ETA_LABELS.get(x, x))
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7)
+
+
+def plot_runs(summaries: list[dict], metric: str, ylabel: str, x: str = "eta", split: list[str] = ()):
+    """Cross-run figure (Fig. 3 / Fig. 9 style): ``metric`` vs eta (``x``: "eta", "eta_self" or
+    "eta_all"), one panel per mass ratio, a line per angle, kind of spin and values of the ``split``
+    columns (a sweep's swept keys) through each point's mean; where a point has several
+    realizations, each drawn faintly and a bar from the smallest to the largest; unsettled points
+    hollow; for m_lf/m_t, the Leinhardt & Stewart (2012) law at the same set-ups (:func:`draw_law`).
+    Panels share their axes."""
+    fig, panels = ratio_panels(summaries, split)
+    for ax, k, _, label, points in series_points(panels, realization_points, metric, x):
+        colour = plt.get_cmap("tab10")(k % 10)
+        draw_points(ax, points, colour, label)
+        if metric == "largest_mass_ratio":
+            draw_law(ax, points, colour, label)
+    for ax, ratio, _ in panels:
+        label_panel(ax, ratio, x)
+    fig.axes[0].set_ylabel(ylabel + "  (hollow: not settled)")
     return fig
 
 
@@ -273,14 +400,16 @@ def size_change_value(summary: dict) -> tuple[float | None, float]:
     return summary.get("particle_size_change"), 0.0
 
 
-def plot_size_change(summaries: list[dict]):
+def plot_size_change(summaries: list[dict], split: list[str] = ()):
     """Fig. 6 style: the largest fragment's particle-size change (mean over the last 10 % of the run,
-    a bar of one standard deviation of its frames there) vs eta from every run, one panel per angle,
-    markers by mass ratio, constructive (m_lf > m_t) blue and destructive orange, unsettled hollow."""
-    angles = sorted({s["theta_deg"] for s in summaries})
-    fig, axes = plt.subplots(1, len(angles), figsize=(4.4 * len(angles), 3.8), squeeze=False, sharey=True, sharex=True)
-    for ax, angle in zip(axes[0], angles):
-        mine = [s for s in summaries if s["theta_deg"] == angle and size_change_value(s)[0] is not None]
+    a bar of one standard deviation of its frames there) vs eta from every run, one panel per angle
+    (and per values of the ``split`` columns), markers by mass ratio, constructive (m_lf > m_t) blue
+    and destructive orange, unsettled hollow."""
+    panels = sorted({(s["theta_deg"], *group_key(s, split)) for s in summaries}, key=family_order)
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.4 * len(panels), 3.8), squeeze=False, sharey=True, sharex=True)
+    for ax, panel in zip(axes[0], panels):
+        angle = panel[0]
+        mine = [s for s in summaries if (s["theta_deg"], *group_key(s, split)) == panel and size_change_value(s)[0] is not None]
         for ratio in sorted({round(s["mass_ratio"], 2) for s in mine}):
             runs = [s for s in mine if round(s["mass_ratio"], 2) == ratio]
             for constructive, colour in ((True, "C0"), (False, "C1")):
@@ -300,15 +429,76 @@ def plot_size_change(summaries: list[dict]):
         ax.axhline(0.0, color="0.6", linewidth=0.6)
         ax.set_xscale("log")
         ax.set_xlabel("eta = KE / |U|")
-        ax.set_title(f"theta = {angle:g} deg")
+        ax.set_title(f"theta = {angle:g} deg" + (f"\n{group_label(panel[1:], split)}" if split else ""))
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)
     axes[0][0].set_ylabel("largest fragment's mean grain mass change [%]")
     return fig
 
 
+def interval_points(summaries: list[dict], metric: str, x: str = "eta", confidence: float = 0.95) -> list[dict]:
+    """Per value of ``x`` (rounded as compare's points), the realizations' mean of ``metric`` and its
+    ``confidence`` interval (Student's t below 30 runs, as decco-warp compare: compare.mean_interval;
+    None for one run), with ``n``."""
+    from .compare import mean_interval, value_key
+
+    points: dict = {}
+    for s in summaries:
+        if s.get(metric) is not None and s.get(x) is not None:
+            points.setdefault(value_key(float(s[x])), []).append(float(s[metric]))
+    out = []
+    for at in sorted(points):
+        values = np.array(points[at])
+        low, high, _ = mean_interval(values, confidence)
+        out.append({"at": at, "n": int(values.size), "mean": float(values.mean()), "low": low, "high": high})
+    return out
+
+
+def plot_intervals(summaries: list[dict], metric: str, ylabel: str, split: list[str] = (), x: str = "eta"):
+    """A sweep's outcome against eta, a series per angle, kind of spin and values of the ``split``
+    columns (its swept keys), each point the realizations' mean with its 95 % interval (Student's t;
+    a point of one run without a bar, its n shown): what ``decco-warp compare --at eta`` compares."""
+    fig, panels = ratio_panels(summaries, split)
+    for ax, k, count, label, points in series_points(panels, interval_points, metric, x):
+        colour = plt.get_cmap("tab10")(k % 10)
+        offset = 1.0 + 0.01 * (k - (count - 1) / 2)  # series side by side, not on top of each other
+        at = np.array([p["at"] for p in points], dtype=float) * offset
+        means = np.array([p["mean"] for p in points])
+        minus = np.array([p["mean"] - p["low"] if p["low"] is not None else np.nan for p in points])
+        plus = np.array([p["high"] - p["mean"] if p["high"] is not None else np.nan for p in points])
+        ax.errorbar(at, means, yerr=[minus, plus], color=colour, marker="o", capsize=3, label=label)
+        for xv, yv, p in zip(at, means, points):
+            ax.annotate(f"n={p['n']}", (xv, yv), textcoords="offset points", xytext=(4, 4), fontsize=6, color=colour)
+    for ax, ratio, _ in panels:
+        label_panel(ax, ratio, x)
+    fig.axes[0].set_ylabel(ylabel + " (mean, 95 % interval)")
+    return fig
+
+
+def plot_histories(summaries: list[dict], histories: dict, split: list[str] = ()):
+    """m_lf/m_t against time of every run of a set, overlaid, a colour per angle, kind of spin and
+    values of the ``split`` columns (``histories``: run name -> (time [s], m_lf/m_t) of its analysed frames)."""
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    drawn = [s for s in summaries if s.get("run") in histories]
+    for k, key in enumerate(sorted({family_of(s, split) for s in drawn}, key=family_order)):
+        colour = plt.get_cmap("tab10")(k % 10)
+        runs = [s for s in drawn if family_of(s, split) == key]
+        for n, s in enumerate(runs):
+            time, ratio = histories[s["run"]]
+            label = f"{family_label(key, split)} ({len(runs)} run{'s' if len(runs) > 1 else ''})" if n == 0 else None
+            ax.plot(np.asarray(time) / HOUR, ratio, color=colour, alpha=0.7, linewidth=1.0, label=label)
+    ax.axhline(1.0, color="0.6", linewidth=0.6)
+    ax.set_xlabel("time [h]")
+    ax.set_ylabel("m_lf / m_t")
+    ax.set_title("largest fragment of every run")
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7)
+    return fig
+
+
 CROSS_RUN_FIGURES = {
-    "largest_fragment": lambda summaries: plot_runs(summaries, "largest_mass_ratio", "m_lf / m_t"),
+    "largest_fragment": lambda summaries, split: plot_runs(summaries, "largest_mass_ratio", "m_lf / m_t", split=split),
+    "largest_fragment_intervals": lambda summaries, split: plot_intervals(summaries, "largest_mass_ratio", "m_lf / m_t", split=split),
     "particle_size_change": plot_size_change,
 }
 
@@ -318,11 +508,17 @@ def line_data(fig) -> list[tuple[np.ndarray, np.ndarray]]:
     return [(np.asarray(line.get_xdata()), np.asarray(line.get_ydata())) for ax in fig.axes for line in ax.lines]
 
 
-def write_cross_run(folder: Path, summaries: list[dict]) -> list[Path]:
-    """The cross-run figures of a set of analysed runs (those with an eta and a mass ratio)."""
+def write_cross_run(folder: Path, summaries: list[dict], split=(), histories: dict | None = None) -> list[Path]:
+    """The cross-run figures of a set of analysed runs (those with an eta and a mass ratio), their
+    series split by those of the columns ``split`` (a sweep's swept keys) that vary among them, and
+    with ``histories`` (run name -> (time, m_lf/m_t), runs.read_history) every run's m_lf/m_t
+    against time overlaid (largest_fragment_time)."""
     usable = [s for s in summaries if s.get("eta") is not None and s.get("mass_ratio") is not None]
     paths = []
     if usable:
+        columns = split_columns(usable, split)
         for name, plot in CROSS_RUN_FIGURES.items():
-            paths += save(plot(usable), folder / "figures", name)
+            paths += save(plot(usable, columns), folder / "figures", name)
+        if histories:
+            paths += save(plot_histories(usable, histories, columns), folder / "figures", "largest_fragment_time")
     return paths

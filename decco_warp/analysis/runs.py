@@ -35,16 +35,26 @@ ENERGY_SERIES = (
 )
 
 
+#: A size change below this [%] is the round-off of a ratio of sums (a fragment of the same grains
+#: as its parents reads +2.2e-14 %): it is 0.
+SIZE_CHANGE_ROUND_OFF = 1e-8
+
+
+def _percent_change(ratio: float) -> float:
+    change = 100.0 * (ratio - 1.0)
+    return 0.0 if abs(change) < SIZE_CHANGE_ROUND_OFF else float(change)
+
+
 def particle_size_change(cluster_mass: float, cluster_members: int, parents_mass: float, parents_count: int) -> float:
     """Paper Fig. 6: mean particle mass of a fragment over that of both piles before the collision, minus 1, in %."""
-    return 100.0 * ((cluster_mass / cluster_members) / (parents_mass / parents_count) - 1.0)
+    return _percent_change((cluster_mass / cluster_members) / (parents_mass / parents_count))
 
 
 def mass_weighted_size_change(cluster_masses: np.ndarray, parents_masses: np.ndarray) -> float:
     """Fig. 6 weighted by mass: the mass-weighted mean particle mass (sum m^2 / sum m) of a fragment
     over that of both piles before the collision, minus 1, in %.  It follows where the mass sits
     (a grain's weight is its mass), where the paper's per-particle mean follows the grain count."""
-    return 100.0 * ((cluster_masses @ cluster_masses / cluster_masses.sum()) / (parents_masses @ parents_masses / parents_masses.sum()) - 1.0)
+    return _percent_change((cluster_masses @ cluster_masses / cluster_masses.sum()) / (parents_masses @ parents_masses / parents_masses.sum()))
 
 
 #: The late window of a run: its last LATE_FRACTION of simulated time.  Size changes are averaged
@@ -87,11 +97,24 @@ def late_statistics(frames: dict, target_mass: float | None = None, start: float
         values = np.asarray(frames[series], dtype=float)[late] if series in frames else np.full(late.size, np.nan)
         values = values[np.isfinite(values)]
         stats[column] = float(values.mean()) if values.size else None
-        stats[f"{column}_std"] = float(values.std()) if values.size else None
+        stats[f"{column}_std"] = spread(values) if values.size else None
     stats["largest_mass_ratio_late_low"] = float(ratio.min()) if ratio.size else None
     stats["largest_mass_ratio_late_high"] = float(ratio.max()) if ratio.size else None
     stats.update(settled_verdict(ratio, fragments, kind, stats["late_from_time"]))
     return stats
+
+
+def spread(values: np.ndarray) -> float:
+    """The standard deviation of ``values``, 0 where they do not differ beyond round-off (the mean of
+    equal numbers is not always that number in floating point: their std would read 3.6e-15)."""
+    values = np.asarray(values, dtype=float)
+    if values.size == 0 or np.ptp(values) <= ROUND_OFF * float(np.abs(values).max()):
+        return 0.0
+    return float(values.std())
+
+
+#: Relative differences below this are floating-point round-off, not a spread.
+ROUND_OFF = 1e-12
 
 
 def settled_verdict(ratio: np.ndarray, fragments: np.ndarray, kind: str, since: float | None) -> dict:
@@ -126,18 +149,28 @@ def outcome_text(summary: dict) -> str:
     return text
 
 
+#: Significant digits of a ratio computed back from the set-up (eta): a set-up for eta 3 gives
+#: KE / |U| = 2.9999999999999996, which the summary keeps as 3.
+RATIO_DIGITS = 12
+
+
+def rounded(value) -> float | None:
+    """``value`` to RATIO_DIGITS significant digits (None stays None)."""
+    return None if value is None else float(f"{float(value):.{RATIO_DIGITS}g}")
+
+
 def eta_readings(collision: dict) -> dict:
     """Both readings of eq. 18 for a collision record (docs/model.md): ``eta_self`` (U of each pile's
     own pairs) and ``eta_all`` (U of every pair at set-up), with the reading the run was set up by
     and the cross term [erg].  Records older than the two readings hold the potentials: eta_all is
     computed from them, the reading is "self"."""
     if not all(key in collision for key in ("kinetic_energy", "target_potential", "projectile_potential", "cross_potential")):
-        return {"eta_potential": collision.get("eta_potential"), "eta_self": collision.get("eta"), "eta_all": None, "cross_potential": None}
+        return {"eta_potential": collision.get("eta_potential"), "eta_self": rounded(collision.get("eta")), "eta_all": None, "cross_potential": None}
     own = collision["target_potential"] + collision["projectile_potential"]
     return {
         "eta_potential": collision.get("eta_potential", "self"),
-        "eta_self": float(collision["kinetic_energy"] / abs(own)),
-        "eta_all": float(collision["kinetic_energy"] / abs(own + collision["cross_potential"])),
+        "eta_self": rounded(collision["kinetic_energy"] / abs(own)),
+        "eta_all": rounded(collision["kinetic_energy"] / abs(own + collision["cross_potential"])),
         "cross_potential": float(collision["cross_potential"]),
     }
 
@@ -396,6 +429,7 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
         min_members=min_members,
         every=every,
         piles=spec.get("piles"),
+        spec=spec,
     )
     # Kept with the summary, so that a sweep that finds the run analysed reports what it took then.
     summary["analysis_seconds"] = round(time.perf_counter() - started, 3)
@@ -411,11 +445,41 @@ def _write_results(run_dir, analysis: dict, summary: dict) -> None:
     write_atomic(folder.summary, json_text(summary))
 
 
+#: A resolved specification's keys that a summary does not carry as columns of their own: the run's
+#: name is ``run``, its folder's parent is not the run's, and the piles' files are named by their
+#: stems (``target_pile``, ``projectile_pile``).
+NOT_COLUMNS = {("run", "name"), ("run", "out"), ("piles", "target"), ("piles", "projectile")}
+#: Keys whose column bears another name, since a summary's own column of that name means another
+#: thing (a sweep's ``device`` is where the run went, [run] device what it asked for).
+RENAMED = {("run", "device"): "run_device"}
+
+
+def spec_column(table: str, key: str) -> str | None:
+    """The summary column of a specification's ``[table] key`` (None: not a column of its own)."""
+    if (table, key) in NOT_COLUMNS:
+        return {"target": "target_pile", "projectile": "projectile_pile"}.get(key) if table == "piles" else None
+    return RENAMED.get((table, key), key)
+
+
+def spec_columns(spec: dict) -> dict:
+    """The columns of a resolved specification: every key of [params] (every physics parameter of the
+    run, the contact law's included), of [collision] and of [run] but those of NOT_COLUMNS, by
+    :func:`spec_column`'s names, so that whatever a sweep varies is a column of the run's summary."""
+    columns = {}
+    for table in ("params", "collision", "run"):
+        for key, value in (spec.get(table) or {}).items():
+            column = spec_column(table, key)
+            if column is not None and (table, key) not in NOT_COLUMNS:
+                columns[column] = list(value) if isinstance(value, tuple) else value
+    return columns
+
+
 def summarise(name: str, analysis: dict, collision: dict, params: dict, n_particles: int, target_mass: float,
-              predicted_overlap, min_members: int, every: int, piles: dict | None = None) -> dict:  # fmt: skip
+              predicted_overlap, min_members: int, every: int, piles: dict | None = None, spec: dict | None = None) -> dict:  # fmt: skip
     """A run's summary row from its analysis (the /frames, /conservation, /energy and /overlap
     series) and its set-up (``collision``: the set-up's metadata; ``params``: the resolved [params];
-    ``piles``: the resolved [piles], whose files name the realization's piles).
+    ``piles``: the resolved [piles], whose files name the realization's piles; ``spec``: the whole
+    resolved specification, whose keys join as :func:`spec_columns`, after the outcome's own).
     Numbers that do not exist (no fragment to measure, a record without the set-up) are None."""
     frames = analysis["frames"]
     depth = np.asarray(analysis["overlap"]["deepest"], dtype=float)
@@ -424,7 +488,7 @@ def summarise(name: str, analysis: dict, collision: dict, params: dict, n_partic
     summary = {
         "run": name,
         "n_particles": n_particles,
-        "eta": collision.get("eta"),
+        "eta": rounded(collision.get("eta")),
         **eta_readings(collision),
         "speed": collision.get("speed"),
         "theta_deg": collision.get("theta_deg"),
@@ -443,6 +507,7 @@ def summarise(name: str, analysis: dict, collision: dict, params: dict, n_partic
         "final_time": float(frames["time"][-1]),
         "largest_mass_ratio": float(frames["largest_mass_ratio"][-1]),
         **scaling.law_columns(collision, G_CGS if G is None else G),
+        **scaling.impact_columns(collision, G_CGS if G is None else G),
         "particle_size_change": float(frames["particle_size_change"][-1]),
         "particle_size_change_mass_weighted": (
             float(frames["particle_size_change_mass_weighted"][-1]) if "particle_size_change_mass_weighted" in frames else None
@@ -456,8 +521,10 @@ def summarise(name: str, analysis: dict, collision: dict, params: dict, n_partic
         "angular_momentum_drift": float(np.max(analysis["conservation"]["angular_momentum_drift"])),
         "ledger_closure": float(np.abs(analysis["energy"]["ledger_closure"]).max()),
         "min_members": int(min_members),
-        "analyse_every": int(every),
+        "analyze_every": int(every),
     }
+    for column, value in spec_columns({**(spec or {}), "params": {**(spec or {}).get("params", {}), **params}}).items():
+        summary.setdefault(column, value)  # the outcome's own columns (eta, speed, steps: what the run made) stand
     return json_ready(summary)
 
 
@@ -541,6 +608,15 @@ def read_analysis(path) -> dict:
     return result
 
 
+def read_history(run_dir) -> tuple[np.ndarray, np.ndarray] | None:
+    """(time [s], m_lf/m_t) of a run's analysed frames, from its analysis.h5 (None without one)."""
+    path = RunFolder(run_dir).analysis
+    if not path.is_file():
+        return None
+    with h5py.File(path, "r") as f:
+        return f["frames/time"][()], f["frames/largest_mass_ratio"][()]
+
+
 def read_catalogue(path) -> dict[str, np.ndarray]:
     """The fragment catalogue of an analysis.h5 as columns, vectors split into _x, _y, _z and the
     composition into class_0, class_1, ...: ``pandas.DataFrame(read_catalogue(path))`` is a table
@@ -561,12 +637,13 @@ def read_catalogue(path) -> dict[str, np.ndarray]:
     return columns
 
 
-def refresh_summary(run_dir, collision: dict, params: dict, piles: dict | None = None) -> dict:
+def refresh_summary(run_dir, collision: dict, params: dict, piles: dict | None = None, spec: dict | None = None) -> dict:
     """A run's summary recomputed from its analysis.h5 alone (no trajectory: a run kept without one)
-    and its set-up's ``collision`` metadata (set up again from its spec.toml: ``plan_start``), with
-    every column of today's :func:`summarise`; analysis.h5 is rewritten (compressed, with units) and
-    summary.json replaced.  Series the analysis did not keep (the mass-weighted size change per frame)
-    give None: those need the trajectory."""
+    and its set-up's ``collision`` metadata (set up again from its spec.toml: ``plan_start``; ``spec``
+    that resolved specification, whose columns join), with every column of today's
+    :func:`summarise`; analysis.h5 is rewritten (compressed, with units) and summary.json replaced.
+    Series the analysis did not keep (the mass-weighted size change per frame) give None: those
+    need the trajectory."""
     run_dir = Path(run_dir)
     analysis = read_analysis(RunFolder(run_dir).analysis)
     old = analysis["summary"]
@@ -580,8 +657,9 @@ def refresh_summary(run_dir, collision: dict, params: dict, piles: dict | None =
         target_mass=float(old["target_mass"]),
         predicted_overlap=old.get("predicted_overlap"),
         min_members=int(old["min_members"]),
-        every=int(old["analyse_every"]),
+        every=int(old.get("analyze_every", old.get("analyse_every"))),  # the key's earlier spelling too
         piles=piles,
+        spec=spec,
     )
     if summary["particle_size_change_mass_weighted"] is None and "label" in final:
         # The last frame's fragment is known (final/label); grains of one density weigh as R^3.

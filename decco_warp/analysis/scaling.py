@@ -106,9 +106,40 @@ LAW_COLUMNS = (
 )
 
 
+#: What a collision record must hold for the law's columns.
+LAW_NEEDS = ("target_mass", "projectile_mass", "target_radius", "projectile_radius", "theta_deg", "kinetic_energy")
+
+
 def law_columns(collision: dict, G: float = G_CGS) -> dict:
     """The LAW_COLUMNS for a run's collision record (None each without its metadata)."""
-    needed = ("target_mass", "projectile_mass", "target_radius", "projectile_radius", "theta_deg", "kinetic_energy")
-    if not all(key in collision for key in needed):
+    if not all(key in collision for key in LAW_NEEDS):
         return {column: None for column, _, _ in LAW_COLUMNS}
     return {column: float(largest_mass_ratio(collision, G, law, c_star)) for column, law, c_star in LAW_COLUMNS}
+
+
+def mutual_escape_speed(total_mass: float, target_radius: float, projectile_radius: float, G: float = G_CGS) -> float:
+    """v_esc = sqrt(2 G M_tot / (R_t + R_p)) [cm/s]: the two bodies' escape speed at touching (LS12's
+    v_esc, by which impact speeds are measured)."""
+    return math.sqrt(2.0 * G * total_mass / (target_radius + projectile_radius))
+
+
+#: The impact's own columns (:func:`impact_columns`), by a pkdgrav or REBOUND user's yardsticks.
+IMPACT_COLUMNS = ("speed_over_escape", "q_r", "q_rd_star", "q_r_over_q_rd_star")
+
+
+def impact_columns(collision: dict, G: float = G_CGS) -> dict:
+    """A collision in LS12's terms: ``speed_over_escape`` (the relative speed at set-up over
+    :func:`mutual_escape_speed`), ``q_r`` (Q_R = KE / M_tot, the specific impact energy in the
+    centre-of-mass frame [erg/g]), ``q_rd_star`` (Q'*_RD of the small-body law at the collision's
+    mass ratio and angle [erg/g]) and their ratio ``q_r_over_q_rd_star`` (1: half the mass stays in
+    the largest remnant by the law).  None each without the record's metadata."""
+    if not all(key in collision for key in (*LAW_NEEDS, "speed")):
+        return dict.fromkeys(IMPACT_COLUMNS)
+    m_t, m_p = collision["target_mass"], collision["projectile_mass"]
+    r_t, r_p = collision["target_radius"], collision["projectile_radius"]
+    specific = collision["kinetic_energy"] / (m_t + m_p)
+    q_star = disruption_energy(m_t, m_p, r_t, r_p, collision["theta_deg"], G)
+    gravitating = G > 0  # without gravity there is no escape speed, and Q*_RD is 0
+    speed = float(collision["speed"] / mutual_escape_speed(m_t + m_p, r_t, r_p, G)) if gravitating else None
+    return {"speed_over_escape": speed, "q_r": float(specific), "q_rd_star": float(q_star) if gravitating else None,
+            "q_r_over_q_rd_star": float(specific / q_star) if gravitating else None}  # fmt: skip

@@ -24,7 +24,7 @@ from pathlib import Path
 from decco_warp import spec as specs
 from decco_warp.analysis.runs import refresh_summary
 from decco_warp.plan import plan_start
-from decco_warp.sweep import SUMMARY_FIELDS, write_summary
+from decco_warp.sweep import summary_fields, write_summary
 
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "runs" / "results"
@@ -39,7 +39,7 @@ def refresh_run(run_dir: Path) -> dict:
     collision = plan.state.metadata
     if abs(collision["speed"] / recorded["speed"] - 1) > SPEED_TOLERANCE:
         raise SystemExit(f"{run_dir}: the set-up made again gives speed {collision['speed']!r}, the run recorded {recorded['speed']!r}")
-    return refresh_summary(run_dir, collision, plan.spec["params"], piles=plan.spec["piles"])
+    return refresh_summary(run_dir, collision, plan.spec["params"], piles=plan.spec["piles"], spec=plan.spec)
 
 
 def refresh_experiment(folder: Path) -> None:
@@ -48,7 +48,7 @@ def refresh_experiment(folder: Path) -> None:
     for run_dir in sorted(p.parent for p in folder.glob("*/analysis.h5")):
         summary = refresh_run(run_dir)
         row = rows.setdefault(run_dir.name, {"run": run_dir.name, "status": "ok"})
-        row.update({key: summary[key] for key in SUMMARY_FIELDS if key in summary})
+        row.update({key: summary[key] for key in summary_fields() if key in summary})
         print(f"{run_dir.relative_to(ROOT)}: m_lf/m_t {summary['largest_mass_ratio']:.4g}, "
               f"{'settled' if summary['settled'] else 'NOT SETTLED'}", flush=True)  # fmt: skip
     write_summary(folder, [{k: ("" if v is None else v) for k, v in row.items()} for row in rows.values()])
