@@ -47,7 +47,7 @@ def step_seconds(n: int, gravity: str, device: str, gravity_every: int = 1) -> f
     every ``gravity_every`` steps (the contacts every step)."""
     if not device.startswith("cuda"):
         step = cpu_step_seconds(n, gravity)
-        if gravity_every > 1:  # the same cores' share as the pair sums (engine.cpu_step_seconds)
+        if gravity_every > 1:  # the same cores' share as the pair sums (cpu_step_seconds)
             step = step / gravity_every + CPU_CONTACT_SECONDS_PER_PARTICLE * n / (max(1, os.cpu_count() or 1) / 2.0)
         return step
     if gravity == "tree":

@@ -67,9 +67,9 @@ AUTO_ENSEMBLE = 8
 #: 16 384 and 1.09x at 20 000, as one system fills more of the GPU.  Larger runs go alone.
 ENSEMBLE_MAX_PARTICLES = 20_000
 SUMMARY_FIELDS = [
-    "run", "status", "reason", "n_particles", "mass_ratio", "theta_deg", "eta", "speed", "spin_kind", "realization", "orientation_seed",
-    "target_pile", "projectile_pile",
-    "k_in", "dt", "restitution", "mu_k", "mu_r", "G", "rolling_friction", "gravity_every", "steps",
+    "run", "status", "reason", "n_particles", "mass_ratio", "target_mass", "theta_deg", "eta", "speed", "spin_kind", "realization",
+    "orientation_seed", "target_pile", "projectile_pile",
+    "k_in", "dt", "restitution", "mu_k", "mu_r", "G", "rolling_friction", "contact_law", "gravity_every", "steps",
     "largest_mass_ratio", "settled", "settled_note", "largest_mass_ratio_late_low", "largest_mass_ratio_late_high",
     "ls12_largest_mass_ratio", "ls12_band_low", "ls12_band_high", "ls12_planets_largest_mass_ratio",
     "speed_over_escape", "q_r", "q_rd_star", "q_r_over_q_rd_star",

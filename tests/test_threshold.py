@@ -157,4 +157,4 @@ def test_the_threshold_command_prints_each_ratio_and_the_constants(tmp_path):
     assert "c* = " in lines[-1] and "mu_bar = " in lines[-1]
     (tmp_path / "summary.csv").write_text("run,mass_ratio,speed,largest_mass_ratio\nx,0.25,1e5,0.5\n")
     result = cli_here("threshold", str(tmp_path / "summary.csv"))
-    assert result.returncode == 2 and "summary.json holds them" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+    assert result.returncode == 2 and "summary.json and its sweep's summary.csv hold them" in result.stderr and len(result.stderr.strip().splitlines()) == 1

@@ -139,7 +139,7 @@ def thresholds(rows: list[dict], confidence: float = CONFIDENCE, regime: tuple[f
         except (KeyError, TypeError, ValueError):
             raise InputError(
                 f"run {row.get('run', '?')}: Q*_RD needs target_mass, mass_ratio, speed and largest_mass_ratio "
-                "(a run's summary.json holds them: give run folders or their sweep's folder)"
+                "(a run's summary.json and its sweep's summary.csv hold them)"
             ) from None
         if not all(math.isfinite(v) for v in values):
             raise InputError(f"run {row.get('run', '?')}: Q*_RD needs finite target_mass, mass_ratio, speed and largest_mass_ratio")
