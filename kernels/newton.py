@@ -26,7 +26,6 @@ import functools
 import warp as wp
 
 from .bodies import BodyDouble, BodyMixed, is_candidate, near_bound, real_types, separation, sweep_of
-from .pair import ContactModel
 
 wp.set_module_options({"enable_backward": False})
 
