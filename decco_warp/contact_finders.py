@@ -167,7 +167,7 @@ class NeighbourList(ContactFinder):
         wp.launch(
             cell_ranges,
             dim=m.count,
-            inputs=[self.keys, m.count, self.order, m.radius, state.position],
+            inputs=[m.count, m.radius, self.keys, self.order, state.position],
             outputs=[self.cell_start, self.cell_end, self.sorted_radius, self.sorted_position],
             device=m.device,
             block_dim=particle_block(),

@@ -205,7 +205,7 @@ class FusedForces(ForcePath):
             self.kernel,
             dim=[self.blocks.shape[0]],
             block_dim=self.scheme.layout.block_dim,
-            inputs=[m.contact, self.blocks, m.radius, m.mass, s.position, s.velocity, s.omega, self.body, m.sweep_max_radius],
+            inputs=[m.contact, self.blocks, m.radius, m.mass, m.sweep_max_radius, s.position, s.velocity, s.omega, self.body],
             outputs=s.contact_outputs(),
             device=m.device,
         )

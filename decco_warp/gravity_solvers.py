@@ -102,7 +102,7 @@ class PairsOnce(GravitySolver):
             self.sweep,
             dim=[self.tiles.shape[0]],
             block_dim=self.layout.block_dim,
-            inputs=[self.tiles, self.body, m.sweep_max_radius],
+            inputs=[self.tiles, m.sweep_max_radius, self.body],
             outputs=[self.tile_field, self.tile_near],
             device=m.device,
         )

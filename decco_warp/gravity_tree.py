@@ -76,26 +76,26 @@ class GravityTree:
 
     def _walk_records(self, precision: str, G: float, theta_open: float) -> list:
         """The nodes' walk records for this G and theta_open (call :meth:`build` first)."""
-        records = [self.box, self.place[precision], self.leaf_position, self.links, self.moments[precision]]
-        inputs = [wp.float64(G), wp.float64(1.0 / theta_open), self.count, self.nodes, *records]
-        self._launch(kernels.walk_records(precision), max(2 * self.count - 1, 1), inputs)
-        self._launch(kernels.walk_roots, 1, [self.links, self.roots])
-        return [*records, self.roots]
+        place, moments = self.place[precision], self.moments[precision]
+        inputs = [wp.float64(G), wp.float64(1.0 / theta_open), self.count, self.nodes, self.box]
+        self._launch(kernels.walk_records(precision), max(2 * self.count - 1, 1), inputs, [place, self.leaf_position, self.links, moments])
+        self._launch(kernels.walk_roots, 1, [self.links], [self.roots])
+        return [self.box, place, self.leaf_position, self.links, moments, self.roots]
 
-    def _launch(self, kernel, dim: int, inputs: list) -> None:
-        wp.launch(kernel, dim=dim, inputs=inputs, device=self.device)
+    def _launch(self, kernel, dim: int, inputs: list, outputs: list) -> None:
+        wp.launch(kernel, dim=dim, inputs=inputs, outputs=outputs, device=self.device)
 
     def build(self, position: wp.array, mass: wp.array) -> None:
         """Sort the particles along a Morton curve, link the tree and sum every node's moments."""
         n = self.count
-        self._launch(kernels.reset_box, 1, [self.box])
-        self._launch(kernels.bounds, n, [position, self.box])
-        self._launch(kernels.morton_codes, n, [position, self.box, self.keys, self.order])
+        self._launch(kernels.reset_box, 1, [], [self.box])
+        self._launch(kernels.bounds, n, [position], [self.box])
+        self._launch(kernels.morton_codes, n, [position, self.box], [self.keys, self.order])
         wp.utils.radix_sort_pairs(self.keys, self.order, n)
         if n > 1:
-            self._launch(kernels.build_nodes, n - 1, [self.keys, n, self.nodes])
-        self._launch(kernels.escape_links, 2 * n - 1, [self.nodes])
-        self._launch(kernels.leaf_moments, n, [position, mass, self.order, n, self.nodes, *self.done])
+            self._launch(kernels.build_nodes, n - 1, [n, self.keys], [self.nodes])
+        self._launch(kernels.escape_links, 2 * n - 1, [], [self.nodes])
+        self._launch(kernels.leaf_moments, n, [n, mass, position, self.order], [self.nodes, *self.done])
         if n > 1:
             # Level by level until the root is summed, the loop's condition kept on the device: no
             # read-back, so a step with the tree is captured in a CUDA graph like any other.
@@ -104,27 +104,28 @@ class GravityTree:
 
     def _two_levels(self) -> None:
         before, after = self.done
-        self._launch(kernels.node_moments, self.count - 1, [self.nodes, before, after, self.pending])
-        self._launch(kernels.node_moments, self.count - 1, [self.nodes, after, before, self.pending])
+        self._launch(kernels.node_moments, self.count - 1, [before], [self.nodes, after, self.pending])
+        self._launch(kernels.node_moments, self.count - 1, [after], [self.nodes, before, self.pending])
 
     def gravity(self, G: float, theta_open: float, mass: wp.array, force_out: wp.array) -> None:
         """force_out = gravity on every particle (call :meth:`build` first)."""
         records = self._walk_records(self.precision, G, theta_open)
-        self._launch(self._gravity_kernel, self.parts * self.count, [self.count, *records, self.field_parts])
-        self._launch(kernels.sum_field_parts, self.count, [self.field_parts, self.order, mass, force_out])
+        self._launch(self._gravity_kernel, self.parts * self.count, [self.count, *records], [self.field_parts])
+        self._launch(kernels.sum_field_parts, self.count, [mass, self.field_parts, self.order], [force_out])
 
     def potential(self, G: float, theta_open: float, mass: wp.array, potential_out: wp.array) -> None:
         """potential_out = half of each particle's gravitational energy (call :meth:`build` first)."""
         records = self._walk_records("float64", G, theta_open)
-        self._launch(kernels.tree_potential, self.parts * self.count, [self.count, *records, self.potential_parts])
-        self._launch(kernels.sum_potential_parts, self.count, [self.potential_parts, self.order, mass, potential_out])
+        self._launch(kernels.tree_potential, self.parts * self.count, [self.count, *records], [self.potential_parts])
+        self._launch(kernels.sum_potential_parts, self.count, [mass, self.potential_parts, self.order], [potential_out])
 
     def contact_candidates(self, position, radius, max_radius: float, candidate_count, candidates) -> None:
         """Each particle's contact candidates (neighbours within R_i + R_j, plus a margin), from the hash grid."""
-        self._launch(kernels.float32_points, self.count, [position, self.box, self.points])
+        self._launch(kernels.float32_points, self.count, [position, self.box], [self.points])
         self.grid.build(self.points, 2.0 * max_radius * 1.0001)
         self._launch(
             kernels.grid_candidates,
             self.count,
-            [self.grid.id, self.points, radius, wp.float64(max_radius), candidate_count, candidates],
+            [radius, wp.float64(max_radius), self.grid.id, self.points],
+            [candidate_count, candidates],
         )

@@ -59,7 +59,7 @@ def pack_bodies(
     G: wp.float64,
     radius_in: wp.array(dtype=wp.float64),
     mass_in: wp.array(dtype=wp.float64),
-    # State in:
+    # In:
     position_in: wp.array(dtype=wp.vec3d),
     # Out:
     body_out: wp.array(dtype=Any),  # BodyMixed or BodyDouble: the overload of the run's precision

@@ -251,19 +251,19 @@ def contact_pass(law: str = "paper", lanes: int = 1, particles: int = 1, accumul
     def contact_pass_kernel(
         # Model:
         model: ContactModel,
-        ranges: wp.array(dtype=wp.vec2i),  # per particle: its system's particles, [first, end)
+        ranges_in: wp.array(dtype=wp.vec2i),  # per particle: its system's particles, [first, end)
         radius_in: wp.array(dtype=wp.float64),
-        # State in:
+        # In:
         position_in: wp.array(dtype=wp.vec3d),
         velocity_in: wp.array(dtype=wp.vec3d),
         omega_in: wp.array(dtype=wp.vec3d),
-        candidate_count: wp.array(dtype=wp.int32),
-        candidates: wp.array2d(dtype=wp.int32),
+        candidate_count_in: wp.array(dtype=wp.int32),  # per particle: candidates noted (past the list's width: an overflow)
+        candidates_in: wp.array2d(dtype=wp.int32),  # per particle: its candidates, in increasing j
         # Out:
         force_inout: wp.array(dtype=wp.vec3d),
         torque_out: wp.array(dtype=wp.vec3d),
         channels_out: wp.array2d(dtype=wp.vec3d),
-        deepest_out: wp.array(dtype=wp.int64),
+        deepest_inout: wp.array(dtype=wp.int64),  # raised to each contact's depth (note_depth), or empty
     ):
         block, thread = wp.tid()
         group = thread // wp.static(lanes)
@@ -272,22 +272,22 @@ def contact_pass(law: str = "paper", lanes: int = 1, particles: int = 1, accumul
         # Past the last particle a lane still takes part in the block's reduction, with nothing.
         noted = int(0)
         listed = True
-        if i < candidate_count.shape[0]:
-            noted = int(candidate_count[i])
-            listed = noted <= candidates.shape[1]
+        if i < candidate_count_in.shape[0]:
+            noted = int(candidate_count_in[i])
+            listed = noted <= candidates_in.shape[1]
         mine = ContactRows()
         for slot in range(lane, wp.where(listed, noted, 0), wp.static(lanes)):
             spring, sliding, sliding_torque, rolling_force, rolling_torque = contact_channels(
-                model, i, candidates[i, slot], radius_in, position_in, velocity_in, omega_in, deepest_out
+                model, i, candidates_in[i, slot], radius_in, position_in, velocity_in, omega_in, deepest_inout
             )
             mine += wp.matrix_from_rows(spring, sliding, sliding_torque, rolling_force, rolling_torque)
         per_lane = wp.tile_reshape(wp.tile(mine, preserve_type=True), shape=(wp.static(particles), wp.static(lanes)))
         sums = wp.tile_sum(per_lane, axis=1)
-        if lane == 0 and i < candidate_count.shape[0]:
+        if lane == 0 and i < candidate_count_in.shape[0]:
             total = contact_sum_of(sums[group])
             if not listed:  # every j of the system, each checked in float64
-                for j in range(ranges[i][0], ranges[i][1]):
-                    total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out, total)
+                for j in range(ranges_in[i][0], ranges_in[i][1]):
+                    total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_inout, total)
             contacts = write_contacts(total, i, torque_out, channels_out)
             if wp.static(accumulate):
                 force_inout[i] = force_inout[i] + contacts

@@ -68,23 +68,23 @@ def pair_forces_tiled(
     def pair_forces_tiled_kernel(
         # Model:
         model: ContactModel,
-        blocks: wp.array(dtype=wp.vec4i),  # per block: first particle, end of its rows, its system's j range
+        blocks_in: wp.array(dtype=wp.vec4i),  # per block: first particle, end of its rows, its system's j range
         radius_in: wp.array(dtype=wp.float64),
         mass_in: wp.array(dtype=wp.float64),
-        # State in:
+        max_radius: real,  # the largest radius: a per-i bound that spares most pairs the contact test
+        # In:
         position_in: wp.array(dtype=wp.vec3d),
         velocity_in: wp.array(dtype=wp.vec3d),
         omega_in: wp.array(dtype=wp.vec3d),
         body_in: wp.array(dtype=Body),
-        max_radius: real,  # the largest radius: a per-i bound that spares most pairs the contact test
         # Out:
         force_out: wp.array(dtype=wp.vec3d),
         torque_out: wp.array(dtype=wp.vec3d),
         channels_out: wp.array2d(dtype=wp.vec3d),  # (N, 4) with the ledger (written whole), else empty
-        deepest_out: wp.array(dtype=wp.int64),  # raised to each contact's depth (note_depth), or empty
+        deepest_inout: wp.array(dtype=wp.int64),  # raised to each contact's depth (note_depth), or empty
     ):
         block, lane = wp.tid()
-        first, end, j_first, j_end = unpack_block(blocks[block])
+        first, end, j_first, j_end = unpack_block(blocks_in[block])
 
         # The block's own particles stay in registers; rows past the end repeat the
         # last particle and are never written.
@@ -146,7 +146,7 @@ def pair_forces_tiled(
                 else:
                     j = slots[p, s]
                 spring, sliding, sliding_torque, rolling, rolling_torque = contact_channels(
-                    model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out
+                    model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_inout
                 )
                 force = spring + sliding + rolling
                 torque = sliding_torque + rolling_torque

@@ -125,11 +125,11 @@ def kick(
     dt: wp.float64,
     mass_in: wp.array(dtype=wp.float64),
     inertia_in: wp.array(dtype=wp.float64),
-    # Data in:
+    # In:
     force_in: wp.array(dtype=wp.vec3d),
     torque_in: wp.array(dtype=wp.vec3d),
     channels_in: wp.array2d(dtype=wp.vec3d),
-    # Data in/out:
+    # Out:
     velocity_inout: wp.array(dtype=wp.vec3d),
     omega_inout: wp.array(dtype=wp.vec3d),
     work_inout: wp.array(dtype=wp.vec4d),
@@ -148,17 +148,16 @@ def kick_drift(
     radius_in: wp.array(dtype=wp.float64),
     mass_in: wp.array(dtype=wp.float64),
     inertia_in: wp.array(dtype=wp.float64),
-    # Data in:
+    # In:
     force_in: wp.array(dtype=wp.vec3d),
     torque_in: wp.array(dtype=wp.vec3d),
     channels_in: wp.array2d(dtype=wp.vec3d),  # (N, 4) with the ledger, else empty
     close_step: bool,  # first the last half kick of the step before (the same forces: those just evaluated)
-    # Data in/out:
+    # Out:
     position_inout: wp.array(dtype=wp.vec3d),
     velocity_inout: wp.array(dtype=wp.vec3d),
     omega_inout: wp.array(dtype=wp.vec3d),
     work_inout: wp.array(dtype=wp.vec4d),  # (N,) with the ledger, else empty
-    # Out:
     body_out: wp.array(dtype=Any),  # the sweep's packed bodies (kernels/bodies.py), or empty: none packed
 ):
     """Half kick with the current forces, then a full drift; with ``close_step`` first ``kick``, and
@@ -219,13 +218,13 @@ def kick_outer(
     outer_dt: wp.float64,  # K dt
     mass_in: wp.array(dtype=wp.float64),
     inertia_in: wp.array(dtype=wp.float64),
-    # Data in:
+    # In:
     force_in: wp.array(dtype=wp.vec3d),  # the contact force
     torque_in: wp.array(dtype=wp.vec3d),
     channels_in: wp.array2d(dtype=wp.vec3d),
     gravity_in: wp.array(dtype=wp.vec3d),
     close_step: bool,  # first the last contact half kick of the inner step before
-    # Data in/out:
+    # Out:
     velocity_inout: wp.array(dtype=wp.vec3d),
     omega_inout: wp.array(dtype=wp.vec3d),
     work_inout: wp.array(dtype=wp.vec4d),
@@ -248,7 +247,9 @@ def kick_drift_inner(
     radius_in: wp.array(dtype=wp.float64),
     mass_in: wp.array(dtype=wp.float64),
     inertia_in: wp.array(dtype=wp.float64),
-    # Data in:
+    system_in: wp.array(dtype=wp.int32),  # per particle: its system (of an ensemble)
+    half_skin: wp.float64,  # half the neighbour list's skin
+    # In:
     force_in: wp.array(dtype=wp.vec3d),  # the contact force
     torque_in: wp.array(dtype=wp.vec3d),
     channels_in: wp.array2d(dtype=wp.vec3d),  # (N, 4) with the ledger, else empty
@@ -256,14 +257,11 @@ def kick_drift_inner(
     close_step: bool,  # first the last contact half kick of the step before
     gravity_kicks: int,  # then gravity half kicks: 1 opens an outer step, 2 also closes the one before
     reference_in: wp.array(dtype=wp.vec3d),  # the positions of the neighbour list's build
-    half_skin: wp.float64,
-    system_in: wp.array(dtype=wp.int32),  # per particle: its system (of an ensemble)
-    # Data in/out:
+    # Out:
     position_inout: wp.array(dtype=wp.vec3d),
     velocity_inout: wp.array(dtype=wp.vec3d),
     omega_inout: wp.array(dtype=wp.vec3d),
     work_inout: wp.array(dtype=wp.vec4d),
-    # Out:
     stale_out: wp.array(dtype=wp.int32),  # [0] = 1 when a particle is now past skin / 2 from its build position
     stale_system_out: wp.array(dtype=wp.int32),  # [s] = 1 when one of system s's particles is
     body_out: wp.array(dtype=Any),  # the gravity sweep's packed bodies (the last inner step), or empty

@@ -54,7 +54,7 @@ def cell_keys(
     # Model:
     system_in: wp.array(dtype=wp.int32),
     cell_width: wp.float64,
-    # State in:
+    # In:
     position_in: wp.array(dtype=wp.vec3d),
     # Out:
     keys_out: wp.array(dtype=wp.int32),  # (2 N: radix_sort_pairs' room) each particle's cell key
@@ -67,11 +67,14 @@ def cell_keys(
 
 @wp.kernel
 def cell_ranges(
-    keys_in: wp.array(dtype=wp.int32),  # sorted
-    count: int,
-    order_in: wp.array(dtype=wp.int32),  # the particles in key order
+    # Model:
+    count: int,  # particles
     radius_in: wp.array(dtype=wp.float64),
+    # In:
+    keys_in: wp.array(dtype=wp.int32),  # sorted
+    order_in: wp.array(dtype=wp.int32),  # the particles in key order
     position_in: wp.array(dtype=wp.vec3d),
+    # Out:
     start_out: wp.array(dtype=wp.int32),  # zeroed first: per key, where its run of sorted particles begins
     end_out: wp.array(dtype=wp.int32),  # zeroed first: and ends (empty cells: 0, 0)
     sorted_radius_out: wp.array(dtype=wp.float64),  # radius and position of the k-th particle in key order
@@ -108,8 +111,8 @@ def build_neighbour_list(
     everything: bool,  # build every system's list, stale or not
     # Out:
     reference_out: wp.array(dtype=wp.vec3d),  # the positions of this build
-    candidate_count: wp.array(dtype=wp.int32),  # neighbours met (past the list's width: an overflow)
-    candidates: wp.array2d(dtype=wp.int32),  # the first of them, in increasing j
+    candidate_count_out: wp.array(dtype=wp.int32),  # neighbours met (past the list's width: an overflow)
+    candidates_out: wp.array2d(dtype=wp.int32),  # the first of them, in increasing j
 ):
     """Thread k lists the k-th particle in key order: the threads of a warp share cells, and a cell's
     particles are read from the sorted copies one after another, not gathered from all over memory.
@@ -145,15 +148,17 @@ def build_neighbour_list(
                         row[s] = wp.int32(j)
                     noted += 1  # past the row's width only counted: an overflow
     for s in range(wp.min(noted, wp.static(CANDIDATES))):
-        candidates[i, s] = row[s]
-    candidate_count[i] = wp.int32(noted)
+        candidates_out[i, s] = row[s]
+    candidate_count_out[i] = wp.int32(noted)
     reference_out[i] = x
 
 
 @wp.kernel
 def lists_built(
-    everything: bool,
-    stale_inout: wp.array(dtype=wp.int32),  # [0] cleared: every list is fresh
+    # In:
+    everything: bool,  # every system's list was built, stale or not
+    # Out:
+    stale_out: wp.array(dtype=wp.int32),  # [0] cleared: every list is fresh
     stale_system_inout: wp.array(dtype=wp.int32),  # per system: cleared
     builds_inout: wp.array(dtype=wp.int64),  # per system: its builds so far, one more where built
 ):
@@ -163,4 +168,4 @@ def lists_built(
         builds_inout[system] = builds_inout[system] + wp.int64(1)
     stale_system_inout[system] = 0
     if system == 0:
-        stale_inout[0] = 0
+        stale_out[0] = 0

@@ -26,7 +26,6 @@ import functools
 import warp as wp
 
 from .bodies import BodyDouble, BodyMixed, is_candidate, near_bound, real_types, separation, sweep_of
-from .pair import ContactModel
 
 wp.set_module_options({"enable_backward": False})
 
@@ -169,17 +168,17 @@ def pair_gravity_newton(particles_per_lane: int, precision: str = "mixed", max_r
     )
     def pair_gravity_newton_kernel(
         # Model:
-        tiles: wp.array(dtype=TilePair),
-        # State in:
-        body_in: wp.array(dtype=Body),
+        tiles_in: wp.array(dtype=TilePair),
         max_radius: real,  # the largest radius: a per-i bound that spares most pairs the contact test
+        # In:
+        body_in: wp.array(dtype=Body),
         # Out:
         field_out: wp.array2d(dtype=vec_real),  # [row, column]: G m_j r_ij / d^3 summed over the other tile
         near_out: wp.array2d(dtype=wp.uint64),  # [row, column]: bit k, the other tile's k-th particle is a candidate
     ):
         block, lane = wp.tid()
         lanes = wp.block_dim()
-        tile = tiles[block]
+        tile = tiles_in[block]
         i_first, i_end, j_first, j_end, row_i, row_j = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5]
         source = (lane + 1) % lanes  # each round a lane takes its neighbour's j particles
 
@@ -258,18 +257,18 @@ def gather_newton(precision: str = "mixed", listing: bool = True, ahead: int = G
     @wp.kernel(module="unique", enable_backward=False)
     def gather_newton_kernel(
         # Model:
-        gather: wp.array(dtype=GatherRows),
+        gather_in: wp.array(dtype=GatherRows),
         mass_in: wp.array(dtype=wp.float64),
         # In:
         field_in: wp.array2d(dtype=vec_real),
         near_in: wp.array2d(dtype=wp.uint64),
         # Out:
         force_out: wp.array(dtype=wp.vec3d),
-        candidate_count: wp.array(dtype=wp.int32),
-        candidates: wp.array2d(dtype=wp.int32),
+        candidate_count_out: wp.array(dtype=wp.int32),  # candidates met (past the list's width: an overflow), or empty
+        candidates_out: wp.array2d(dtype=wp.int32),  # the first of them, in increasing j, or empty
     ):
         i = wp.tid()
-        rows = gather[i]
+        rows = gather_in[i]
         row, tiles, column, first = rows[0], rows[1], rows[2], rows[3]
         size = field_in.shape[1]
         field = wp.vec3d()
@@ -288,12 +287,12 @@ def gather_newton(precision: str = "mixed", listing: bool = True, ahead: int = G
                 if wp.static(listing):
                     bits = words[k]
                     while bits != wp.uint64(0):
-                        if noted < candidates.shape[1]:
-                            candidates[i, noted] = first + (start + k) * size + lowest_bit(bits)
+                        if noted < candidates_out.shape[1]:
+                            candidates_out[i, noted] = first + (start + k) * size + lowest_bit(bits)
                         bits = bits & (bits - wp.uint64(1))
                         noted += 1
         force_out[i] = -mass_in[i] * field
         if wp.static(listing):
-            candidate_count[i] = noted
+            candidate_count_out[i] = noted
 
     return gather_newton_kernel

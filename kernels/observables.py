@@ -96,10 +96,10 @@ def pair_sums(
 def pair_observables(
     # Model:
     model: ContactModel,
-    ranges: wp.array(dtype=wp.vec2i),  # per particle: its system's particles, [first, end)
+    ranges_in: wp.array(dtype=wp.vec2i),  # per particle: its system's particles, [first, end)
     radius_in: wp.array(dtype=wp.float64),
     mass_in: wp.array(dtype=wp.float64),
-    # State in:
+    # In:
     position_in: wp.array(dtype=wp.vec3d),
     velocity_in: wp.array(dtype=wp.vec3d),
     # Out:
@@ -115,7 +115,7 @@ def pair_observables(
     deepest contact as a fraction of the smaller radius of the pair, with that partner
     (-1 without contacts)."""
     i = wp.tid()
-    potential, total = pair_sums(model, i, ranges[i][0], ranges[i][1], 1, radius_in, mass_in, position_in, velocity_in)
+    potential, total = pair_sums(model, i, ranges_in[i][0], ranges_in[i][1], 1, radius_in, mass_in, position_in, velocity_in)
     potential_out[i] = potential
     write_contact_observables(total, i, elastic_out, contacts_out, max_overlap_out, overlap_depth_out, overlap_partner_out)
 
@@ -142,12 +142,15 @@ def pair_observables_tiled(block_dim: int):
 
     @wp.kernel(module="unique", enable_backward=False)
     def pair_observables_tiled_kernel(
+        # Model:
         model: ContactModel,
-        ranges: wp.array(dtype=wp.vec2i),
+        ranges_in: wp.array(dtype=wp.vec2i),  # per particle: its system's particles, [first, end)
         radius_in: wp.array(dtype=wp.float64),
         mass_in: wp.array(dtype=wp.float64),
+        # In:
         position_in: wp.array(dtype=wp.vec3d),
         velocity_in: wp.array(dtype=wp.vec3d),
+        # Out:
         potential_out: wp.array(dtype=wp.float64),
         elastic_out: wp.array(dtype=wp.float64),
         contacts_out: wp.array(dtype=wp.int32),
@@ -157,7 +160,7 @@ def pair_observables_tiled(block_dim: int):
     ):
         i, lane = wp.tid()
         potential, total = pair_sums(
-            model, i, ranges[i][0] + lane, ranges[i][1], wp.block_dim(), radius_in, mass_in, position_in, velocity_in
+            model, i, ranges_in[i][0] + lane, ranges_in[i][1], wp.block_dim(), radius_in, mass_in, position_in, velocity_in
         )
         # (Struct fields are copied into values first: a tile is made of values.)
         elastic = wp.tile_sum(wp.tile(wp.float64(total.elastic)))
@@ -187,13 +190,13 @@ def pair_observables_tiled(block_dim: int):
 def candidate_observables(
     # Model:
     model: ContactModel,
-    ranges: wp.array(dtype=wp.vec2i),
+    ranges_in: wp.array(dtype=wp.vec2i),  # per particle: its system's particles, [first, end)
     radius_in: wp.array(dtype=wp.float64),
-    # State in:
+    # In:
     position_in: wp.array(dtype=wp.vec3d),
     velocity_in: wp.array(dtype=wp.vec3d),
-    candidate_count: wp.array(dtype=wp.int32),
-    candidates: wp.array2d(dtype=wp.int32),
+    candidate_count_in: wp.array(dtype=wp.int32),  # per particle: candidates noted (past the list's width: an overflow)
+    candidates_in: wp.array2d(dtype=wp.int32),  # per particle: its candidates, in increasing j
     # Out:
     elastic_out: wp.array(dtype=wp.float64),
     contacts_out: wp.array(dtype=wp.int32),
@@ -204,10 +207,10 @@ def candidate_observables(
     """The contact part of :func:`pair_observables` from each particle's contact candidates (the
     tree path's hash grid), in the same order of j, so with the same sums."""
     i = wp.tid()
-    listed, walk = candidates_walk(i, ranges, candidate_count, candidates)
+    listed, walk = candidates_walk(i, ranges_in, candidate_count_in, candidates_in)
     total = no_contacts()
     for s in range(walk):
-        j = candidate_at(i, listed, ranges, candidates, s)
+        j = candidate_at(i, listed, ranges_in, candidates_in, s)
         r_ij = position_in[i] - position_in[j]
         d2 = wp.dot(r_ij, r_ij)
         if d2 > wp.float64(0.0):
@@ -217,19 +220,21 @@ def candidate_observables(
 
 @wp.kernel
 def smoothed_density(
-    source_position: wp.array(dtype=wp.vec3d),
-    source_norm: wp.array(dtype=wp.float64),
-    source_inv_two_var: wp.array(dtype=wp.float64),
-    target_position: wp.array(dtype=wp.vec3d),
+    # In:
+    source_position_in: wp.array(dtype=wp.vec3d),
+    source_norm_in: wp.array(dtype=wp.float64),  # per source: m_j / ((2 pi)^(3/2) sigma_j^3)
+    source_inv_two_var_in: wp.array(dtype=wp.float64),  # per source: 1 / (2 sigma_j^2)
+    target_position_in: wp.array(dtype=wp.vec3d),
+    # Out:
     density_out: wp.array(dtype=wp.float64),
 ):
     """The cluster finder's smoothed density (paper sect. 2.7) at each target: sum over the sources of
     m_j / ((2 pi)^(3/2) sigma_j^3) exp(-|y - x_j|^2 / (2 sigma_j^2)), the factors given per source.
     O(N^2) in float64: the Gaussian is 10 radii wide, so it reaches across a whole pile."""
     t = wp.tid()
-    y = target_position[t]
+    y = target_position_in[t]
     total = wp.float64(0.0)
-    for j in range(source_position.shape[0]):
-        r = y - source_position[j]
-        total += source_norm[j] * wp.exp(-wp.dot(r, r) * source_inv_two_var[j])
+    for j in range(source_position_in.shape[0]):
+        r = y - source_position_in[j]
+        total += source_norm_in[j] * wp.exp(-wp.dot(r, r) * source_inv_two_var_in[j])
     density_out[t] = total

@@ -28,10 +28,10 @@ def pair_forces_reference(precision: str = "mixed", law: str = "paper"):
     def pair_forces_reference_kernel(
         # Model:
         model: ContactModel,
-        ranges: wp.array(dtype=wp.vec2i),  # per particle: its system's particles, [first, end)
+        ranges_in: wp.array(dtype=wp.vec2i),  # per particle: its system's particles, [first, end)
         radius_in: wp.array(dtype=wp.float64),
         mass_in: wp.array(dtype=wp.float64),
-        # State in:
+        # In:
         position_in: wp.array(dtype=wp.vec3d),
         velocity_in: wp.array(dtype=wp.vec3d),
         omega_in: wp.array(dtype=wp.vec3d),
@@ -39,20 +39,20 @@ def pair_forces_reference(precision: str = "mixed", law: str = "paper"):
         force_out: wp.array(dtype=wp.vec3d),
         torque_out: wp.array(dtype=wp.vec3d),
         channels_out: wp.array2d(dtype=wp.vec3d),
-        deepest_out: wp.array(dtype=wp.int64),
+        deepest_inout: wp.array(dtype=wp.int64),  # raised to each contact's depth (note_depth), or empty
     ):
         i = wp.tid()
         position_i = position_in[i]
         g_mass_i = model.G * mass_in[i]
         gravity_sum = vec_real()
         total = ContactSum()
-        for j in range(ranges[i][0], ranges[i][1]):
+        for j in range(ranges_in[i][0], ranges_in[i][1]):
             r_ij = position_i - position_in[j]
             d2 = wp.dot(r_ij, r_ij)
             if d2 > wp.float64(0.0):
                 gravity_sum += gravity(vec_real(r_ij), real(g_mass_i * mass_in[j]))
                 if in_contact(d2, radius_in[i], radius_in[j]):
-                    total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out, total)
+                    total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_inout, total)
         contact_force = write_contacts(total, i, torque_out, channels_out)
         force_out[i] = wp.vec3d(gravity_sum) + contact_force
 

@@ -62,18 +62,26 @@ class TreeNodes:
 
 
 @wp.kernel
-def reset_box(box: wp.array(dtype=wp.vec3d)):
+def reset_box(
+    # Out:
+    box_out: wp.array(dtype=wp.vec3d),  # [0] = +big, [1] = -big: what bounds narrows
+):
     big = wp.float64(1.0e300)
-    box[0] = wp.vec3d(big, big, big)
-    box[1] = wp.vec3d(-big, -big, -big)
+    box_out[0] = wp.vec3d(big, big, big)
+    box_out[1] = wp.vec3d(-big, -big, -big)
 
 
 @wp.kernel
-def bounds(position_in: wp.array(dtype=wp.vec3d), box: wp.array(dtype=wp.vec3d)):
-    """box[0] = componentwise min, box[1] = max of the centres (box preset to +inf, -inf)."""
+def bounds(
+    # In:
+    position_in: wp.array(dtype=wp.vec3d),
+    # Out:
+    box_inout: wp.array(dtype=wp.vec3d),  # preset by reset_box
+):
+    """box_inout[0] = componentwise min, box_inout[1] = max of the centres (preset to +big, -big)."""
     i = wp.tid()
-    wp.atomic_min(box, 0, position_in[i])
-    wp.atomic_max(box, 1, position_in[i])
+    wp.atomic_min(box_inout, 0, position_in[i])
+    wp.atomic_max(box_inout, 1, position_in[i])
 
 
 @wp.func
@@ -89,23 +97,25 @@ def spread_bits(v: int) -> int:
 
 @wp.kernel
 def morton_codes(
+    # In:
     position_in: wp.array(dtype=wp.vec3d),
-    box: wp.array(dtype=wp.vec3d),
-    keys: wp.array(dtype=wp.int32),
-    order: wp.array(dtype=wp.int32),
+    box_in: wp.array(dtype=wp.vec3d),  # the centres' [min, max] (bounds)
+    # Out:
+    keys_out: wp.array(dtype=wp.int32),
+    order_out: wp.array(dtype=wp.int32),
 ):
-    """keys[i]: the 30-bit Morton code of centre i in the box; order[i] = i (sorted along with keys)."""
+    """keys_out[i]: the 30-bit Morton code of centre i in the box; order_out[i] = i (sorted along with the keys)."""
     i = wp.tid()
-    low = box[0]
-    extent = box[1] - low
+    low = box_in[0]
+    extent = box_in[1] - low
     size = wp.max(wp.max(extent[0], extent[1]), extent[2])
     scale = wp.float64(0.0)
     if size > wp.float64(0.0):
         scale = wp.float64(1023.999) / size  # one cube, so that cells stay cubes
     q = (position_in[i] - low) * scale
     code = (spread_bits(int(q[0])) << 2) | (spread_bits(int(q[1])) << 1) | spread_bits(int(q[2]))
-    keys[i] = wp.int32(code)
-    order[i] = wp.int32(i)
+    keys_out[i] = wp.int32(code)
+    order_out[i] = wp.int32(i)
 
 
 @wp.func
@@ -130,43 +140,50 @@ def highest_bit(x: int) -> int:
 
 
 @wp.func
-def common_prefix(keys: wp.array(dtype=wp.int32), count: int, i: int, j: int) -> int:
+def common_prefix(keys_in: wp.array(dtype=wp.int32), count: int, i: int, j: int) -> int:
     """delta(i, j) of Karras: bits shared by the keys of sorted positions i and j (30 key bits, then
     31 bits of the positions themselves when the keys are equal); -1 outside the array."""
     if j < 0 or j >= count:
         return -1
-    a = int(keys[i])
-    b = int(keys[j])
+    a = int(keys_in[i])
+    b = int(keys_in[j])
     if a != b:
         return 29 - highest_bit(a ^ b)
     return 30 + 30 - highest_bit(i ^ j)
 
 
 @wp.kernel
-def build_nodes(keys: wp.array(dtype=wp.int32), count: int, nodes: TreeNodes):
+def build_nodes(
+    # Model:
+    count: int,  # particles
+    # In:
+    keys_in: wp.array(dtype=wp.int32),  # sorted Morton codes
+    # Out:
+    nodes_out: TreeNodes,  # child, parent, first, last
+):
     """Internal node i (of count - 1): its range [first, last] of sorted positions and its two
     children (node indices; leaves are count - 1 + position).  Node 0 is the root."""
     i = wp.tid()
     direction = int(1)
-    if common_prefix(keys, count, i, i + 1) < common_prefix(keys, count, i, i - 1):
+    if common_prefix(keys_in, count, i, i + 1) < common_prefix(keys_in, count, i, i - 1):
         direction = -1
-    floor_prefix = common_prefix(keys, count, i, i - direction)
+    floor_prefix = common_prefix(keys_in, count, i, i - direction)
     reach = int(2)
-    while common_prefix(keys, count, i, i + reach * direction) > floor_prefix:
+    while common_prefix(keys_in, count, i, i + reach * direction) > floor_prefix:
         reach = reach * 2
     length = int(0)
     step = reach // 2
     while step >= 1:
-        if common_prefix(keys, count, i, i + (length + step) * direction) > floor_prefix:
+        if common_prefix(keys_in, count, i, i + (length + step) * direction) > floor_prefix:
             length += step
         step = step // 2
     j = i + length * direction
-    node_prefix = common_prefix(keys, count, i, j)
+    node_prefix = common_prefix(keys_in, count, i, j)
     split = int(0)
     step = length
     while step > 1:
         step = (step + 1) // 2
-        if common_prefix(keys, count, i, i + (split + step) * direction) > node_prefix:
+        if common_prefix(keys_in, count, i, i + (split + step) * direction) > node_prefix:
             split += step
     gamma = i + split * direction + wp.min(direction, 0)
     low = wp.min(i, j)
@@ -177,18 +194,21 @@ def build_nodes(keys: wp.array(dtype=wp.int32), count: int, nodes: TreeNodes):
     right = gamma + 1
     if high == gamma + 1:
         right = count - 1 + gamma + 1
-    nodes.child[i, 0] = wp.int32(left)
-    nodes.child[i, 1] = wp.int32(right)
-    nodes.parent[left] = wp.int32(i)
-    nodes.parent[right] = wp.int32(i)
+    nodes_out.child[i, 0] = wp.int32(left)
+    nodes_out.child[i, 1] = wp.int32(right)
+    nodes_out.parent[left] = wp.int32(i)
+    nodes_out.parent[right] = wp.int32(i)
     if i == 0:
-        nodes.parent[0] = wp.int32(-1)
-    nodes.first[i] = wp.int32(low)
-    nodes.last[i] = wp.int32(high)
+        nodes_out.parent[0] = wp.int32(-1)
+    nodes_out.first[i] = wp.int32(low)
+    nodes_out.last[i] = wp.int32(high)
 
 
 @wp.kernel
-def escape_links(nodes: TreeNodes):
+def escape_links(
+    # Out:
+    nodes_inout: TreeNodes,  # reads parent and child, writes escape
+):
     """Node k's escape: climb while k is its parent's second child; the escape is then the second
     child of that parent (-1 past the root).  With it the walk needs no stack (a stack of a few dozen
     nodes per thread lives in slow local memory on a GPU), and visits the nodes in the order a
@@ -197,40 +217,43 @@ def escape_links(nodes: TreeNodes):
     node = k
     escape = int(-1)
     while node > 0 and escape < 0:
-        up = int(nodes.parent[node])
-        if int(nodes.child[up, 0]) == node:
-            escape = int(nodes.child[up, 1])
+        up = int(nodes_inout.parent[node])
+        if int(nodes_inout.child[up, 0]) == node:
+            escape = int(nodes_inout.child[up, 1])
         node = up
-    nodes.escape[k] = wp.int32(escape)
+    nodes_inout.escape[k] = wp.int32(escape)
 
 
 @wp.kernel
 def leaf_moments(
-    position_in: wp.array(dtype=wp.vec3d),
+    # Model:
+    count: int,  # particles
     mass_in: wp.array(dtype=wp.float64),
-    order: wp.array(dtype=wp.int32),
-    count: int,
-    nodes: TreeNodes,
-    done_a: wp.array(dtype=wp.int32),
-    done_b: wp.array(dtype=wp.int32),
+    # In:
+    position_in: wp.array(dtype=wp.vec3d),
+    order_in: wp.array(dtype=wp.int32),  # the particles in sorted order
+    # Out:
+    nodes_out: TreeNodes,  # the leaves' moments and boxes
+    done_a_out: wp.array(dtype=wp.int32),
+    done_b_out: wp.array(dtype=wp.int32),
 ):
     """Leaf count - 1 + k holds the particle at sorted position k, summed from the start; internal
     node k starts unsummed (in both flag arrays, which the levels use in turn)."""
     k = wp.tid()
     leaf = count - 1 + k
-    x = position_in[order[k]]
-    nodes.mass[leaf] = mass_in[order[k]]
-    nodes.centre[leaf] = x
-    nodes.quadrupole[leaf] = wp.mat33d()
-    nodes.low[leaf] = x
-    nodes.high[leaf] = x
-    nodes.size[leaf] = wp.float64(0.0)
-    nodes.offset[leaf] = wp.float64(0.0)
-    done_a[leaf] = 1
-    done_b[leaf] = 1
+    x = position_in[order_in[k]]
+    nodes_out.mass[leaf] = mass_in[order_in[k]]
+    nodes_out.centre[leaf] = x
+    nodes_out.quadrupole[leaf] = wp.mat33d()
+    nodes_out.low[leaf] = x
+    nodes_out.high[leaf] = x
+    nodes_out.size[leaf] = wp.float64(0.0)
+    nodes_out.offset[leaf] = wp.float64(0.0)
+    done_a_out[leaf] = 1
+    done_b_out[leaf] = 1
     if k < count - 1:
-        done_a[k] = 0
-        done_b[k] = 0
+        done_a_out[k] = 0
+        done_b_out[k] = 0
 
 
 @wp.func
@@ -243,44 +266,46 @@ def shifted_quadrupole(quadrupole: wp.mat33d, mass: wp.float64, offset: wp.vec3d
 
 @wp.kernel
 def node_moments(
-    nodes: TreeNodes,
-    done_before: wp.array(dtype=wp.int32),
-    done_after: wp.array(dtype=wp.int32),
-    pending: wp.array(dtype=wp.int32),
+    # In:
+    done_before_in: wp.array(dtype=wp.int32),  # per node: summed by an earlier launch
+    # Out:
+    nodes_inout: TreeNodes,  # reads the children's moments, writes the node's
+    done_after_out: wp.array(dtype=wp.int32),
+    pending_out: wp.array(dtype=wp.int32),  # [0] = 0 once the root is summed
 ):
     """One level: an internal node whose children were both summed before this launch sums them.
-    Flags are read from ``done_before`` and written to ``done_after`` only, so no thread reads
-    what another writes in the same launch.  pending[0] = 0 once the root (node 0) is summed: the
+    Flags are read from ``done_before_in`` and written to ``done_after_out`` only, so no thread reads
+    what another writes in the same launch.  pending_out[0] = 0 once the root (node 0) is summed: the
     device-side loop condition, so that no launch count is read back to the host."""
     i = wp.tid()
-    if done_before[i] != 0:
-        done_after[i] = 1
+    if done_before_in[i] != 0:
+        done_after_out[i] = 1
         if i == 0:
-            pending[0] = 0
+            pending_out[0] = 0
         return
-    a = int(nodes.child[i, 0])
-    b = int(nodes.child[i, 1])
-    if done_before[a] == 0 or done_before[b] == 0:
-        done_after[i] = 0
+    a = int(nodes_inout.child[i, 0])
+    b = int(nodes_inout.child[i, 1])
+    if done_before_in[a] == 0 or done_before_in[b] == 0:
+        done_after_out[i] = 0
         return
     if i == 0:
-        pending[0] = 0
-    mass = nodes.mass[a] + nodes.mass[b]
-    centre = (nodes.mass[a] * nodes.centre[a] + nodes.mass[b] * nodes.centre[b]) / mass
-    nodes.mass[i] = mass
-    nodes.centre[i] = centre
-    nodes.quadrupole[i] = shifted_quadrupole(nodes.quadrupole[a], nodes.mass[a], nodes.centre[a] - centre) + shifted_quadrupole(
-        nodes.quadrupole[b], nodes.mass[b], nodes.centre[b] - centre
+        pending_out[0] = 0
+    mass = nodes_inout.mass[a] + nodes_inout.mass[b]
+    centre = (nodes_inout.mass[a] * nodes_inout.centre[a] + nodes_inout.mass[b] * nodes_inout.centre[b]) / mass
+    nodes_inout.mass[i] = mass
+    nodes_inout.centre[i] = centre
+    nodes_inout.quadrupole[i] = shifted_quadrupole(nodes_inout.quadrupole[a], nodes_inout.mass[a], nodes_inout.centre[a] - centre) + shifted_quadrupole(
+        nodes_inout.quadrupole[b], nodes_inout.mass[b], nodes_inout.centre[b] - centre
     )
-    low = wp.min(nodes.low[a], nodes.low[b])
-    high = wp.max(nodes.high[a], nodes.high[b])
+    low = wp.min(nodes_inout.low[a], nodes_inout.low[b])
+    high = wp.max(nodes_inout.high[a], nodes_inout.high[b])
     extent = high - low
-    nodes.low[i] = low
-    nodes.high[i] = high
+    nodes_inout.low[i] = low
+    nodes_inout.high[i] = high
     # What the walk's opening test needs, once per node rather than once per visit.
-    nodes.size[i] = wp.max(wp.max(extent[0], extent[1]), extent[2])
-    nodes.offset[i] = wp.length(centre - wp.float64(0.5) * (high + low))
-    done_after[i] = 1
+    nodes_inout.size[i] = wp.max(wp.max(extent[0], extent[1]), extent[2])
+    nodes_inout.offset[i] = wp.length(centre - wp.float64(0.5) * (high + low))
+    done_after_out[i] = 1
 
 
 @wp.func
@@ -325,29 +350,32 @@ def walk_records(precision: str):
 
     @wp.kernel(module="unique", enable_backward=False)
     def walk_records_kernel(
+        # Model:
         G: wp.float64,
-        inv_theta: wp.float64,
-        count: int,
-        nodes: TreeNodes,
-        box: wp.array(dtype=wp.vec3d),
-        place: wp.array(dtype=vec4),
-        leaf_position: wp.array(dtype=wp.vec3d),
-        links: wp.array(dtype=wp.vec4i),
-        moments: wp.array2d(dtype=vec4),
+        inv_theta: wp.float64,  # 1 / theta_open
+        count: int,  # particles
+        # In:
+        nodes_in: TreeNodes,
+        box_in: wp.array(dtype=wp.vec3d),
+        # Out:
+        place_out: wp.array(dtype=vec4),
+        leaf_position_out: wp.array(dtype=wp.vec3d),
+        links_out: wp.array(dtype=wp.vec4i),
+        moments_out: wp.array2d(dtype=vec4),
     ):
         node = wp.tid()
-        centre = nodes.centre[node]
-        relative = centre - wp.float64(0.5) * (box[0] + box[1])
-        place[node] = vec4(real(relative[0]), real(relative[1]), real(relative[2]), real(nodes.size[node] * inv_theta + nodes.offset[node]))
+        centre = nodes_in.centre[node]
+        relative = centre - wp.float64(0.5) * (box_in[0] + box_in[1])
+        place_out[node] = vec4(real(relative[0]), real(relative[1]), real(relative[2]), real(nodes_in.size[node] * inv_theta + nodes_in.offset[node]))
         if node >= count - 1:
             position = node - (count - 1)
-            leaf_position[position] = centre
-            links[node] = wp.vec4i(position, position, -1, int(nodes.escape[node]))
+            leaf_position_out[position] = centre
+            links_out[node] = wp.vec4i(position, position, -1, int(nodes_in.escape[node]))
         else:
-            links[node] = wp.vec4i(int(nodes.first[node]), int(nodes.last[node]), int(nodes.child[node, 0]), int(nodes.escape[node]))
-        g_quadrupole = G * nodes.quadrupole[node]
-        moments[node, 0] = vec4(real(G * nodes.mass[node]), real(g_quadrupole[0, 0]), real(g_quadrupole[1, 1]), real(g_quadrupole[2, 2]))
-        moments[node, 1] = vec4(real(g_quadrupole[0, 1]), real(g_quadrupole[0, 2]), real(g_quadrupole[1, 2]), real(0.0))
+            links_out[node] = wp.vec4i(int(nodes_in.first[node]), int(nodes_in.last[node]), int(nodes_in.child[node, 0]), int(nodes_in.escape[node]))
+        g_quadrupole = G * nodes_in.quadrupole[node]
+        moments_out[node, 0] = vec4(real(G * nodes_in.mass[node]), real(g_quadrupole[0, 0]), real(g_quadrupole[1, 1]), real(g_quadrupole[2, 2]))
+        moments_out[node, 1] = vec4(real(g_quadrupole[0, 1]), real(g_quadrupole[0, 2]), real(g_quadrupole[1, 2]), real(0.0))
 
     return walk_records_kernel
 
@@ -367,36 +395,36 @@ def tree_walk_function(precision: str):
         k: int,
         start: int,
         count: int,
-        box: wp.array(dtype=wp.vec3d),
-        place: wp.array(dtype=vec4),
-        leaf_position: wp.array(dtype=wp.vec3d),
-        links: wp.array(dtype=wp.vec4i),
-        moments: wp.array2d(dtype=vec4),
+        box_in: wp.array(dtype=wp.vec3d),
+        place_in: wp.array(dtype=vec4),
+        leaf_position_in: wp.array(dtype=wp.vec3d),
+        links_in: wp.array(dtype=wp.vec4i),
+        moments_in: wp.array2d(dtype=vec4),
     ):
         """Acceleration and potential (per unit mass) at the particle at sorted position k, from every
         other particle under node ``start`` (the root: all others; -1: none); a kernel that uses one
         of them lets the compiler drop the other."""
-        x = leaf_position[k]
-        x_relative = vec(x - wp.float64(0.5) * (box[0] + box[1]))
+        x = leaf_position_in[k]
+        x_relative = vec(x - wp.float64(0.5) * (box_in[0] + box_in[1]))
         field = vec()
         potential = real(0.0)
         node = start
         end = int(-1)  # where the walk leaves start's subtree
         if start >= 0:
-            end = int(links[start][3])
+            end = int(links_in[start][3])
         while node != end:
-            link = links[node]
+            link = links_in[node]
             if node >= count - 1:  # a leaf: one particle, summed directly (not the particle itself)
-                r = vec(x - leaf_position[link[0]])
+                r = vec(x - leaf_position_in[link[0]])
                 d2 = wp.dot(r, r)
                 if int(link[0]) != k and d2 > real(0.0):
                     inv_d = inverse_sqrt(d2)
-                    g_mass = moments[node, 0][0]
+                    g_mass = moments_in[node, 0][0]
                     field -= (g_mass * inv_d * inv_d) * (r * inv_d)
                     potential -= g_mass * inv_d
                 node = int(link[3])
                 continue
-            at = place[node]
+            at = place_in[node]
             r = x_relative - vec(at[0], at[1], at[2])
             d2 = wp.dot(r, r)
             # Used whole only beyond size / theta_open plus the offset of its centre of mass from
@@ -406,8 +434,8 @@ def tree_walk_function(precision: str):
             if not own and reach * reach < d2:
                 inv_d = inverse_sqrt(d2)
                 unit = r * inv_d
-                a = moments[node, 0]
-                b = moments[node, 1]
+                a = moments_in[node, 0]
+                b = moments_in[node, 1]
                 g_quadrupole = mat(a[1], b[0], b[1], b[0], a[2], b[2], b[1], b[2], a[3])
                 field += multipole_field(unit, inv_d, a[0], g_quadrupole)
                 potential += multipole_potential(unit, inv_d, a[0], g_quadrupole)
@@ -428,35 +456,44 @@ def tree_gravity(precision: str = "mixed"):
 
     @wp.kernel(module="unique", enable_backward=False)
     def tree_gravity_kernel(
-        count: int,
-        box: wp.array(dtype=wp.vec3d),
-        place: wp.array(dtype=vec4),
-        leaf_position: wp.array(dtype=wp.vec3d),
-        links: wp.array(dtype=wp.vec4i),
-        moments: wp.array2d(dtype=vec4),
-        roots: wp.array(dtype=wp.int32),
-        field_parts: wp.array2d(dtype=vec),
+        # Model:
+        count: int,  # particles
+        # In:
+        box_in: wp.array(dtype=wp.vec3d),
+        place_in: wp.array(dtype=vec4),  # the walk records (walk_records)
+        leaf_position_in: wp.array(dtype=wp.vec3d),
+        links_in: wp.array(dtype=wp.vec4i),
+        moments_in: wp.array2d(dtype=vec4),
+        roots_in: wp.array(dtype=wp.int32),  # the parts' subtrees (walk_roots)
+        # Out:
+        field_parts_out: wp.array2d(dtype=vec),
     ):
         """The field at each particle from one part of the tree: thread part N + k walks the subtree
-        ``roots[part]`` for the particle at sorted position k."""
+        ``roots_in[part]`` for the particle at sorted position k."""
         part = wp.tid() // count
         k = wp.tid() - part * count
-        field, potential = tree_walk(k, int(roots[part]), count, box, place, leaf_position, links, moments)
-        field_parts[part, k] = field
+        field, potential = tree_walk(k, int(roots_in[part]), count, box_in, place_in, leaf_position_in, links_in, moments_in)
+        field_parts_out[part, k] = field
 
     return tree_gravity_kernel
 
 
 @wp.kernel
 def sum_field_parts(
-    field_parts: wp.array2d(dtype=Any), order: wp.array(dtype=wp.int32), mass_in: wp.array(dtype=wp.float64), force_out: wp.array(dtype=wp.vec3d)
+    # Model:
+    mass_in: wp.array(dtype=wp.float64),
+    # In:
+    field_parts_in: wp.array2d(dtype=Any),  # [part, sorted position] (tree_gravity)
+    order_in: wp.array(dtype=wp.int32),  # the particles in sorted order
+    # Out:
+    force_out: wp.array(dtype=wp.vec3d),
 ):
     """force_out = mass times the field summed over the parts, in part order (deterministic)."""
     k = wp.tid()
     field = wp.vec3d()
-    for part in range(field_parts.shape[0]):
-        field += wp.vec3d(field_parts[part, k])
-    i = int(order[k])
+    for part in range(field_parts_in.shape[0]):
+        field += wp.vec3d(field_parts_in[part, k])
+    i = int(order_in[k])
     force_out[i] = mass_in[i] * field
 
 
@@ -465,54 +502,68 @@ _walk_float64 = tree_walk_function("float64")
 
 @wp.kernel
 def tree_potential(
-    count: int,
-    box: wp.array(dtype=wp.vec3d),
-    place: wp.array(dtype=wp.vec4d),
-    leaf_position: wp.array(dtype=wp.vec3d),
-    links: wp.array(dtype=wp.vec4i),
-    moments: wp.array2d(dtype=wp.vec4d),
-    roots: wp.array(dtype=wp.int32),
-    potential_parts: wp.array2d(dtype=wp.float64),
+    # Model:
+    count: int,  # particles
+    # In:
+    box_in: wp.array(dtype=wp.vec3d),
+    place_in: wp.array(dtype=wp.vec4d),  # the float64 walk records (walk_records)
+    leaf_position_in: wp.array(dtype=wp.vec3d),
+    links_in: wp.array(dtype=wp.vec4i),
+    moments_in: wp.array2d(dtype=wp.vec4d),
+    roots_in: wp.array(dtype=wp.int32),  # the parts' subtrees (walk_roots)
+    # Out:
+    potential_parts_out: wp.array2d(dtype=wp.float64),
 ):
     """The potential (per unit mass) at each particle from one part of the tree, for frames on the
     tree path: always float64 (float64 records), so that the energy ledger closes to round-off."""
     part = wp.tid() // count
     k = wp.tid() - part * count
-    field, potential = _walk_float64(k, int(roots[part]), count, box, place, leaf_position, links, moments)
-    potential_parts[part, k] = potential
+    field, potential = _walk_float64(k, int(roots_in[part]), count, box_in, place_in, leaf_position_in, links_in, moments_in)
+    potential_parts_out[part, k] = potential
 
 
 @wp.kernel
 def sum_potential_parts(
-    potential_parts: wp.array2d(dtype=wp.float64), order: wp.array(dtype=wp.int32), mass_in: wp.array(dtype=wp.float64), potential_out: wp.array(dtype=wp.float64)
+    # Model:
+    mass_in: wp.array(dtype=wp.float64),
+    # In:
+    potential_parts_in: wp.array2d(dtype=wp.float64),  # [part, sorted position] (tree_potential)
+    order_in: wp.array(dtype=wp.int32),  # the particles in sorted order
+    # Out:
+    potential_out: wp.array(dtype=wp.float64),
 ):
     """Half of each particle's gravitational energy with all others (summed over particles, the
     potential energy): the parts summed in order."""
     k = wp.tid()
     potential = wp.float64(0.0)
-    for part in range(potential_parts.shape[0]):
-        potential += potential_parts[part, k]
-    i = int(order[k])
+    for part in range(potential_parts_in.shape[0]):
+        potential += potential_parts_in[part, k]
+    i = int(order_in[k])
     potential_out[i] = wp.float64(0.5) * mass_in[i] * potential
 
 
 @wp.kernel
-def walk_roots(links: wp.array(dtype=wp.vec4i), roots: wp.array(dtype=wp.int32)):
-    """Split the tree into len(roots) subtrees that hold every leaf, so that as many threads walk
+def walk_roots(
+    # In:
+    links_in: wp.array(dtype=wp.vec4i),  # the nodes' links (walk_records)
+    # Out:
+    roots_out: wp.array(dtype=wp.int32),  # the parts' subtrees, in depth-first order (-1: an empty part)
+):
+    """Split the tree into len(roots_out) subtrees that hold every leaf, so that as many threads walk
     for each particle (a GPU needs ~1e6 threads in flight to hide the walk's memory latency; one
     per particle is too few below a few 1e5): from the root, split the subtree holding most
     particles into its two children, in place (the parts stay in depth-first order), until there
     are enough.  Parts left over (fewer particles than parts) are -1, an empty walk.  One thread."""
-    parts = roots.shape[0]
-    roots[0] = wp.int32(0)
+    parts = roots_out.shape[0]
+    roots_out[0] = wp.int32(0)
     for s in range(1, parts):
-        roots[s] = wp.int32(-1)
+        roots_out[s] = wp.int32(-1)
     made = int(1)
     while made < parts:
         best = int(-1)
         most = int(1)
         for s in range(made):
-            link = links[roots[s]]
+            link = links_in[roots_out[s]]
             held = int(link[1]) - int(link[0]) + 1
             if held > most:
                 best = s
@@ -522,22 +573,25 @@ def walk_roots(links: wp.array(dtype=wp.vec4i), roots: wp.array(dtype=wp.int32))
         else:
             s = made
             while s > best + 1:
-                roots[s] = roots[s - 1]
+                roots_out[s] = roots_out[s - 1]
                 s -= 1
-            first_child = int(links[roots[best]][2])
-            roots[best] = wp.int32(first_child)
-            roots[best + 1] = links[first_child][3]  # the second child: where the first's walk goes next
+            first_child = int(links_in[roots_out[best]][2])
+            roots_out[best] = wp.int32(first_child)
+            roots_out[best + 1] = links_in[first_child][3]  # the second child: where the first's walk goes next
             made += 1
 
 
 @wp.kernel
 def grid_candidates(
-    grid: wp.uint64,
-    points: wp.array(dtype=wp.vec3),
+    # Model:
     radius_in: wp.array(dtype=wp.float64),
     max_radius: wp.float64,
-    candidate_count: wp.array(dtype=wp.int32),
-    candidates: wp.array2d(dtype=wp.int32),
+    # In:
+    grid: wp.uint64,  # the hash grid of the points
+    points_in: wp.array(dtype=wp.vec3),  # the centres in float32 (float32_points)
+    # Out:
+    candidate_count_out: wp.array(dtype=wp.int32),  # candidates met (past the list's width: an overflow)
+    candidates_out: wp.array2d(dtype=wp.int32),  # the first of them, in increasing j
 ):
     """Each particle's contact candidates: neighbours closer than (R_i + R_j) (1 + 1e-4), a
     superset of its contacts confirmed in float64 by the contact pass.  The grid is asked for
@@ -547,19 +601,25 @@ def grid_candidates(
     i = wp.tid()
     margin = wp.float64(1.0001)
     reach = wp.float32((radius_in[i] + max_radius) * margin)
-    query = wp.hash_grid_query(grid, points[i], reach)
+    query = wp.hash_grid_query(grid, points_in[i], reach)
     j = int(0)
     noted = int(0)
     while wp.hash_grid_query_next(query, j):
         if j != i:
             touch = wp.float32((radius_in[i] + radius_in[j]) * margin)
-            if wp.length_sq(points[j] - points[i]) < touch * touch:
-                noted = note_candidate(candidates, i, noted, j)
-    candidate_count[i] = wp.int32(noted)
+            if wp.length_sq(points_in[j] - points_in[i]) < touch * touch:
+                noted = note_candidate(candidates_out, i, noted, j)
+    candidate_count_out[i] = wp.int32(noted)
 
 
 @wp.kernel
-def float32_points(position_in: wp.array(dtype=wp.vec3d), origin: wp.array(dtype=wp.vec3d), points: wp.array(dtype=wp.vec3)):
+def float32_points(
+    # In:
+    position_in: wp.array(dtype=wp.vec3d),
+    origin_in: wp.array(dtype=wp.vec3d),  # [0]: the box's low corner (bounds)
+    # Out:
+    points_out: wp.array(dtype=wp.vec3),
+):
     """Centres relative to the box corner, in float32, for the hash grid."""
     i = wp.tid()
-    points[i] = wp.vec3(position_in[i] - origin[0])
+    points_out[i] = wp.vec3(position_in[i] - origin_in[0])
