@@ -23,6 +23,7 @@ from .folder import RunFolder  # noqa: E402
 from .layouts import Layout  # noqa: E402
 from .io import load_pile, read_trajectory, save_pile  # noqa: E402
 from .params import CONTACT_LAWS, G_CGS, ROLLING_FRICTION_FORMS, Params  # noqa: E402
+from .scheme import Scheme  # noqa: E402
 from .pile import Formation, form_pile  # noqa: E402
 from .simulation import Simulation, compute_forces  # noqa: E402
 from .stability import (  # noqa: E402
@@ -45,6 +46,7 @@ __all__ = [
     "G_CGS",
     "Layout",
     "Params",
+    "Scheme",
     "ROLLING_FRICTION_FORMS",
     "CONTACT_LAWS",
     "Simulation",

@@ -26,6 +26,7 @@ from . import layouts as thread_layouts  # (its PARTICLE_BLOCK is set per row; "
 from .engine import Engine
 from .layouts import Layout, choose_layout
 from .params import Params
+from .scheme import Scheme
 from .simulation import Simulation, graph_steps
 from .state import State
 from .errors import InputError
@@ -218,12 +219,13 @@ def bench_size(
 def _bench_size(n, device, precision, layout, budget, steps, baseline, gravity, systems, system, gravity_every) -> BenchRow:
     state = bench_system(system, n, systems)
     sizes = [n] * systems
-    params = Params(gravity=gravity, gravity_every=gravity_every)
+    params = Params()
     layout = layout or choose_layout(n, device)
-    tiled = Engine(state, params, device, precision, "tiled", layout, systems=sizes)
+    scheme = Scheme(precision=precision, gravity=gravity, gravity_every=gravity_every, layout=layout)
+    tiled = Engine(state, params, device, systems=sizes, scheme=scheme)
     force_seconds = _seconds_per_call(tiled.eval_forces, device, budget)
     # The full step as runs take it: with the energy ledger.
-    sim = Simulation(state, params, device=device, precision=precision, layout=layout, allow_unstable=True, ledger=True, systems=sizes)
+    sim = Simulation(state, params, device=device, scheme=scheme, allow_unstable=True, ledger=True, systems=sizes)
     block = graph_steps(gravity_every)
     steps = block * math.ceil(steps / block)
     first_step, first_builds = sim.step_count, sim.neighbour_list_builds()
@@ -240,7 +242,7 @@ def _bench_size(n, device, precision, layout, budget, steps, baseline, gravity, 
         solver = "the tree" if gravity == "tree" else "each pair once"
         what = f"gravity every {gravity_every} steps ({solver}), neighbour-list contacts"
     else:
-        what = layout.describe() if gravity == "all-pairs" else f"tree (theta_open {params.theta_open:g}), hash-grid contacts"
+        what = layout.describe() if gravity == "all-pairs" else f"tree (theta_open {scheme.theta_open:g}), hash-grid contacts"
     return BenchRow(
         n=n,
         device=device,

@@ -210,7 +210,7 @@ def pile(
     mu_r: float = typer.Option(PILE_DEFAULTS["mu_r"], "--mu-r", help="Rolling friction coefficient."),
     dt: float = typer.Option(PILE_DEFAULTS["dt"], "--dt", help="Time step [s]."),
     precision: str = typer.Option(PILE_DEFAULTS["precision"], "--precision", help="mixed or float64."),
-    gravity: str = typer.Option(PILE_DEFAULTS["gravity"], "--gravity", help="all-pairs, tree, or auto: the tree from the size where it is the faster on this device (params.TREE_FROM)."),
+    gravity: str = typer.Option(PILE_DEFAULTS["gravity"], "--gravity", help="all-pairs, tree, or auto: the tree from the size where it is the faster on this device (scheme.TREE_FROM)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing pile file."),
     check: bool = typer.Option(False, "--check", help="Check the inputs and estimate the steps and wall time of the formation, form nothing."),
     from_ss: Optional[Path] = typer.Option(
@@ -258,7 +258,7 @@ def _form_pile(
         )  # fmt: skip
     except ValueError as error:  # bad input: each input error of errors.py is a ValueError, as are Params' checks
         fail(str(error))
-    gravity, chosen = plan.params.gravity, plan.device
+    gravity, chosen = plan.gravity, plan.device
     if check:
         from .costs import formation_cost
 
@@ -409,7 +409,7 @@ def _rerun_observer(prepared, mode_text: str | None, every: int | None):
     try:
         mode, address = parse_mode(mode_text)
         every = every or prepared.plan.outputs.output_every
-        outer = prepared.plan.params.gravity_every
+        outer = prepared.plan.scheme.gravity_every
         if every < 1 or every % outer:
             raise ValueError(f"--rerun-every must be a multiple of [params] gravity_every = {outer} (>= 1); got {every}")
         if prepared.resume:
@@ -632,8 +632,8 @@ def _check(spec: dict) -> None:
         fail(str(error))
     for line in [*plan.lines(), *plan.choices()]:
         typer.echo(line)
-    typer.echo(f"cost: {run_cost(plan.state.n, plan.params.gravity, plan.device, plan.steps, plan.params.gravity_every)}")
-    if plan.params.gravity_every > 1:
+    typer.echo(f"cost: {run_cost(plan.state.n, plan.scheme.gravity, plan.device, plan.steps, plan.scheme.gravity_every)}")
+    if plan.scheme.gravity_every > 1:
         typer.echo(GRAVITY_EVERY_NOTE)
     if plan.run_dir.exists():
         typer.echo(f"note: run folder {plan.run_dir} exists (resume continues it, --overwrite replaces it)")
@@ -737,7 +737,7 @@ def bench(
     from .device import DeviceError, resolve_device
     from .scheme import PRECISIONS
     from .layouts import parse_layout
-    from .params import GRAVITY_SOLVERS
+    from .scheme import GRAVITY_SOLVERS
 
     try:
         chosen = resolve_device(device)

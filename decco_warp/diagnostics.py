@@ -8,7 +8,6 @@ pair sums computed on the device by the engine.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 
@@ -36,7 +35,7 @@ def diagnostics(state: State, params: Params, device: str | None = None) -> dict
     from .engine import Engine  # here, so that the analysis can use this module without Warp
 
     # Observables are of one state: the clock gravity is kicked on plays no part in them.
-    pairs = Engine(state, replace(params, gravity_every=1), device, force_kernel="reference").pair_observables()
+    pairs = Engine(state, params, device, force_kernel="reference").pair_observables()
     return state_diagnostics(state, pairs)
 
 

@@ -27,7 +27,7 @@ from .kernels.bodies import PACK_KERNELS
 from .kernels.contacts import CANDIDATES, unpack_depth
 from .layouts import Layout, particle_block
 from .params import Params
-from .scheme import choose_scheme, force_path
+from .scheme import Scheme, choose_scheme, force_path
 from .state import State
 from .errors import InputError
 
@@ -45,31 +45,34 @@ class Engine:
         state: State,
         params: Params,
         device: str | None = None,
-        precision: str = "mixed",
-        force_kernel: str = "tiled",
+        precision: str | None = None,
+        force_kernel: str | None = None,
         layout: Layout | None = None,
         ledger: bool = False,
         systems: Sequence[int] | None = None,
+        scheme: Scheme | None = None,
     ):
-        """``systems``: the sizes of independent systems laid one after another in ``state``
-        (an ensemble: each particle feels only its own system; default, one system)."""
+        """``scheme``: how the model is evaluated (scheme.py; default Scheme()), ``precision``,
+        ``force_kernel`` and ``layout`` replacing its own where given.  ``systems``: the sizes of
+        independent systems laid one after another in ``state`` (an ensemble: each particle feels only
+        its own system; default, one system)."""
         self.device = resolve_device(device)
         self.params = params
         sizes = system_sizes(systems, state.n)
-        self.scheme = choose_scheme(int(sizes.max()), self.device, params, precision, force_kernel, layout)
-        self.model = ModelArrays(state, params, self.device, precision, systems,
+        self.scheme = choose_scheme(int(sizes.max()), self.device, scheme, precision=precision, force_kernel=force_kernel, layout=layout)
+        self.model = ModelArrays(state, params, self.device, self.scheme.precision, systems,
                                  candidate_width(float(state.radii.min()), float(state.radii.max())))  # fmt: skip
         self.state = StateArrays(state, self.device, ledger)
         # The parts, chosen in one place (scheme.force_path; the integrator by the clocks).
         self.path = FORCE_PATHS[force_path(self.scheme)](self.model, self.state, self.scheme)
-        self.integrator = INTEGRATORS[1 if self.scheme.clock == 1 else 2](self.model, self.state, self.path, self.scheme, self.pack_bodies)
+        self.integrator = INTEGRATORS[1 if self.scheme.gravity_every == 1 else 2](self.model, self.state, self.path, self.scheme, self.pack_bodies)
 
     # -- what others read of it ----------------------------------------------------
 
     precision = property(lambda self: self.scheme.precision)
     force_kernel = property(lambda self: self.scheme.force_kernel)
     layout = property(lambda self: self.scheme.layout)
-    gravity_every = property(lambda self: self.scheme.clock, doc="K: steps of dt per gravity evaluation")
+    gravity_every = property(lambda self: self.scheme.gravity_every, doc="K: steps of dt per gravity evaluation")
     ledger = property(lambda self: self.state.ledger)
     count = property(lambda self: self.model.count)
     systems = property(lambda self: self.model.systems)
@@ -133,9 +136,9 @@ class Engine:
         """``steps`` steps (a multiple of K), ending at a whole step as :meth:`step` does, bit for bit
         the same: with ``layout.fuse_kicks``, a step's last half kick, the next one's first half
         kick and drift and the packing of its bodies are one launch."""
-        check_steps(steps, self.scheme.clock)
+        check_steps(steps, self.scheme.gravity_every)
         if not self.scheme.layout.fuse_kicks:
-            for _ in range(steps // self.scheme.clock):
+            for _ in range(steps // self.scheme.gravity_every):
                 self.integrator.step()
         else:
             self.integrator.advance(steps)

@@ -37,9 +37,9 @@ class Ensemble:
                 raise InputError("the members of an ensemble must share their Params")
             if sim.step_count != first.step_count or sim.device != first.device:
                 raise InputError("the members of an ensemble must be at the same step on the same device")
-            # One layout and precision for all: a member stepped otherwise would not move as it would alone.
-            if sim.engine.layout != first.engine.layout or sim.engine.precision != first.engine.precision:
-                raise InputError("the members of an ensemble must share their force layout and precision")
+            # One scheme for all (its layout and precision): a member stepped otherwise would not move as it would alone.
+            if sim.engine.scheme != first.engine.scheme:
+                raise InputError("the members of an ensemble must share their force layout and precision, and gravity and its clock (their Scheme)")
         if not all(sim.engine.ledger for sim in members):
             raise InputError("the members of an ensemble keep the energy ledger (ledger=True)")
         snapshots = [sim.snapshot() for sim in members]
@@ -58,8 +58,7 @@ class Ensemble:
         # At the members' step (each view keeps its own clock's origin).
         state = replace(state, step=first.step_count, time=first.step_count * first.params.dt)
         self.sim = Simulation(
-            state, first.params, device=first.device, precision=first.engine.precision, allow_unstable=True, ledger=True, systems=sizes.tolist(),
-            force_kernel=first.engine.force_kernel, layout=first.engine.layout,
+            state, first.params, device=first.device, scheme=first.engine.scheme, allow_unstable=True, ledger=True, systems=sizes.tolist(),
         )  # fmt: skip
         self.sim.engine.restore(joined)
         self.views = [

@@ -250,7 +250,7 @@ class TreeForces(ForcePath):
 
 
 class ClockedForces(ForcePath):
-    """Gravity on its own clock (``Scheme.clock`` K > 1; docs/model.md): gravity every K steps into its
+    """Gravity on its own clock (``Scheme.gravity_every`` K > 1; docs/model.md): gravity every K steps into its
     own array (gravity "pairs-once", listing nothing, or "tree"), the contacts every step from a
     "neighbour-list".  The integrator (decco_warp/integrators.py ``TwoClocks``) kicks each on its clock."""
 
@@ -267,7 +267,7 @@ class ClockedForces(ForcePath):
                     f"gravity_every > 1 sums all-pairs gravity with the Newton sweep, which holds systems of up to "
                     f"{NEWTON_MAX} particles; this one has {largest}: use gravity = \"tree\""
                 )
-            layout = newton_sweep_layout(scheme.gravity, scheme.clock, scheme.layout, model.device)
+            layout = newton_sweep_layout(scheme.gravity, scheme.gravity_every, scheme.layout, model.device)
             self.body = packed_bodies(model, scheme, model.count)
             self.gravity = PairsOnce(model, scheme, layout, self.body)
         self.gravity_force = wp.zeros(model.count, dtype=wp.vec3d, device=model.device)

@@ -15,7 +15,8 @@ from .device import resolve_device
 from .arrays import candidate_width
 from .costs import check_fits
 from .io import FileFormatError, read_checkpoint, save_pile, write_checkpoint
-from .params import GRAVITY_CHOICES, Params, choose_gravity
+from .params import Params
+from .scheme import GRAVITY_CHOICES, choose_gravity
 from .pile import Formation, FormationError, FormationProgress, check_formation_inputs, grain_sizes
 from .sizes import PowerLaw, parse_size_distribution, touching_limit
 from .stability import MIN_TIME_STEP_MARGIN
@@ -50,12 +51,13 @@ class PilePlan:
     device: str
     note: str | None  # the line that says a formation would take hours here, else None
     size_distribution: PowerLaw | None = None  # radii drawn from a power law instead of ``radii``
+    gravity: str = "all-pairs"  # the gravity solver, "auto" settled
 
     def options(self) -> dict:
         """:class:`decco_warp.pile.Formation`'s options."""
         return {"n_particles": self.particles, "seed": self.seed, "device": self.device, "radii": self.radii, "density": self.density,
                 "params": self.params, "ke_threshold": self.ke_threshold, "fill": self.fill, "max_steps": self.max_steps,
-                "precision": self.precision, "size_distribution": self.size_distribution}  # fmt: skip
+                "precision": self.precision, "size_distribution": self.size_distribution, "gravity": self.gravity}  # fmt: skip
 
     def grain_lines(self) -> list[str]:
         """``pile --check``'s lines on the grains: their sizes; what the smallest costs (paper eq. 17:
@@ -108,14 +110,14 @@ def plan_pile(
         raise InputError(f"--gravity must be one of {', '.join(GRAVITY_CHOICES)}; got {gravity!r}")
     if gravity == "auto":
         gravity = choose_gravity(particles, chosen)
-    params = Params(k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt, gravity=gravity)
+    params = Params(k_in=k_in, restitution=restitution, mu_k=mu_k, mu_r=mu_r, dt=dt)
     radii = tuple(float(r) for r in radii)
     law = None if size_distribution is None else parse_size_distribution(size_distribution)
     sizes = radii if law is None else (law.r_min, law.r_max)
     check_formation_inputs(particles, sizes, density, ke_threshold, fill, max_steps=max_steps)
     width = candidate_width(min(sizes), max(sizes))
     note = check_fits(particles, gravity, chosen, min(max_steps, TYPICAL_FORMATION_STEPS), "forming a pile", candidate_width=width)
-    return PilePlan(Path(out), particles, seed, radii, density, ke_threshold, fill, max_steps, params, precision, chosen, note, law)
+    return PilePlan(Path(out), particles, seed, radii, density, ke_threshold, fill, max_steps, params, precision, chosen, note, law, gravity)
 
 
 def partial_path(out: Path) -> Path:

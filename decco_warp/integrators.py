@@ -91,7 +91,7 @@ class TwoClocks(OneClock):
 
     def __init__(self, model: ModelArrays, state: StateArrays, path: ForcePath, scheme: Scheme, pack):
         super().__init__(model, state, path, scheme, pack)
-        self.every = scheme.clock
+        self.every = scheme.gravity_every
 
     def kick_outer(self, close_step: bool = False) -> None:
         """A gravity half kick of K dt / 2; with ``close_step`` first the last contact half kick (:meth:`kick`)."""

@@ -16,6 +16,7 @@ from typing import Callable
 import numpy as np
 
 from .params import Params
+from .scheme import Scheme
 from .simulation import Simulation
 from .checks import DENSITY_RANGE, RADIUS_RANGE
 from .sizes import PowerLaw, classify, parse_size_distribution
@@ -157,8 +158,10 @@ class Formation:
         precision: str = "mixed",
         snapshot: dict | None = None,
         size_distribution: PowerLaw | str | None = None,
+        gravity: str = "all-pairs",
     ):
-        """``size_distribution``: radii drawn from a power law (a PowerLaw, or its text) instead of ``radii``."""
+        """``size_distribution``: radii drawn from a power law (a PowerLaw, or its text) instead of
+        ``radii``; ``gravity``: the gravity solver (scheme.GRAVITY_SOLVERS)."""
         params = params or Params()
         law = parse_size_distribution(size_distribution) if isinstance(size_distribution, str) else size_distribution
         radii = np.asarray(radii, dtype=float) if law is None else np.array([law.r_min, law.r_max])
@@ -173,8 +176,10 @@ class Formation:
             "fill": float(fill),
             "check_every": int(check_every),
             "precision": precision,
+            "gravity": gravity,
             "params": params.to_dict(),
         }
+        scheme = Scheme(precision=precision, gravity=gravity)
         particle_radii, size_class, self.sizes = grain_sizes(n_particles, seed, radii, law)
         masses = 4.0 / 3.0 * math.pi * density * particle_radii**3
         # Where this session's wall time goes (seconds): set-up (seeding, the simulation), stepping
@@ -186,7 +191,7 @@ class Formation:
             positions, self.seed_radius = seed_cloud(particle_radii, np.random.default_rng(seed), fill)
             zeros = np.zeros_like(positions)
             cloud = State.from_arrays(positions, zeros, zeros, particle_radii, masses, size_class=size_class)
-            self.sim = Simulation(cloud, params, device=device, precision=precision)
+            self.sim = Simulation(cloud, params, device=device, scheme=scheme)
             self.history_time, self.history_ratio, self.peak, self.wall_before = [0.0], [0.0], 0.0, 0.0
         else:
             formation = snapshot["formation"]
@@ -194,7 +199,7 @@ class Formation:
             cloud = State.from_arrays(
                 snapshot["positions"], snapshot["velocities"], snapshot["omegas"], particle_radii, masses, size_class=size_class
             )
-            self.sim = Simulation.from_snapshot(cloud, params, snapshot, device=device, precision=precision)
+            self.sim = Simulation.from_snapshot(cloud, params, snapshot, device=device, scheme=scheme)
             self.seed_radius = float(formation["seed_radius"])
             self.history_time = [float(v) for v in formation["history_time"]]
             self.history_ratio = [float(v) for v in formation["history_ke_over_u"]]
@@ -292,6 +297,8 @@ def _check_same_settings(saved: dict, asked: dict) -> None:
     """A formation continues only with the settings it began with."""
     for key, value in asked.items():
         before = saved.get(key)
+        if key == "gravity" and before is None:  # formations begun when the solver was a field of params
+            before = saved.get("params", {}).get("gravity", value)
         if key == "params":
             differs = {k: v for k, v in value.items() if before is None or before.get(k) != v}
         elif isinstance(value, np.ndarray):

@@ -23,9 +23,10 @@ from . import spec as specs
 from .checks import check_particles, deepest_rest_overlap
 from .collision import setup_collision
 from .device import resolve_device
-from .layouts import Layout, choose_layout, layout_for
+from .layouts import Layout, layout_for
 from .io import FileFormatError, load_pile
 from .params import Params
+from .scheme import Scheme, choose_scheme
 from .stability import CompressionForecast, StabilityReport, check_stability, predict_compression
 from .state import State
 from .errors import RunError  # noqa: F401 (re-exported: the error lives in errors.py)
@@ -101,11 +102,12 @@ class Plan:
     state: State
     """The collision set up (a new run), or the checkpoint's static arrays (a resumed one)."""
     params: Params
+    """What the model is: the contact law and its constants, G, dt."""
+    scheme: Scheme
+    """How it is evaluated: precision, gravity solver, its clock, and the force kernel's layout for
+    this run's size on its device."""
     device: str
     """The Warp device ("cpu", "cuda:N")."""
-    layout: Layout
-    """The force kernel's layout for this run's size on its device."""
-    precision: str
     steps: int
     """The total steps the run reaches."""
     outputs: Outputs
@@ -129,6 +131,15 @@ class Plan:
         return {table: dict(values) for table, values in self.spec_items}
 
     @property
+    def layout(self) -> Layout:
+        """The force kernel's layout for this run's size on its device."""
+        return self.scheme.layout
+
+    @property
+    def precision(self) -> str:
+        return self.scheme.precision
+
+    @property
     def run_dir(self) -> Path:
         return self.outputs.run_dir
 
@@ -148,7 +159,7 @@ class Plan:
     def lines(self) -> list[str]:
         """What run.log and ``--check`` say about the set-up before any step."""
         meta = self.state.metadata
-        params, run = self.params, self.spec["run"]
+        params, scheme, run = self.params, self.scheme, self.spec["run"]
         return [
             f"collision: {self.state.n} particles ({int((self.state.pile_id == 0).sum())} target + "
             f"{int((self.state.pile_id == 1).sum())} projectile), eta {meta['eta']:.6g}"
@@ -159,7 +170,7 @@ class Plan:
             *self.notes,
             f"parameters: k_in {params.k_in:.6g} dyne/cm, dt {params.dt:.6g} s, {self.steps} steps "
             f"({self.steps * params.dt:.6g} s)"
-            + (f", gravity every {params.gravity_every} steps" if params.gravity_every > 1 else "")
+            + (f", gravity every {scheme.gravity_every} steps" if scheme.gravity_every > 1 else "")
             + (f", force layout {run['layout']}" if run["layout"] != "auto" else ""),
             f"stability: {self.stability.summary()}",
             f"compression: {self.forecast.summary()}",
@@ -167,16 +178,16 @@ class Plan:
 
     def choices(self) -> list[str]:
         """The plan's resolved choices, beyond :meth:`lines`: what ``--check`` adds."""
-        p = self.params
+        p, s = self.params, self.scheme
         return [
             f"piles: {', '.join(f'{pile.which} {pile.file} (sha256 {pile.sha256[:12]})' for pile in self.piles)}",
             f"physics: restitution {p.restitution:g}, mu_k {p.mu_k:g}, mu_r {p.mu_r:g} ({p.rolling_friction}), "
-            f"G {p.G:.6g}, gravity {p.gravity}" + (f" (theta_open {p.theta_open:g})" if p.gravity == "tree" else ""),
+            f"G {p.G:.6g}, gravity {s.gravity}" + (f" (theta_open {s.theta_open:g})" if s.gravity == "tree" else ""),
             f"device: {self.device}, precision {self.precision}, force layout {self.layout.describe()}"
             + (
-                f"; gravity every {p.gravity_every} steps ({'the tree' if p.gravity == 'tree' else 'each pair once'}), "
+                f"; gravity every {s.gravity_every} steps ({'the tree' if s.gravity == 'tree' else 'each pair once'}), "
                 "contacts every step from a neighbour list"
-                if p.gravity_every > 1
+                if s.gravity_every > 1
                 else ""
             ),
             f"outputs: {self.outputs.run_dir}, a frame every {self.outputs.output_every} steps, "
@@ -206,10 +217,9 @@ def _resolved(spec: dict, state: State, device: str, **given) -> Plan:
         spec_items=_frozen(spec),
         state=_read_only(state),
         params=specs.params_of(spec),
+        # The layout "auto" is the engine's own choice for one system of n particles, made here once.
+        scheme=choose_scheme(n, device, specs.scheme_of(spec), layout=layout_for(run["layout"], n, device)),
         device=device,
-        # "auto" is the engine's own choice for one system of n particles, made here once.
-        layout=layout_for(run["layout"], n, device) or choose_layout(n, device),
-        precision=run["precision"],
         steps=run["steps"],
         outputs=Outputs(run_dir_of(spec), run["output_every"], run["checkpoint_every"]),
         allow_unstable=run["allow_unstable"],

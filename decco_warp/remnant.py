@@ -20,6 +20,7 @@ from .diagnostics import diagnostics
 from .folder import RunFolder
 from .io import read_trajectory
 from .params import Params
+from .scheme import SCHEME_KEYS, Scheme
 from .simulation import Simulation
 from .state import State, remove_net_motion
 
@@ -127,13 +128,15 @@ def settle_fragment(state: State, source: dict, spin: str = "keep", settle: bool
                     max_steps: int = 1_000_000, device: str | None = None, progress=None) -> State:  # fmt: skip
     """:func:`extract_fragment`'s work on a fragment read by :func:`fragment_of` (its ``state`` and ``source``)."""
     source = dict(source)
-    params = Params.from_dict({k: v for k, v in source.pop("params").items() if k in Params.__dataclass_fields__})
+    given = source.pop("params")
+    params = Params.from_dict({k: v for k, v in given.items() if k in Params.__dataclass_fields__})
+    scheme = Scheme(**{k: v for k, v in given.items() if k in SCHEME_KEYS})  # the run's gravity and its clock
     state = _centred(state, spin)
     steps, ratio = 0, None
     if settle:
-        sim = Simulation(state, params, device=device, allow_unstable=True)
+        sim = Simulation(state, params, device=device, allow_unstable=True, scheme=scheme)
         ratio = _internal_ratio(sim)
-        outer = params.gravity_every  # steps go in whole outer steps
+        outer = scheme.gravity_every  # steps go in whole outer steps
         chunk = max(1, CHECK_EVERY // outer) * outer
         while ratio >= ke_threshold and sim.step_count + outer <= max_steps:
             sim.step(min(chunk, (max_steps - sim.step_count) // outer * outer))

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from .params import auto_gravity_every
+from .scheme import auto_gravity_every
 from .sizes import parse_size_distribution
 from .errors import InputError
 

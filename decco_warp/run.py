@@ -172,8 +172,7 @@ def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None
             plan.state,
             plan.params,
             device=plan.device,
-            precision=plan.precision,
-            layout=plan.layout,
+            scheme=plan.scheme,
             allow_unstable=plan.allow_unstable,
             ledger=True,
             stability=plan.stability,
@@ -200,8 +199,8 @@ def plan_fits(plan: Plan, n: int, steps: int) -> str | None:
 
     try:
         return check_fits(
-            n, plan.params.gravity, plan.device, steps, "a run",
-            gravity_every=plan.params.gravity_every, layout=plan.layout, precision=plan.precision,
+            n, plan.scheme.gravity, plan.device, steps, "a run",
+            gravity_every=plan.scheme.gravity_every, layout=plan.scheme.layout, precision=plan.scheme.precision,
             candidate_width=candidate_width(float(plan.state.radii.min()), float(plan.state.radii.max())),
         )  # fmt: skip
     except InputError as error:
@@ -249,7 +248,7 @@ def _prepare_resume(run_dir, spec_path, checkpoint_path, trajectory_path, steps,
         raise RunError(f"steps {steps} is below the {int(snapshot['step'])} already taken")
     plan = plan_resume(spec, static, run_dir, device, steps)
     note = plan_fits(plan, static.n, max(0, plan.steps - int(snapshot["step"])))
-    sim = Simulation.from_snapshot(static, plan.params, snapshot, device=plan.device, precision=plan.precision, layout=plan.layout)
+    sim = Simulation.from_snapshot(static, plan.params, snapshot, device=plan.device, scheme=plan.scheme)
     return PreparedRun(sim, plan, extra, resume=True, lock=lock, note=note)
 
 
@@ -531,7 +530,7 @@ class RunDriver:
         self.outside = {"observables": 0.0, "trajectory": 0.0, "checkpoints": 0.0}
         self.started = _time.perf_counter()
         # Progress is reported about 200 times per run, never between graph blocks (nor outer steps).
-        outer = plan.params.gravity_every  # steps of an outer step: every stop is a whole number of them
+        outer = plan.scheme.gravity_every  # steps of an outer step: every stop is a whole number of them
         self.graph_steps = graph_steps(outer)
         self.report_every = outer * max(-(-50 // outer), self.total // 200 // outer)
         self.start_energy = sim.energy_start["total_energy"]

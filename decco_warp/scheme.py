@@ -11,32 +11,82 @@ and :func:`force_path` is the one switch from a scheme to the parts that compute
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import numbers
+from dataclasses import dataclass, replace
 
 from .errors import InputError
-from .kernels.bodies import PRECISIONS  # noqa: F401 (the scheme's names: spec.py reads them here)
+from .kernels.bodies import PRECISIONS
 from .layouts import Layout, choose_layout
+from .params import Range, require_number
 
 #: The force kernels a scheme may step with: "tiled" (the layouts of the GPU and CPU) or the plain
 #: one-thread-per-particle "reference" kernel (the tests' yardstick, the bench's baseline).
 FORCE_KERNELS = ("tiled", "reference")
 
+#: Gravity solvers: "all-pairs" sums every pair (exact, O(N^2)); "tree" walks a radix tree with
+#: monopole + quadrupole nodes (O(N log N), error set by theta_open; contacts from a hash grid).
+GRAVITY_SOLVERS = ("all-pairs", "tree")
+#: What a specification or the CLI may ask for: a solver, or "auto" (:func:`choose_gravity`).
+GRAVITY_CHOICES = (*GRAVITY_SOLVERS, "auto")
+
+#: From this many particles ``gravity = "auto"`` takes the tree, per device kind. CPU: measured
+#: (docs/benchmarks.md: on copies of a settled pile the tree's step is the faster from ~1 150
+#: particles, since its hash grid notes only touching neighbours). CUDA: measured on an H100 on
+#: real piles (the innermost 32 768, 49 152 and 65 536 particles of a settled 80 000-particle pile):
+#: a step takes 1.15, 2.42 and 4.19 ms with all-pairs in the Newton layout, 1.72, 2.20 and 2.74 ms
+#: with the tree, so the two meet near 45 000 (docs/benchmarks.md, "The tree path").
+TREE_FROM = {"cpu": 1200, "cuda": 45_000}
+
+
+def choose_gravity(n: int, device: str) -> str:
+    """The gravity solver ``gravity = "auto"`` takes for ``n`` particles on ``device`` ("cpu", "cuda:0")."""
+    return "tree" if n >= TREE_FROM["cuda" if device.startswith("cuda") else "cpu"] else "all-pairs"
+
+
+#: The K that ``gravity_every = "auto"`` stands for: on the paper's runs (the Fig. 8 collision and the
+#: equal-mass head-on ones at eta 3, 9 and 12) every K from 5 to 50 lands inside the spread of K = 1's
+#: realizations or within 0.015 of it (eta 9: K = 5 and 10 above it; docs/benchmarks.md, "Equivalence
+#: before speed"), no difference resolved or growing with K; 10 takes most of the speed (whole
+#: runs ~2x at 6 250 particles, ~3x at 10 000) at a fifth of the largest K measured.
+GRAVITY_EVERY_AUTO = 10
+
+
+def auto_gravity_every() -> int:
+    """The K of ``gravity_every = "auto"``."""
+    return GRAVITY_EVERY_AUTO
+
+
+#: The Scheme fields that a run specification keeps in its [params] table, beside the physics (its
+#: precision is a [run] key; its layout is chosen from [run] layout and the device).
+SCHEME_KEYS = ("gravity", "theta_open", "gravity_every")
+
+#: The scheme's numbers' ranges: Scheme checks them, and the run specification's schema (spec.py)
+#: reads the same.
+SCHEME_RANGES = {
+    "theta_open": Range(lambda v: 0 < v < 2, "in (0, 2)", "tree opening angle"),
+}
+
 
 @dataclass(frozen=True)
 class Scheme:
-    """The numerical choices of an engine, settled (no "auto")."""
+    """How an engine evaluates the model: the numerical choices beside the physics of Params.
+
+    >>> sim = Simulation(state, Params(), scheme=Scheme(gravity="tree", gravity_every=10))
+    """
 
     precision: str = "mixed"
     """Arithmetic of the all-pairs sweep: "mixed" (float32 gravity on float64 separations) or "float64"."""
     gravity: str = "all-pairs"
-    """Gravity solver: "all-pairs" (every pair) or "tree" (Barnes-Hut, error set by ``theta_open``)."""
+    """Gravity solver, one of GRAVITY_SOLVERS: "all-pairs" (every pair) or "tree" (Barnes-Hut)."""
     theta_open: float = 0.4
-    """The tree's opening angle."""
-    clock: int = 1
-    """K, steps of dt per gravity evaluation (``gravity_every``): 1 the paper's scheme, K > 1 gravity
-    on its own clock (impulse multiple time stepping, docs/model.md)."""
+    """The tree's opening angle: a node is used whole beyond size / theta_open (plus its centre's
+    offset); 0.4 keeps the rms relative gravity error on settled piles below 1e-3 (tests/test_tree.py)."""
+    gravity_every: int = 1
+    """K, the clock: steps of dt per evaluation of gravity.  1 is the paper's scheme (gravity and
+    contacts every step); K > 1 kicks gravity every K dt around K steps of contacts alone (impulse
+    multiple time stepping, docs/model.md "Gravity on its own clock"), and step counts are multiples of K."""
     layout: Layout | None = None
-    """The all-pairs kernels' layout (None: not settled yet; :func:`choose_scheme` settles it)."""
+    """The all-pairs kernels' layout (None: the device's own for the size, settled by :func:`choose_scheme`)."""
     force_kernel: str = "tiled"
 
     def __post_init__(self):
@@ -44,20 +94,22 @@ class Scheme:
             raise InputError(f"precision must be one of {', '.join(PRECISIONS)}; got {self.precision!r}")
         if self.force_kernel not in FORCE_KERNELS:
             raise InputError(f"force_kernel must be one of {', '.join(FORCE_KERNELS)}; got {self.force_kernel!r}")
+        if self.gravity not in GRAVITY_SOLVERS:
+            raise InputError(f"gravity must be one of {', '.join(GRAVITY_SOLVERS)}; got {self.gravity!r}")
+        for name, allowed in SCHEME_RANGES.items():
+            require_number(self, name, allowed)
+        every = self.gravity_every
+        if isinstance(every, bool) or not isinstance(every, numbers.Integral) or every < 1:
+            raise InputError(f"gravity_every must be an integer >= 1 (steps of dt per gravity evaluation); got {every!r}")
+        object.__setattr__(self, "gravity_every", int(every))
 
 
-def choose_scheme(largest: int, device: str, params, precision: str = "mixed", force_kernel: str = "tiled", layout: Layout | None = None) -> Scheme:
-    """The scheme of an engine whose largest system has ``largest`` particles on ``device``, from the
-    numerical keys of ``params`` (gravity, theta_open, gravity_every) and the engine's options; the
-    layout, where not given, is the device's own for that size (layouts.choose_layout)."""
-    return Scheme(
-        precision=precision,
-        gravity=params.gravity,
-        theta_open=params.theta_open,
-        clock=params.gravity_every,
-        layout=layout or choose_layout(largest, device),
-        force_kernel=force_kernel,
-    )
+def choose_scheme(largest: int, device: str, asked: Scheme | None = None, **choices) -> Scheme:
+    """The scheme of an engine whose largest system has ``largest`` particles on ``device``: ``asked``
+    (default Scheme()) with ``choices`` (its fields, None: as asked) and its layout, where none is
+    asked for, the device's own for that size (layouts.choose_layout)."""
+    scheme = replace(asked or Scheme(), **{name: value for name, value in choices.items() if value is not None})
+    return scheme if scheme.layout is not None else replace(scheme, layout=choose_layout(largest, device))
 
 
 def force_path(scheme: Scheme) -> str:
@@ -66,10 +118,10 @@ def force_path(scheme: Scheme) -> str:
     gravity once, listing candidates for the contact pass), "tree" (the tree's gravity, a hash
     grid's candidates) or "clocked" (gravity every K steps, contacts every step from a neighbour list)."""
     if scheme.force_kernel == "reference":
-        if scheme.clock > 1:
+        if scheme.gravity_every > 1:
             raise InputError("the reference kernel evaluates gravity with every force: it steps with gravity_every = 1 only")
         return "reference"
-    if scheme.clock > 1:
+    if scheme.gravity_every > 1:
         return "clocked"
     if scheme.gravity == "tree":
         return "tree"

@@ -13,6 +13,7 @@ from .diagnostics import state_diagnostics
 from .engine import Engine
 from .layouts import Layout
 from .params import Params
+from .scheme import Scheme
 from .stability import StabilityError, StabilityReport, check_stability
 from .state import State
 from .errors import InputError
@@ -33,6 +34,7 @@ class Simulation:
 
     >>> sim = Simulation(state, Params(), device="cpu")
     >>> sim.step(100)               # 100 steps of params.dt
+    >>> clocked = Simulation(state, Params(), scheme=Scheme(gravity_every=10))   # gravity every 10 steps
     >>> later = sim.state           # a host copy, State
     >>> diagnostics(later, sim.params)
 
@@ -47,13 +49,14 @@ class Simulation:
         state: State,
         params: Params,
         device: str | None = None,
-        precision: str = "mixed",
+        precision: str | None = None,
         allow_unstable: bool = False,
-        force_kernel: str = "tiled",
+        force_kernel: str | None = None,
         layout: Layout | None = None,
         ledger: bool = False,
         systems: Sequence[int] | None = None,
         stability: StabilityReport | None = None,
+        scheme: Scheme | None = None,
     ):
         self.params = params
         # A run's plan has made the report for this state and params already.
@@ -61,12 +64,12 @@ class Simulation:
         if not self.stability.stable and not allow_unstable:
             raise StabilityError(self.stability)
         self._static = state.copy()
-        self.engine = Engine(state, params, device, precision, force_kernel, layout, ledger, systems)
+        self.engine = Engine(state, params, device, precision, force_kernel, layout, ledger, systems, scheme)
         # Time is origin + step * dt, never a running sum, so that a restarted run keeps the same clock.
         self._time_origin = state.time - state.step * params.dt
         self._step = state.step
         self._graph = None
-        self._graph_steps = graph_steps(params.gravity_every)
+        self._graph_steps = graph_steps(self.engine.scheme.gravity_every)
         # A loop or branch decided on the device (the tree's levels) is a conditional graph node on
         # CUDA (driver and toolkit 12.4+); without them steps are launched one by one, which gives
         # the same numbers.
@@ -125,12 +128,12 @@ class Simulation:
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` steps of ``params.dt`` (with gravity on its own clock, a multiple of
-        ``params.gravity_every``: whole outer steps): whole blocks of steps replay a recorded graph
+        ``scheme.gravity_every``: whole outer steps): whole blocks of steps replay a recorded graph
         (the steps of a block, and those left over, share launches: :meth:`Engine.advance`)."""
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise InputError(f"step count must be a non-negative integer; got {n!r}")
         n = int(n)
-        every = self.params.gravity_every
+        every = self.engine.scheme.gravity_every
         if n % every:
             raise InputError(f"with gravity_every = {every} the step count must be a multiple of {every} (whole outer steps); got {n}")
         while self._record and n >= self._graph_steps:
@@ -217,14 +220,15 @@ def compute_forces(
     state: State,
     params: Params,
     device: str | None = None,
-    precision: str = "mixed",
-    force_kernel: str = "tiled",
+    precision: str | None = None,
+    force_kernel: str | None = None,
     layout: Layout | None = None,
+    scheme: Scheme | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Force [dyne] and torque [dyne cm] on every particle, with the kernels that Simulation steps with.
 
     >>> force, torque = compute_forces(state, Params(), device="cpu")
     """
-    engine = Engine(state, params, device, precision, force_kernel, layout)
+    engine = Engine(state, params, device, precision, force_kernel, layout, scheme=scheme)
     engine.eval_forces()
     return engine.read_forces()

@@ -31,9 +31,9 @@ from pathlib import Path
 from typing import Any, Callable
 
 from .collision import ETA_POTENTIALS, SPIN_AXES, spin_axis
-from .scheme import PRECISIONS
+from .scheme import GRAVITY_CHOICES, PRECISIONS, SCHEME_KEYS, SCHEME_RANGES, Scheme, auto_gravity_every, choose_gravity
 from .layouts import LAYOUT_CHOICES
-from .params import CONTACT_LAWS, GRAVITY_CHOICES, ROLLING_FRICTION_FORMS, Params, auto_gravity_every, choose_gravity
+from .params import CONTACT_LAWS, PHYSICS_RANGES, ROLLING_FRICTION_FORMS, Params, Range
 from .stability import DEFAULT_MAX_COMPRESSION, choose_stiffness, choose_time_step
 from .errors import SpecError  # noqa: F401 (re-exported: the error lives in errors.py)
 
@@ -81,6 +81,13 @@ _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 _DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?")
 
 _PARAMS_DEFAULT = Params()
+_SCHEME_DEFAULT = Scheme()
+
+
+def _ranged(default, allowed: Range, auto: bool = False) -> Key:
+    """A number's key with the range that Params or Scheme checks (params.py, scheme.py: one table)."""
+    return Key(float, default, allowed.test, allowed.text("()") + (' or "auto"' if auto else ""), auto=auto)
+
 
 SCHEMA: dict[str, dict[str, Key]] = {
     "run": {
@@ -123,18 +130,19 @@ SCHEMA: dict[str, dict[str, Key]] = {
         ),
     },
     "params": {
-        "k_in": Key(float, _PARAMS_DEFAULT.k_in, _positive, "> 0 (dyne/cm) or \"auto\"", auto=True),
-        "restitution": Key(float, _PARAMS_DEFAULT.restitution, lambda v: 0 < v <= 1, "in (0, 1]"),
-        "mu_k": Key(float, _PARAMS_DEFAULT.mu_k, _non_negative, ">= 0"),
-        "mu_r": Key(float, _PARAMS_DEFAULT.mu_r, _non_negative, ">= 0"),
-        "dt": Key(float, _PARAMS_DEFAULT.dt, _positive, "> 0 (s) or \"auto\"", auto=True),
-        "G": Key(float, _PARAMS_DEFAULT.G, _non_negative, ">= 0 (cm^3 g^-1 s^-2)"),
+        "k_in": _ranged(_PARAMS_DEFAULT.k_in, PHYSICS_RANGES["k_in"], auto=True),
+        "restitution": _ranged(_PARAMS_DEFAULT.restitution, PHYSICS_RANGES["restitution"]),
+        "mu_k": _ranged(_PARAMS_DEFAULT.mu_k, PHYSICS_RANGES["mu_k"]),
+        "mu_r": _ranged(_PARAMS_DEFAULT.mu_r, PHYSICS_RANGES["mu_r"]),
+        "dt": _ranged(_PARAMS_DEFAULT.dt, PHYSICS_RANGES["dt"], auto=True),
+        "G": _ranged(_PARAMS_DEFAULT.G, PHYSICS_RANGES["G"]),
         "rolling_friction": Key(str, "couple", lambda v: v in ROLLING_FRICTION_FORMS, " or ".join(ROLLING_FRICTION_FORMS)),
         "contact_law": Key(str, _PARAMS_DEFAULT.contact_law, lambda v: v in CONTACT_LAWS, " or ".join(CONTACT_LAWS)),
-        "gravity": Key(str, _PARAMS_DEFAULT.gravity, lambda v: v in GRAVITY_CHOICES, " or ".join(GRAVITY_CHOICES)),
-        "theta_open": Key(float, _PARAMS_DEFAULT.theta_open, lambda v: 0 < v < 2, "in (0, 2) (tree opening angle)"),
+        # The scheme's keys (scheme.py): how the model is evaluated, beside it in [params].
+        "gravity": Key(str, _SCHEME_DEFAULT.gravity, lambda v: v in GRAVITY_CHOICES, " or ".join(GRAVITY_CHOICES)),
+        "theta_open": _ranged(_SCHEME_DEFAULT.theta_open, SCHEME_RANGES["theta_open"]),
         "gravity_every": Key(
-            int, _PARAMS_DEFAULT.gravity_every, _positive, "an integer >= 1 (steps of dt per gravity evaluation)", auto_value=auto_gravity_every
+            int, _SCHEME_DEFAULT.gravity_every, _positive, "an integer >= 1 (steps of dt per gravity evaluation)", auto_value=auto_gravity_every
         ),
         "max_compression": Key(
             float, DEFAULT_MAX_COMPRESSION, lambda v: 0 < v <= 1, "in (0, 1] (deepest overlap for k_in = \"auto\", fraction of the smallest radius)"
@@ -306,6 +314,7 @@ def resolve_spec(raw: dict | None = None, overrides: dict | None = None) -> dict
         collision["eta"] = DEFAULT_ETA
     try:
         Params(**{key: value for key, value in params_values(spec).items() if value != AUTO})
+        Scheme(**{key: value for key, value in scheme_values(spec).items() if value != AUTO})
     except ValueError as error:
         raise SpecError(f"[params] {error}") from None
     check_clock(spec)
@@ -399,15 +408,29 @@ def _checked(table: str, key: str, value, rule: Key):
 
 
 def params_values(spec: dict) -> dict:
-    """The [params] entries that are Params fields (max_compression only steers k_in = "auto")."""
-    return {key: value for key, value in spec["params"].items() if key != "max_compression"}
+    """The [params] entries that are Params fields (the scheme's keys are Scheme's; max_compression
+    only steers k_in = "auto")."""
+    return {key: value for key, value in spec["params"].items() if key != "max_compression" and key not in SCHEME_KEYS}
+
+
+def scheme_values(spec: dict) -> dict:
+    """The entries of a specification that are Scheme fields: the scheme's [params] keys and [run] precision."""
+    return {**{key: spec["params"][key] for key in SCHEME_KEYS if key in spec["params"]}, "precision": spec["run"]["precision"]}
 
 
 def params_of(spec: dict) -> Params:
     values = params_values(spec)
     if AUTO in values.values():
-        raise SpecError("[params] k_in, dt and gravity must be settled from the collision set-up first (settle_auto)")
+        raise SpecError("[params] k_in and dt must be settled from the collision set-up first (settle_auto)")
     return Params(**values)
+
+
+def scheme_of(spec: dict) -> Scheme:
+    """The Scheme a specification asks for (its layout settled by the plan, which knows the device)."""
+    values = scheme_values(spec)
+    if AUTO in values.values():
+        raise SpecError("[params] gravity must be settled from the collision set-up first (settle_auto)")
+    return Scheme(**values)
 
 
 def spin_of(spec: dict, which: str):

@@ -303,7 +303,7 @@ def ensemble_groups(prepared, max_particles: int | None = None) -> list[list[int
     for k, run in enumerate(prepared):
         if run is not None:
             plan = run.plan
-            key = (plan.params, plan.precision, plan.layout, run.sim.step_count) if plan.params.gravity == "all-pairs" else (k,)
+            key = (plan.params, plan.scheme, run.sim.step_count) if plan.scheme.gravity == "all-pairs" else (k,)
             if max_particles is not None:
                 count = plan.state.n
                 key = (*key, count) if count <= max_particles else (k,)
@@ -453,11 +453,11 @@ def run_check(spec: dict, done: int = 0) -> tuple[str, RunCost | None]:
         return f"REFUSED: {error}", None
     stability = plan.stability
     refused = "" if stability.stable or plan.allow_unstable else f"; REFUSED: {'; '.join(stability.problems())}"
-    steps, every = max(0, plan.steps - done), plan.params.gravity_every
+    steps, every = max(0, plan.steps - done), plan.scheme.gravity_every
     line = (f"eta {plan.state.metadata['eta']:.3g}, margins: stiffness {stability.stiffness_margin:.3g} (>= 1), time step "
             f"{stability.time_step_margin:.3g} (>= 10); predicted deepest overlap {plan.forecast.fraction:.2g}; "
-            f"{run_cost(plan.state.n, plan.params.gravity, plan.device, steps, every)}{refused}")  # fmt: skip
-    cost = None if refused else RunCost(step_seconds(plan.state.n, plan.params.gravity, plan.device, every) * steps, plan.device, every)
+            f"{run_cost(plan.state.n, plan.scheme.gravity, plan.device, steps, every)}{refused}")  # fmt: skip
+    cost = None if refused else RunCost(step_seconds(plan.state.n, plan.scheme.gravity, plan.device, every) * steps, plan.device, every)
     return line, cost
 
 

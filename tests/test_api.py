@@ -104,11 +104,11 @@ def test_recorded_steps_equal_steps_launched_one_by_one(device, gravity):
     steps launched one by one, bit for bit, the ledger's work included. The tree path's level loop
     keeps its condition on the device, so its steps record like the others."""
     state = contact_cluster(30, seed=4)
-    params = dw.Params(gravity=gravity)
-    a = dw.Simulation(state, params, device=device, ledger=True)
+    params, scheme = dw.Params(), dw.Scheme(gravity=gravity)
+    a = dw.Simulation(state, params, device=device, ledger=True, scheme=scheme)
     for _ in range(120):
         a.engine.step()
-    b = dw.Simulation(state, params, device=device, ledger=True)
+    b = dw.Simulation(state, params, device=device, ledger=True, scheme=scheme)
     for n in (3, 110, 7):
         b.step(n)
     assert b.step_count == 120

@@ -37,7 +37,7 @@ def _array_bytes(holder) -> int:
 @pytest.mark.parametrize("gravity", ["all-pairs", "tree"])
 def test_the_memory_estimate_bounds_the_engines_arrays(gravity):
     pile = dw.load_pile(builtin_pile("target"))
-    sim = dw.Simulation(pile, dw.Params(gravity=gravity), device="cpu", ledger=True)
+    sim = dw.Simulation(pile, dw.Params(), device="cpu", ledger=True, scheme=dw.Scheme(gravity=gravity))
     engine = sim.engine
     held = _array_bytes(engine)
     device_part = costs.memory_estimate(pile.n, gravity) - costs.FIXED_BYTES - pile.n * costs.HOST_BYTES_PER_PARTICLE
@@ -54,7 +54,7 @@ def test_the_memory_estimate_counts_the_newton_sweeps_rows_where_gravity_takes_i
     state = overlapping_cloud(2000, seed=3)
     held = {}
     for every in (1, 10):
-        sim = dw.Simulation(state, dw.Params(gravity_every=every), device="cpu", ledger=True)
+        sim = dw.Simulation(state, dw.Params(), device="cpu", ledger=True, scheme=dw.Scheme(gravity_every=every))
         held[every] = _array_bytes(sim.engine)
         estimate = costs.memory_estimate(state.n, "all-pairs", gravity_every=every) - costs.FIXED_BYTES
         estimate -= state.n * costs.HOST_BYTES_PER_PARTICLE

@@ -85,7 +85,7 @@ def test_ensemble_sizes_are_checked_and_the_tree_steps_one_system():
         with pytest.raises(ValueError, match="systems must be positive sizes"):
             dw.Simulation(state, dw.Params(), device="cpu", systems=sizes)
     with pytest.raises(ValueError, match="one system at a time"):
-        dw.Simulation(state, dw.Params(gravity="tree"), device="cpu", systems=SIZES)
+        dw.Simulation(state, dw.Params(), device="cpu", systems=SIZES, scheme=dw.Scheme(gravity="tree"))
 
 
 def test_members_of_another_layout_or_precision_are_refused():

@@ -147,8 +147,8 @@ def test_contact_pass_handles_more_candidates_than_its_list_holds(case):
     device, layout = case
     count = CANDIDATES + 6
     state = crowded_sphere(count)
-    for params in (dw.Params(), dw.Params(G=0.0, gravity="tree")):
-        engine = Engine(state, params, device, "float64", layout=layout)
+    for params, scheme in ((dw.Params(), dw.Scheme()), (dw.Params(G=0.0), dw.Scheme(gravity="tree"))):
+        engine = Engine(state, params, device, "float64", layout=layout, scheme=scheme)
         engine.eval_forces()
         assert engine.candidate_overflows() >= 1
         reference = dw.compute_forces(state, params, device=device, precision="float64", force_kernel="reference")
@@ -217,11 +217,11 @@ def test_steps_sharing_launches_equal_the_launches_of_a_step_bit_for_bit(device,
     from helpers import assert_fused_steps_equal_one_step_at_a_time
 
     options = dict(options)
-    params = dw.Params(gravity=options.pop("gravity", "all-pairs"))
+    params, scheme = dw.Params(), dw.Scheme(gravity=options.pop("gravity", "all-pairs"))
     state = contact_cluster(40, seed=6, speed=1e3)
 
     def make():
-        return dw.Simulation(state, params, device=device, precision=precision, ledger=True, allow_unstable=True, **options)
+        return dw.Simulation(state, params, device=device, precision=precision, ledger=True, allow_unstable=True, scheme=scheme, **options)
 
     assert_fused_steps_equal_one_step_at_a_time(make)
 
@@ -245,7 +245,7 @@ def test_a_squeezed_pile_notes_its_contacts_and_no_list_overflows(gravity, devic
     state = dw.State.from_arrays(centre + 0.94 * (pile.positions - centre), pile.velocities, pile.omegas, pile.radii, pile.masses)
     # The Newton layout meets each pair once and notes it for both particles.
     layout = dw.Layout(32, 64, newton=True) if device.startswith("cuda") else dw.Layout(1, 4, newton=True)
-    engine = Engine(state, dw.Params(gravity="all-pairs" if gravity == "newton" else gravity), device, layout=layout)
+    engine = Engine(state, dw.Params(), device, layout=layout, scheme=dw.Scheme(gravity="all-pairs" if gravity == "newton" else gravity))
     engine.eval_forces()
     noted = engine.candidate_count.numpy()
     contacts = _contact_counts(state, 1.0)
@@ -273,13 +273,13 @@ for precision, tolerance in (("float64", 1e-12), ("mixed", 1e-5)):
         for g, w in zip(got, want):
             assert np.abs(g - w).max() <= tolerance * np.abs(w).max(), (precision, layout)
     # Gravity on its own clock: the contact pass's lanes (8 a particle, 4 particles a block) over the neighbour list.
-    got = dw.compute_forces(state, replace(params, gravity_every=5), device="cpu", precision=precision)
+    got = dw.compute_forces(state, params, device="cpu", precision=precision, scheme=dw.Scheme(gravity_every=5))
     for g, w in zip(got, want):
         assert np.abs(g - w).max() <= tolerance * np.abs(w).max(), (precision, "gravity_every")
 # The tree path's contacts (8 lanes a particle over the hash grid's lists), without gravity: the tree's is approximate.
 no_gravity = replace(params, G=0.0)
 want = dw.compute_forces(state, no_gravity, device="cpu", precision="float64", force_kernel="reference")
-got = dw.compute_forces(state, replace(no_gravity, gravity="tree"), device="cpu", precision="float64")
+got = dw.compute_forces(state, no_gravity, device="cpu", precision="float64", scheme=dw.Scheme(gravity="tree"))
 for g, w in zip(got, want):
     assert np.abs(g - w).max() <= 1e-12 * np.abs(w).max(), "tree"
 # The ledger's channels (float64 in either precision), summed over a block's lanes by the fused

@@ -25,6 +25,7 @@ import pytest
 import decco_warp as dw
 from decco_warp.layouts import newton_layout
 from decco_warp.run import builtin_pile
+from decco_warp.scheme import SCHEME_KEYS
 
 RECORD = Path(__file__).parent / "data" / "motion_hashes.json"
 STEPS = 200
@@ -90,7 +91,8 @@ def motion_hash(name: str) -> str:
         options = {**options, "systems": [state.n // 2, state.n // 2]}
     if options.get("layout") == "newton":
         options = {**options, "layout": newton_layout("cpu")}
-    params = dw.Params(**overrides)
+    params = dw.Params(**{k: v for k, v in overrides.items() if k not in SCHEME_KEYS})
+    options = {**options, "scheme": dw.Scheme(**{k: v for k, v in overrides.items() if k in SCHEME_KEYS})}
     sim = dw.Simulation(state, params, device="cpu", ledger=True, allow_unstable=True, **options)
     if resumed:
         sim.step(STEPS // 2)

@@ -160,10 +160,10 @@ def test_the_record_holds_the_deepest_contact_of_every_step_since_it_was_taken(d
     options = dict(ENGINES[engine])
     if engine == "newton" and device.startswith("cuda"):  # a Newton block is one warp there
         options["layout"] = dw.Layout(block_dim=32, particles_per_block=2, newton=True)
-    params = dw.Params(dt=0.01, gravity=options.pop("gravity", "all-pairs"))
+    params, scheme = dw.Params(dt=0.01), dw.Scheme(gravity=options.pop("gravity", "all-pairs"))
     state = overlapping_cloud(150, seed=7, fill=0.9)
-    every_step = dw.Simulation(state, params, device=device, allow_unstable=True, **options)
-    every_eighth = dw.Simulation(state, params, device=device, allow_unstable=True, **options)
+    every_step = dw.Simulation(state, params, device=device, allow_unstable=True, scheme=scheme, **options)
+    every_eighth = dw.Simulation(state, params, device=device, allow_unstable=True, scheme=scheme, **options)
     start = every_step.take_deepest_contact()
     depth, pair = numpy_deepest(state.positions, state.radii)
     assert start["deepest_overlap"] == pytest.approx(depth, abs=1e-7) and tuple(start["deepest_overlap_pair"]) == pair

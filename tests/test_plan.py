@@ -8,6 +8,7 @@ import pytest
 from helpers import cli
 
 import decco_warp as dw
+from decco_warp.scheme import SCHEME_KEYS
 from decco_warp import spec as specs
 from decco_warp.layouts import choose_layout
 from decco_warp.plan import Plan, builtin_pile
@@ -60,12 +61,13 @@ def test_a_spec_is_resolved_once_into_a_frozen_plan_with_no_auto_left(tmp_path, 
     fields = {field.name: getattr(plan, field.name) for field in dataclasses.fields(plan) if field.name != "spec_items"}
     assert "auto" not in [value for value in fields.values() if isinstance(value, str)]
     assert "auto" not in dataclasses.asdict(plan.params).values()
-    assert plan.params == dw.Params(**{k: v for k, v in settled["params"].items() if k != "max_compression"})
+    assert plan.params == dw.Params(**{k: v for k, v in settled["params"].items() if k != "max_compression" and k not in SCHEME_KEYS})
+    assert plan.scheme == dw.Scheme(**{k: settled["params"][k] for k in SCHEME_KEYS}, precision=settled["run"]["precision"], layout=plan.layout)
     assert plan.steps == settled["run"]["steps"] == math.ceil(4.0 / plan.params.dt - 1e-9)
     # k_in = "auto" is the softest spring whose predicted deepest overlap is max_compression (0.1).
     assert plan.forecast.fraction == pytest.approx(0.1, rel=0.02)
     assert plan.stability.stable and plan.stability.k_in == plan.params.k_in and plan.stability.dt == plan.params.dt
-    assert plan.params.gravity == "all-pairs"  # "auto" for a few hundred particles on the CPU
+    assert plan.scheme.gravity == "all-pairs"  # "auto" for a few hundred particles on the CPU
 
     # Piles read with their files and SHA-256; the collision turned by orientation_seed.
     assert [(p.which, p.file, p.sha256) for p in plan.piles] == [
@@ -103,7 +105,7 @@ def test_a_resumed_run_is_planned_from_its_folder_without_resolving_again(tmp_pa
         plan = prepared.plan
         assert calls["settle_auto"] == 0  # the folder's spec.toml is settled already
         assert plan.steps == 150 and plan.spec["run"]["steps"] == 150
-        assert plan.params == dw.Params(**{k: v for k, v in started["params"].items() if k != "max_compression"})
+        assert plan.params == dw.Params(**{k: v for k, v in started["params"].items() if k != "max_compression" and k not in SCHEME_KEYS})
         assert plan.run_dir == first.run_dir and plan.device == prepared.sim.device == "cpu"
         assert plan.layout == prepared.sim.engine.layout and prepared.sim.step_count == 100
         # Until the run is executed its folder keeps the steps it was started with.

@@ -1,4 +1,4 @@
-"""Gravity on its own clock (Params.gravity_every = K > 1, docs/model.md): impulse multiple time
+"""Gravity on its own clock (Scheme.gravity_every = K > 1, docs/model.md): impulse multiple time
 stepping against a float64 NumPy RESPA step, the neighbour list that feeds the contacts, the energy
 ledger, bit-exact restarts and ensembles."""
 
@@ -61,12 +61,12 @@ def test_one_outer_step_equals_a_numpy_respa_step(precision, tolerance):
     Verlet steps (gravity every step) differ from it ~1e5 times more in float64."""
     state = contact_cluster(40, seed=4, overlap_range=(1.0, 1e2), speed=1e3, spin=1e-3)
     every = 5
-    params = dw.Params(gravity_every=every)
+    params = dw.Params()
     contact = _oracle_forces(state.positions, state.velocities, state.omegas, state, params, gravity=False)[0]
     gravity = _oracle_forces(state.positions, state.velocities, state.omegas, state, params, gravity=True)[0]
     assert 0.1 < np.abs(gravity).max() / np.abs(contact).max() < 10
     want = _numpy_respa_step(state, params, every)
-    sim = dw.Simulation(state, params, device="cpu", precision=precision)
+    sim = dw.Simulation(state, params, device="cpu", precision=precision, scheme=dw.Scheme(gravity_every=every))
     sim.step(every)
     after = sim.state
     start = (state.positions, state.velocities, state.omegas)
@@ -100,7 +100,7 @@ def test_the_neighbour_list_holds_every_touching_pair_and_is_rebuilt_past_half_t
     within R_i + R_j + skin at that build, so it holds every pair that touches now (NumPy, all
     pairs); the list is rebuilt as the particles travel, and kept while nothing moves far."""
     state = _fast_clump()
-    sim = dw.Simulation(state, dw.Params(gravity_every=2), device="cpu", allow_unstable=True)
+    sim = dw.Simulation(state, dw.Params(), device="cpu", allow_unstable=True, scheme=dw.Scheme(gravity_every=2))
     neighbours = sim.engine.path.finder
     skin = SKIN_FRACTION * state.radii.min()
     assert neighbours.skin == skin
@@ -130,7 +130,7 @@ def test_the_neighbour_list_holds_every_touching_pair_and_is_rebuilt_past_half_t
     assert touched > state.n and travelled > 2 * skin  # contacts all along, and particles far travelled
     assert builds[0] == 1 and builds[-1] >= travelled / (skin / 2) / 2 and builds[-1] < 80
     # A clump at rest lists once and keeps its list.
-    slow = dw.Simulation(replace(state, velocities=state.velocities * 1e-4), dw.Params(gravity_every=2, G=0.0), device="cpu", allow_unstable=True)
+    slow = dw.Simulation(replace(state, velocities=state.velocities * 1e-4), dw.Params(G=0.0), device="cpu", allow_unstable=True, scheme=dw.Scheme(gravity_every=2))
     slow.step(40)
     assert slow.neighbour_list_builds() == 1
 
@@ -146,7 +146,7 @@ def test_forces_on_two_clocks_are_gravity_plus_the_listed_contacts_even_past_a_f
 
     count = CANDIDATES + 6
     state = crowded_sphere(count)
-    engine = Engine(state, dw.Params(gravity_every=3), "cpu", precision)
+    engine = Engine(state, dw.Params(), "cpu", precision, scheme=dw.Scheme(gravity_every=3))
     engine.eval_forces()
     assert engine.candidate_overflows() >= 1
     want = dw.compute_forces(state, dw.Params(), device="cpu", precision="float64", force_kernel="reference")
@@ -168,7 +168,7 @@ def test_the_ledger_closes_with_gravity_booked_at_the_outer_kicks(precision, gra
     outer kicks as the exact kinetic-energy change of each, the contact channels at the inner ones),
     every dissipation channel counts, and gravity did work."""
     clump = contact_cluster(100, seed=3, overlap_range=(1.0, 1e3), speed=20.0, spin=1e-4)
-    sim = dw.Simulation(clump, dw.Params(gravity_every=10, gravity=gravity), device="cpu", precision=precision, ledger=True)
+    sim = dw.Simulation(clump, dw.Params(), device="cpu", precision=precision, ledger=True, scheme=dw.Scheme(gravity_every=10, gravity=gravity))
     sim.step(1000)
     ledger, balance = _books(sim)
     start = sim.energy_start["total_energy"]
@@ -182,7 +182,7 @@ def test_elastic_frictionless_clump_dissipates_nothing_on_two_clocks():
     """Restitution 1, no friction, K = 5: nothing is dissipated, and what the books call the
     integration error stays tiny against the kinetic energy exchanged."""
     clump = contact_cluster(100, seed=3, overlap_range=(1.0, 1e3), speed=20.0)
-    sim = dw.Simulation(clump, dw.Params(restitution=1.0, mu_k=0.0, mu_r=0.0, gravity_every=5), device="cpu", precision="float64", ledger=True)
+    sim = dw.Simulation(clump, dw.Params(restitution=1.0, mu_k=0.0, mu_r=0.0), device="cpu", precision="float64", ledger=True, scheme=dw.Scheme(gravity_every=5))
     sim.step(1000)
     ledger, balance = _books(sim)
     kinetic = sim.diagnostics()["kinetic_translational"]
@@ -196,13 +196,13 @@ def test_a_restart_from_a_snapshot_is_bit_identical(precision, device):
     """Stopped at step 60 and restored (gravity evaluated anew at the restored positions, the
     neighbour lists and the positions of their build from the snapshot), then stepped to 150: every
     array the next step depends on, bit for bit."""
-    clump, params = _fast_clump(), dw.Params(gravity_every=5)
-    straight = dw.Simulation(clump, params, device=device, precision=precision, ledger=True, allow_unstable=True)
+    clump, params, scheme = _fast_clump(), dw.Params(), dw.Scheme(gravity_every=5)
+    straight = dw.Simulation(clump, params, device=device, precision=precision, ledger=True, allow_unstable=True, scheme=scheme)
     straight.step(150)
-    first = dw.Simulation(clump, params, device=device, precision=precision, ledger=True, allow_unstable=True)
+    first = dw.Simulation(clump, params, device=device, precision=precision, ledger=True, allow_unstable=True, scheme=scheme)
     first.step(60)
     snap = first.snapshot()
-    second = dw.Simulation.from_snapshot(clump, params, snap, device=device, precision=precision)
+    second = dw.Simulation.from_snapshot(clump, params, snap, device=device, precision=precision, scheme=scheme)
     assert second.step_count == 60
     second.step(90)
     a, b = straight.snapshot(), second.snapshot()
@@ -217,13 +217,13 @@ def test_a_snapshot_without_neighbour_lists_restarts_with_lists_built_afresh():
     restored positions and steps on (the lists hold every touching pair)."""
     from decco_warp.contact_finders import NEIGHBOUR_ARRAYS
 
-    clump, params = _fast_clump(), dw.Params(gravity_every=5)
-    first = dw.Simulation(clump, params, device="cpu", ledger=True, allow_unstable=True)
+    clump, params, scheme = _fast_clump(), dw.Params(), dw.Scheme(gravity_every=5)
+    first = dw.Simulation(clump, params, device="cpu", ledger=True, allow_unstable=True, scheme=scheme)
     first.step(60)
     snap = first.snapshot()
     assert all(key in snap for key in NEIGHBOUR_ARRAYS)
     old = {key: value for key, value in snap.items() if key not in NEIGHBOUR_ARRAYS}
-    second = dw.Simulation.from_snapshot(clump, params, old, device="cpu")
+    second = dw.Simulation.from_snapshot(clump, params, old, device="cpu", scheme=scheme)
     reference = second.engine.path.finder.reference.numpy()
     assert np.array_equal(reference, snap["positions"])  # built at the restored positions
     second.step(20)
@@ -242,7 +242,7 @@ def test_steps_sharing_launches_equal_the_launches_of_an_outer_step(precision):
     state = _fast_clump(40, seed=6)
 
     def make():
-        return dw.Simulation(state, dw.Params(gravity_every=every), device="cpu", precision=precision, ledger=True, allow_unstable=True)
+        return dw.Simulation(state, dw.Params(), device="cpu", precision=precision, ledger=True, allow_unstable=True, scheme=dw.Scheme(gravity_every=every))
 
     assert_fused_steps_equal_one_step_at_a_time(make, pieces=(every, 0, 10 * every + every))
 
@@ -254,13 +254,13 @@ def test_an_ensemble_on_two_clocks_moves_each_system_as_alone(device):
     states = [_fast_clump(n, seed=seed) for seed, n in enumerate(sizes)]
     joined = dw.State.from_arrays(*[np.concatenate([getattr(s, name) for s in states])
                                     for name in ("positions", "velocities", "omegas", "radii", "masses")])  # fmt: skip
-    params = dw.Params(gravity_every=4)
-    ensemble = dw.Simulation(joined, params, device=device, systems=sizes, ledger=True, allow_unstable=True)
+    params, scheme = dw.Params(), dw.Scheme(gravity_every=4)
+    ensemble = dw.Simulation(joined, params, device=device, systems=sizes, ledger=True, allow_unstable=True, scheme=scheme)
     ensemble.step(60)
     cuts = np.cumsum((0, *sizes))
     force, torque = ensemble.forces()
     for k, state in enumerate(states):
-        alone = dw.Simulation(state, params, device=device, ledger=True, allow_unstable=True)
+        alone = dw.Simulation(state, params, device=device, ledger=True, allow_unstable=True, scheme=scheme)
         alone.step(60)
         part = slice(cuts[k], cuts[k + 1])
         assert np.array_equal(ensemble.state.positions[part], alone.state.positions)
@@ -274,16 +274,16 @@ def test_bad_clocks_are_refused_with_one_line():
     state = contact_cluster(10, seed=1)
     for bad in (0, -1, 2.5, "x", True, None):
         with pytest.raises(ValueError, match="gravity_every must be an integer >= 1") as error:
-            dw.Params(gravity_every=bad)
+            dw.Scheme(gravity_every=bad)
         assert "\n" not in str(error.value)
-    sim = dw.Simulation(state, dw.Params(gravity_every=5), device="cpu")
+    sim = dw.Simulation(state, dw.Params(), device="cpu", scheme=dw.Scheme(gravity_every=5))
     with pytest.raises(ValueError, match="with gravity_every = 5 the step count must be a multiple of 5.*got 7"):
         sim.step(7)
     assert sim.step_count == 0
     with pytest.raises(ValueError, match="reference kernel .* gravity_every = 1 only"):
-        dw.Simulation(state, dw.Params(gravity_every=5), device="cpu", force_kernel="reference")
+        dw.Simulation(state, dw.Params(), device="cpu", force_kernel="reference", scheme=dw.Scheme(gravity_every=5))
     # Observables of one state do not depend on the clock: diagnostics take any K.
-    clocked, plain = dw.diagnostics(state, dw.Params(gravity_every=5)), dw.diagnostics(state, dw.Params())
+    clocked, plain = dw.Simulation(state, dw.Params(), device="cpu", scheme=dw.Scheme(gravity_every=5)).diagnostics(), dw.diagnostics(state, dw.Params())
     for key, value in plain.items():
         assert np.array_equal(clocked[key], value), key
 
@@ -351,7 +351,7 @@ def test_auto_gravity_every_is_the_k_of_the_equivalence_table_and_the_spec_recor
     """gravity_every = "auto" resolves to GRAVITY_EVERY_AUTO (an integer > 1: the table of
     docs/benchmarks.md supports K up to 50), the resolved spec holding the number, and a duration
     becomes whole outer steps of it."""
-    from decco_warp.params import GRAVITY_EVERY_AUTO
+    from decco_warp.scheme import GRAVITY_EVERY_AUTO
 
     spec = _spec(tmp_path, "auto", {"gravity_every": "auto"}, steps=None, duration=1.0, output_every=GRAVITY_EVERY_AUTO, checkpoint_every=GRAVITY_EVERY_AUTO)
     assert isinstance(GRAVITY_EVERY_AUTO, int) and 1 < GRAVITY_EVERY_AUTO <= 50
@@ -424,7 +424,7 @@ def test_the_per_particle_block_size_leaves_the_motion_unchanged(device, every, 
     ends = []
     for block in (256, 32):
         monkeypatch.setattr(layouts, "PARTICLE_BLOCK", block)
-        sim = dw.Simulation(clump, dw.Params(gravity_every=every), device=device, ledger=True, allow_unstable=True)
+        sim = dw.Simulation(clump, dw.Params(), device=device, ledger=True, allow_unstable=True, scheme=dw.Scheme(gravity_every=every))
         sim.step(150)
         ends.append(sim.snapshot())
     for key in ("positions", "velocities", "omegas", "force", "torque", "channels", "work", "deepest_contact"):
@@ -448,7 +448,7 @@ if len(sys.argv) > 3:  # the check of the check: lists built afresh on restore, 
 from dataclasses import replace
 from decco_warp.io import load_pile
 from decco_warp.plan import builtin_pile
-params = dw.Params(gravity_every=5)
+params, scheme = dw.Params(), dw.Scheme(gravity_every=5)
 def sheared(seed):  # the shipped pile (lists of up to ~30 neighbours) in a shear flow: its layers slide past each other
     pile = load_pile(builtin_pile("target"))
     y = pile.positions[:, 1] - pile.positions[:, 1].mean()
@@ -456,23 +456,23 @@ def sheared(seed):  # the shipped pile (lists of up to ~30 neighbours) in a shea
     flow[:, 0] = contact_finders.SKIN_FRACTION * 7.5e5 * (0.2 + 0.1 * (seed % 3)) * y / np.abs(y).max()
     return replace(pile, velocities=pile.velocities + flow)
 clump = sheared(11)
-straight = dw.Simulation(clump, params, device="cpu", ledger=True, allow_unstable=True)
+straight = dw.Simulation(clump, params, device="cpu", ledger=True, allow_unstable=True, scheme=scheme)
 straight.step(300)
-first = dw.Simulation(clump, params, device="cpu", ledger=True, allow_unstable=True)
+first = dw.Simulation(clump, params, device="cpu", ledger=True, allow_unstable=True, scheme=scheme)
 first.step(60)
-second = dw.Simulation.from_snapshot(clump, params, first.snapshot(), device="cpu")
+second = dw.Simulation.from_snapshot(clump, params, first.snapshot(), device="cpu", scheme=scheme)
 second.step(240)
 a, b = straight.snapshot(), second.snapshot()
 restart = all(np.array_equal(a[key], b[key]) for key in KEYS)
 states = [_fast_clump(37, seed=0), sheared(1), _fast_clump(64, seed=2)]
 sizes = [s.n for s in states]
 joined = dw.State.from_arrays(*[np.concatenate([getattr(s, name) for s in states]) for name in ("positions", "velocities", "omegas", "radii", "masses")])
-ensemble = dw.Simulation(joined, params, device="cpu", systems=sizes, ledger=True, allow_unstable=True)
+ensemble = dw.Simulation(joined, params, device="cpu", systems=sizes, ledger=True, allow_unstable=True, scheme=scheme)
 ensemble.step(300)
 cuts = np.cumsum((0, *sizes))
 together, builds = True, True
 for k, state in enumerate(states):
-    alone = dw.Simulation(state, params, device="cpu", ledger=True, allow_unstable=True)
+    alone = dw.Simulation(state, params, device="cpu", ledger=True, allow_unstable=True, scheme=scheme)
     alone.step(300)
     part = slice(cuts[k], cuts[k + 1])
     together &= np.array_equal(ensemble.state.positions[part], alone.state.positions)

@@ -93,8 +93,8 @@ def test_lists_sized_for_the_radius_ratio_hold_a_large_grains_contacts(gravity):
     the lists for. The Newton layout's list (all-pairs) and the tree's grid list hold them all, and
     the forces are the plain loop's."""
     state = _large_among_small(100, 5.0)
-    params = dw.Params() if gravity == "all-pairs" else dw.Params(G=0.0, gravity="tree")
-    engine = Engine(state, params, "cpu", "float64", layout=dw.Layout(1, 4, newton=True))
+    params = dw.Params() if gravity == "all-pairs" else dw.Params(G=0.0)
+    engine = Engine(state, params, "cpu", "float64", layout=dw.Layout(1, 4, newton=True), scheme=dw.Scheme(gravity=gravity))
     engine.eval_forces()
     assert engine.candidates.shape[1] == 108
     assert engine.candidate_count.numpy()[0] == 100 > CANDIDATES and engine.candidate_overflows() == 0

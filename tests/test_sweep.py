@@ -371,10 +371,11 @@ def test_auto_ensembles_group_runs_of_10000_particles_and_keep_larger_ones_alone
     from types import SimpleNamespace
 
     from decco_warp.params import Params
+    from decco_warp.scheme import Scheme
     from decco_warp.sweep import ensemble_groups, ensemble_plan
 
     def run(n, gravity="all-pairs"):
-        plan = SimpleNamespace(params=Params(gravity=gravity), precision="mixed", layout=None, state=SimpleNamespace(n=n))
+        plan = SimpleNamespace(params=Params(), scheme=Scheme(gravity=gravity), state=SimpleNamespace(n=n))
         return SimpleNamespace(plan=plan, sim=SimpleNamespace(step_count=0))
 
     cap = ensemble_plan("auto", 1, runs=8)[1]

@@ -1,4 +1,4 @@
-"""The tree path (Params(gravity="tree")): gravity from a radix tree against all-pairs, contacts
+"""The tree path (Scheme(gravity="tree")): gravity from a radix tree against all-pairs, contacts
 from a hash grid identical to all-pairs, conservation figures, and a collision on both paths."""
 
 import numpy as np
@@ -21,7 +21,7 @@ def _gravity(state, params, **options):
 
 def _errors(state, theta_open, device):
     exact = _gravity(state, dw.Params(), device=device, force_kernel="reference")
-    tree = _gravity(state, dw.Params(gravity="tree", theta_open=theta_open), device=device)
+    tree = _gravity(state, dw.Params(), device=device, scheme=dw.Scheme(gravity="tree", theta_open=theta_open))
     relative = np.linalg.norm(tree - exact, axis=1) / np.linalg.norm(exact, axis=1)
     return float(np.sqrt((relative**2).mean())), float(relative.max())
 
@@ -32,7 +32,7 @@ def test_tree_gravity_error_on_a_settled_pile_shrinks_with_theta_and_meets_the_d
     errors = {theta: _errors(state, theta, device) for theta in (0.2, 0.4, 0.7)}
     rms = [errors[theta][0] for theta in (0.2, 0.4, 0.7)]
     assert rms[0] < rms[1] < rms[2]  # a smaller angle opens more nodes
-    assert errors[dw.Params().theta_open][0] <= SETTLED_RMS
+    assert errors[dw.Scheme().theta_open][0] <= SETTLED_RMS
     assert errors[0.2][1] < 2e-3 and errors[0.7][1] < 0.2  # the worst particle, near the centre where gravity cancels
 
 
@@ -47,7 +47,7 @@ def test_tree_gravity_on_clouds_with_duplicate_morton_cells_and_tiny_counts(devi
     )  # fmt: skip
     for state in (joined, contact_cluster(1, seed=0), contact_cluster(2, seed=1), contact_cluster(3, seed=1)):
         exact = _gravity(state, dw.Params(), device=device, force_kernel="reference")
-        tree = _gravity(state, dw.Params(gravity="tree", theta_open=1e-6), device=device)
+        tree = _gravity(state, dw.Params(), device=device, scheme=dw.Scheme(gravity="tree", theta_open=1e-6))
         scale = np.abs(exact).max() or 1.0
         np.testing.assert_allclose(tree, exact, rtol=0, atol=1e-12 * scale)
 
@@ -58,12 +58,12 @@ def test_the_default_precision_walks_in_float32_within_its_round_off(device):
     error is ~1e-3), and with theta_open -> small within 2e-6 of float64 all-pairs."""
 
     def tree_gravity(state, theta_open, precision):
-        params = dw.Params(gravity="tree", theta_open=theta_open)
-        with_g = dw.compute_forces(state, params, device=device, precision=precision)[0]
-        return with_g - dw.compute_forces(state, dw.Params(**{**params.to_dict(), "G": 0.0}), device=device, precision=precision)[0]
+        scheme = dw.Scheme(gravity="tree", theta_open=theta_open)
+        with_g = dw.compute_forces(state, dw.Params(), device=device, precision=precision, scheme=scheme)[0]
+        return with_g - dw.compute_forces(state, dw.Params(G=0.0), device=device, precision=precision, scheme=scheme)[0]
 
     state = dw.load_pile(builtin_pile("target"))
-    for theta_open, want in ((dw.Params().theta_open, tree_gravity(state, dw.Params().theta_open, "float64")),
+    for theta_open, want in ((dw.Scheme().theta_open, tree_gravity(state, dw.Scheme().theta_open, "float64")),
                              (1e-6, _gravity(state, dw.Params(), device=device, force_kernel="reference"))):  # fmt: skip
         got = tree_gravity(state, theta_open, "mixed")
         relative = np.linalg.norm(got - want, axis=1) / np.linalg.norm(want, axis=1)
@@ -108,7 +108,7 @@ def test_a_walk_split_into_parts_sums_the_same_pairs_and_nodes_no_worse(device, 
     def rms(force):
         return float(np.sqrt(np.mean((np.linalg.norm(force - exact, axis=1) / np.linalg.norm(exact, axis=1)) ** 2)))
 
-    errors = [rms(walk(pile, parts, dw.Params().theta_open)[0]) for parts in (1, 8, 64)]
+    errors = [rms(walk(pile, parts, dw.Scheme().theta_open)[0]) for parts in (1, 8, 64)]
     assert errors[2] <= errors[1] * 1.05 and errors[1] <= errors[0] * 1.05 and errors[0] <= SETTLED_RMS, errors
 
 
@@ -119,7 +119,7 @@ def test_hash_grid_contacts_equal_all_pairs_contacts(device):
     for rolling in ("couple", "paper"):
         params = dw.Params(G=0.0, rolling_friction=rolling)
         exact = dw.compute_forces(state, params, device=device, precision="float64", force_kernel="reference")
-        tree = dw.compute_forces(state, dw.Params(**{**params.to_dict(), "gravity": "tree"}), device=device, precision="float64")
+        tree = dw.compute_forces(state, params, device=device, precision="float64", scheme=dw.Scheme(gravity="tree"))
         for got, want in zip(tree, exact):
             np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
 
@@ -129,8 +129,8 @@ def test_tree_momentum_figures_over_a_run(device):
     the shipped target pile, the net gravity stays below 1e-3 of the summed |gravity|, and the
     momentum drift below 1e-3 of (summed |gravity| x time); the energy ledger still closes."""
     pile = dw.load_pile(builtin_pile("target"))
-    sim = dw.Simulation(pile, dw.Params(gravity="tree"), device=device, ledger=True)
-    gravity = _gravity(pile, dw.Params(gravity="tree"), device=device)
+    sim = dw.Simulation(pile, dw.Params(), device=device, ledger=True, scheme=dw.Scheme(gravity="tree"))
+    gravity = _gravity(pile, dw.Params(), device=device, scheme=dw.Scheme(gravity="tree"))
     assert np.linalg.norm(gravity.sum(axis=0)) <= 1e-3 * np.linalg.norm(gravity, axis=1).sum()
     p0 = (pile.masses[:, None] * pile.velocities).sum(axis=0)
     sim.step(200)
@@ -166,17 +166,17 @@ def test_auto_gravity_takes_the_tree_from_the_crossover_and_the_spec_records_it(
     from types import SimpleNamespace
 
     from decco_warp import spec as specs
-    from decco_warp.params import TREE_FROM, choose_gravity
+    from decco_warp.scheme import TREE_FROM, choose_gravity
 
     for device, kind in (("cpu", "cpu"), ("cuda:0", "cuda"), ("cuda:3", "cuda")):
         assert choose_gravity(TREE_FROM[kind] - 1, device) == "all-pairs"
         assert choose_gravity(TREE_FROM[kind], device) == "tree"
     spec = specs.resolve_spec({"run": {"name": "auto", "out": str(tmp_path), "device": "cpu", "steps": 10}, "params": {"gravity": "auto"}})
     with pytest.raises(specs.SpecError, match="settled"):
-        specs.params_of(spec)
+        specs.scheme_of(spec)
     for n, solver in ((TREE_FROM["cpu"] - 1, "all-pairs"), (TREE_FROM["cpu"], "tree")):
         settled, notes = specs.settle_auto(spec, SimpleNamespace(n=n), "cpu")
-        assert specs.params_of(settled).gravity == solver and notes == [f'gravity = "auto": {solver} for {n} particles on cpu']
+        assert specs.scheme_of(settled).gravity == solver and notes == [f'gravity = "auto": {solver} for {n} particles on cpu']
     with pytest.raises(specs.SpecError, match="gravity"):
         specs.resolve_spec({"params": {"gravity": "fmm"}})
     # Through the CLI: the shipped 450-particle collision stays on all-pairs, and says so.
@@ -201,8 +201,7 @@ def test_tree_frames_give_the_all_pairs_observables_in_n_log_n(device, scene):
     assert exact["contacts"].sum() > 500
     rms = {}
     for theta in (0.2, 0.4, 0.7):
-        params = dw.Params(gravity="tree", theta_open=theta)
-        tree = dw.Simulation(state, params, device=device, allow_unstable=True).pair_observables()
+        tree = dw.Simulation(state, dw.Params(), device=device, allow_unstable=True, scheme=dw.Scheme(gravity="tree", theta_open=theta)).pair_observables()
         for key in ("elastic", "contacts", "max_overlap", "overlap_depth", "overlap_partner"):
             if key == "elastic" and device.startswith("cuda"):
                 np.testing.assert_allclose(tree[key], exact[key], rtol=1e-12, atol=0)
@@ -210,7 +209,7 @@ def test_tree_frames_give_the_all_pairs_observables_in_n_log_n(device, scene):
                 assert np.array_equal(tree[key], exact[key]), key
         error = (tree["potential"] - exact["potential"]) / np.abs(exact["potential"])
         rms[theta] = float(np.sqrt(np.mean(error**2)))
-        if theta == dw.Params().theta_open:
+        if theta == dw.Scheme().theta_open:
             assert rms[theta] < 3e-4 and abs(tree["potential"].sum() / exact["potential"].sum() - 1) < 5e-5
     assert rms[0.2] < rms[0.4] < rms[0.7]
 
@@ -232,10 +231,10 @@ def test_a_run_whose_contact_lists_overflow_says_so_once_in_its_log(tmp_path):
     pile = dw.State.from_arrays(x, np.zeros_like(x), np.zeros_like(x), radii, sphere_mass(radii))
     from decco_warp.engine import Engine
 
-    listed = Engine(pile, dw.Params(gravity="tree"), "cpu")
+    listed = Engine(pile, dw.Params(), "cpu", scheme=dw.Scheme(gravity="tree"))
     listed.eval_forces()
     assert listed.candidate_overflows() == 0 and listed.candidates.shape[1] >= count
-    engine = Engine(pile, dw.Params(gravity="tree", gravity_every=5), "cpu")
+    engine = Engine(pile, dw.Params(), "cpu", scheme=dw.Scheme(gravity="tree", gravity_every=5))
     engine.eval_forces()
     assert engine.candidate_overflows() == 1  # the large sphere only
     dw.save_pile(pile, tmp_path / "urchin.h5")
