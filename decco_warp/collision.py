@@ -102,11 +102,16 @@ def _spin_vector(spin, state: State, G: float, which: str) -> np.ndarray | None:
     return fraction * breakup_spin(state, G) * spin_axis(axis, f"{which}_spin axis")
 
 
+#: The impact angle when none is given, here and in a run specification [degrees]: the paper's
+#: oblique collision of Fig. 8 (the shipped default collision, runs/default.toml).
+DEFAULT_THETA_DEG = 22.0
+
+
 def setup_collision(
     target: State,
     projectile: State,
     eta: float | None = None,
-    theta_deg: float = 0.0,
+    theta_deg: float = DEFAULT_THETA_DEG,
     gap: float = 1e5,
     target_spin=None,
     projectile_spin=None,

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-from .collision import ETA_POTENTIALS, SPIN_AXES, spin_axis
+from .collision import DEFAULT_THETA_DEG, ETA_POTENTIALS, SPIN_AXES, spin_axis
 from .scheme import GRAVITY_CHOICES, PRECISIONS, SCHEME_KEYS, SCHEME_RANGES, Scheme, auto_gravity_every, choose_gravity
 from .layouts import LAYOUT_CHOICES
 from .params import CONTACT_LAWS, PHYSICS_RANGES, ROLLING_FRICTION_FORMS, Params, Range
@@ -119,7 +119,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
             str, "self", lambda v: v in ETA_POTENTIALS,
             "self (U: each pile's own pairs) or all (U: every pair of both piles at set-up, the cross term included)",
         ),
-        "theta_deg": Key(float, 22.0, lambda v: 0 <= v < 90, "in [0, 90) degrees"),
+        "theta_deg": Key(float, DEFAULT_THETA_DEG, lambda v: 0 <= v < 90, "in [0, 90) degrees"),
         "gap": Key(float, 1e5, _non_negative, ">= 0 (cm)"),
         "target_spin": Key(float, 0.0, lambda v: 0 <= v <= 1, "in [0, 1] (fraction of breakup spin)"),
         "target_spin_axis": Key(object, "+z", _axis, _AXES),
