@@ -72,7 +72,7 @@ class Engine:
     precision = property(lambda self: self.scheme.precision)
     force_kernel = property(lambda self: self.scheme.force_kernel)
     layout = property(lambda self: self.scheme.layout)
-    gravity_every = property(lambda self: self.scheme.gravity_every, doc="K: steps of dt per gravity evaluation")
+    step_multiple = property(lambda self: self.integrator.every, doc="steps of an outer step: every step count is a multiple of it")
     ledger = property(lambda self: self.state.ledger)
     count = property(lambda self: self.model.count)
     systems = property(lambda self: self.model.systems)
@@ -136,9 +136,9 @@ class Engine:
         """``steps`` steps (a multiple of K), ending at a whole step as :meth:`step` does, bit for bit
         the same: with ``layout.fuse_kicks``, a step's last half kick, the next one's first half
         kick and drift and the packing of its bodies are one launch."""
-        check_steps(steps, self.scheme.gravity_every)
+        check_steps(steps, self.step_multiple)
         if not self.scheme.layout.fuse_kicks:
-            for _ in range(steps // self.scheme.gravity_every):
+            for _ in range(steps // self.step_multiple):
                 self.integrator.step()
         else:
             self.integrator.advance(steps)

@@ -138,6 +138,11 @@ class SystemView:
         return self._ensemble.sim.device
 
     @property
+    def step_multiple(self) -> int:
+        """Steps of an outer step of the ensemble (every member's)."""
+        return self._ensemble.sim.step_multiple
+
+    @property
     def step_count(self) -> int:
         return self._ensemble.sim.step_count
 

@@ -136,7 +136,7 @@ def settle_fragment(state: State, source: dict, spin: str = "keep", settle: bool
     if settle:
         sim = Simulation(state, params, device=device, allow_unstable=True, scheme=scheme)
         ratio = _internal_ratio(sim)
-        outer = scheme.gravity_every  # steps go in whole outer steps
+        outer = sim.step_multiple  # steps go in whole outer steps
         chunk = max(1, CHECK_EVERY // outer) * outer
         while ratio >= ke_threshold and sim.step_count + outer <= max_steps:
             sim.step(min(chunk, (max_steps - sim.step_count) // outer * outer))

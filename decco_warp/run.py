@@ -530,7 +530,7 @@ class RunDriver:
         self.outside = {"observables": 0.0, "trajectory": 0.0, "checkpoints": 0.0}
         self.started = _time.perf_counter()
         # Progress is reported about 200 times per run, never between graph blocks (nor outer steps).
-        outer = plan.scheme.gravity_every  # steps of an outer step: every stop is a whole number of them
+        outer = sim.step_multiple  # steps of an outer step: every stop is a whole number of them
         self.graph_steps = graph_steps(outer)
         self.report_every = outer * max(-(-50 // outer), self.total // 200 // outer)
         self.start_energy = sim.energy_start["total_energy"]

@@ -23,10 +23,10 @@ from .errors import InputError
 GRAPH_STEPS = 50
 
 
-def graph_steps(gravity_every: int) -> int:
-    """The steps of one recorded graph: GRAPH_STEPS, or whole outer steps of gravity_every (as many
-    as fit in GRAPH_STEPS, at least one)."""
-    return gravity_every * max(1, GRAPH_STEPS // gravity_every)
+def graph_steps(step_multiple: int) -> int:
+    """The steps of one recorded graph: GRAPH_STEPS, or whole outer steps of ``step_multiple`` steps
+    (as many as fit in GRAPH_STEPS, at least one)."""
+    return step_multiple * max(1, GRAPH_STEPS // step_multiple)
 
 
 class Simulation:
@@ -69,7 +69,7 @@ class Simulation:
         self._time_origin = state.time - state.step * params.dt
         self._step = state.step
         self._graph = None
-        self._graph_steps = graph_steps(self.engine.scheme.gravity_every)
+        self._graph_steps = graph_steps(self.step_multiple)
         # A loop or branch decided on the device (the tree's levels) is a conditional graph node on
         # CUDA (driver and toolkit 12.4+); without them steps are launched one by one, which gives
         # the same numbers.
@@ -113,6 +113,17 @@ class Simulation:
         return snap
 
     @property
+    def step_multiple(self) -> int:
+        """Steps of an outer step (with gravity on its own clock, its K; else 1): every step count is a
+        multiple of it."""
+        return self.engine.step_multiple
+
+    @property
+    def scheme(self) -> Scheme:
+        """How the model is evaluated (scheme.py)."""
+        return self.engine.scheme
+
+    @property
     def device(self) -> str:
         return self.engine.device
 
@@ -133,7 +144,7 @@ class Simulation:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise InputError(f"step count must be a non-negative integer; got {n!r}")
         n = int(n)
-        every = self.engine.scheme.gravity_every
+        every = self.step_multiple
         if n % every:
             raise InputError(f"with gravity_every = {every} the step count must be a multiple of {every} (whole outer steps); got {n}")
         while self._record and n >= self._graph_steps:

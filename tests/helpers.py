@@ -61,7 +61,7 @@ def assert_fused_steps_equal_one_step_at_a_time(make, pieces=FUSED_PIECES):
     the next step depends on (positions, velocities, spins, forces, torques, the ledger's channels
     and work, the deepest-contact records) is the same, bit for bit."""
     launched, fused = make(), make()
-    for _ in range(sum(pieces) // launched.engine.scheme.gravity_every):  # with gravity on its own clock, an outer step
+    for _ in range(sum(pieces) // launched.step_multiple):  # with gravity on its own clock, an outer step
         launched.engine.step()
     for steps in pieces:
         fused.step(steps)
