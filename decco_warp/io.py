@@ -42,7 +42,23 @@ from .errors import FileFormatError  # noqa: F401 (re-exported: the error lives 
 
 PILE_FORMAT = "decco-warp pile"
 CHECKPOINT_FORMAT = "decco-warp checkpoint"
+#: The layout of the files this decco-warp writes (trajectories, checkpoints), in their
+#: ``format_version`` attribute; it reads every version up to this one (files of decco-warp 0.2 have
+#: none: version 0, their missing parts default, run.py and record.py say how) and refuses newer ones.
 FORMAT_VERSION = 1
+
+
+def check_format_version(f, what: str, path) -> int:
+    """The format version of an open file (0 where it records none); FileFormatError for one newer
+    than this decco-warp reads."""
+    version = int(f.attrs.get("format_version", 0))
+    if version > FORMAT_VERSION:
+        creator = f.attrs.get("creator", "a newer decco-warp")
+        raise FileFormatError(
+            f"{what} {path} has format version {version} ({creator}); this decco-warp {__version__} reads up to "
+            f"{FORMAT_VERSION}: upgrade decco-warp to read it"
+        )
+    return version
 
 _STATE_ARRAYS = ("positions", "velocities", "omegas", "radii", "masses", "size_class")
 
@@ -107,6 +123,7 @@ def open_trajectory(path):
     check_complete(path, "trajectory")
     try:
         with open_h5(path, "trajectory", locking=False) as f:
+            check_format_version(f, "trajectory", path)
             yield f
             return
     except FileFormatError as error:
@@ -565,6 +582,7 @@ def read_checkpoint(path) -> tuple[dict, State, dict]:
     with open_h5(path, "checkpoint") as f:
         if f.attrs.get("format") != CHECKPOINT_FORMAT:
             raise FileFormatError(f"checkpoint {path} is not a decco-warp checkpoint")
+        check_format_version(f, "checkpoint", path)
         snapshot = read_dict(f["snapshot"])
         static = {name: f["state"][name][()] for name in ("radii", "masses", "pile_id", "size_class")}
         extra = read_dict(f["run"])

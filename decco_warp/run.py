@@ -23,6 +23,7 @@ from .durable import describe_write_error, pause_point, write_atomic, write_poin
 from .folder import RunFolder, missing
 from .io import BackgroundFrames, FileFormatError, Trajectory, read_checkpoint, read_frame, write_checkpoint
 from .lock import RunFolderLock
+from .record import RunRecord
 from .plan import Plan, RunError, builtin_pile, pile_path, plan_resume, plan_start, run_dir_of  # noqa: F401 (run's names)
 from .simulation import Simulation, graph_steps
 from .stops import StopRequests
@@ -140,7 +141,8 @@ class PreparedRun:
 
     sim: Simulation
     plan: Plan
-    extra: dict
+    record: RunRecord
+    """The run's record (record.py), as its checkpoints keep it."""
     resume: bool
     lock: RunFolderLock | None = None
     """The run folder's lock, once taken (execute takes it for a new folder and releases it at the end)."""
@@ -182,13 +184,8 @@ def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None
             lock.release()
         raise
     depth, i, j = plan.rest_overlap
-    extra = {
-        "size_classes": plan.size_classes,
-        "wall_seconds": 0.0,
-        "start_overlap": depth,
-        "start_overlap_pair": np.array([i, j], dtype=np.int64),
-    }
-    return PreparedRun(sim, plan, extra, resume=False, lock=lock, note=note)
+    run_record = RunRecord(size_classes=plan.size_classes, start_overlap=depth, start_overlap_pair=(int(i), int(j)))
+    return PreparedRun(sim, plan, run_record, resume=False, lock=lock, note=note)
 
 
 def plan_fits(plan: Plan, n: int, steps: int) -> str | None:
@@ -234,7 +231,8 @@ def prepare_resume(run_dir, steps: int | None = None, device: str | None = None)
 def _prepare_resume(run_dir, spec_path, checkpoint_path, trajectory_path, steps, device, lock) -> PreparedRun:
     spec = specs.resolve_spec(specs.load_spec_file(spec_path))
     try:
-        snapshot, static, extra = read_checkpoint(checkpoint_path)
+        snapshot, static, kept = read_checkpoint(checkpoint_path)
+        run_record = RunRecord.from_checkpoint(kept)
         first_frame = read_frame(trajectory_path, 0)[0]
     except FileFormatError as error:
         raise RunError(str(error)) from None
@@ -242,14 +240,14 @@ def _prepare_resume(run_dir, spec_path, checkpoint_path, trajectory_path, steps,
         raise RunError(f"trajectory {trajectory_path} has no readable first frame ({error})") from None
     if first_frame["position"].shape != snapshot["positions"].shape:
         raise RunError(f"{trajectory_path} and {checkpoint_path} are of different runs (particle counts differ)")
-    if specs.resolve_spec(_parse_toml(extra["spec_toml"])) != spec:
+    if specs.resolve_spec(_parse_toml(run_record.spec_toml)) != spec:
         raise RunError(f"{spec_path} changed since the run started; restore it to resume")
     if steps is not None and steps < int(snapshot["step"]):
         raise RunError(f"steps {steps} is below the {int(snapshot['step'])} already taken")
     plan = plan_resume(spec, static, run_dir, device, steps)
     note = plan_fits(plan, static.n, max(0, plan.steps - int(snapshot["step"])))
     sim = Simulation.from_snapshot(static, plan.params, snapshot, device=plan.device, scheme=plan.scheme)
-    return PreparedRun(sim, plan, extra, resume=True, lock=lock, note=note)
+    return PreparedRun(sim, plan, run_record, resume=True, lock=lock, note=note)
 
 
 #: Something that watches frames as a run makes them: (every how many steps, callback(step, time, particles, observables)).
@@ -318,12 +316,12 @@ def _open(run: PreparedRun, progress, observers, opened: list) -> RunDriver:
     """Write a new run folder's first frame and checkpoint, or reopen a resumed one: its driver.
     What it opens (the log, the trajectory) is added to ``opened`` as it goes."""
     observers = observers or []
-    sim, plan, spec, run_dir, extra = run.sim, run.plan, run.spec, run.run_dir, run.extra
+    sim, plan, spec, run_dir, run_record = run.sim, run.plan, run.spec, run.run_dir, run.record
     folder = RunFolder(run_dir)
     spec_text = specs.dumps(spec, header=f"decco-warp run specification, resolved {datetime.now(timezone.utc):%Y-%m-%d %H:%M UTC}")
     if run.resume:
-        if spec_text.split("\n", 1)[1] != extra["spec_toml"].split("\n", 1)[1]:  # the total steps changed
-            extra["spec_toml"] = spec_text
+        if spec_text.split("\n", 1)[1] != run_record.spec_toml.split("\n", 1)[1]:  # the total steps changed
+            run_record.spec_toml = spec_text
             write_atomic(folder.spec, spec_text)
         log = RunLog(folder.log)
         opened.append(log)
@@ -331,28 +329,28 @@ def _open(run: PreparedRun, progress, observers, opened: list) -> RunDriver:
             stale.unlink()
             log(f"resume: removed the unfinished {stale.name}")
         log(f"resume: from step {sim.step_count} of {plan.steps} on {sim.device}")
-        sample = record(sim, int(extra["size_classes"]))[1]
+        sample = record(sim, run_record.size_classes)[1]
         trajectory = Trajectory.reopen(folder.trajectory, keep_through_step=sim.step_count, observables=sample)
         opened.append(trajectory)
-        return RunDriver(sim, trajectory, plan, run_dir, log, extra, progress, observers)
+        return RunDriver(sim, trajectory, plan, run_dir, log, run_record, progress, observers)
 
     for path in (folder.trajectory, folder.checkpoint, folder.log):
         path.unlink(missing_ok=True)
     write_atomic(folder.spec, spec_text)
-    extra["spec_toml"] = spec_text
+    run_record.spec_toml = spec_text
     log = RunLog(folder.log)
     opened.append(log)
     state = plan.state
     log(f"start: {state.n} particles on {sim.device}, precision {plan.precision}, {plan.steps} steps")
     for line in plan.lines():
         log(line)
-    particles, observables = record(sim, extra["size_classes"])
+    particles, observables = record(sim, run_record.size_classes)
     observables.update(deepest_since(observables, sim.take_deepest_contact()))
     parameters = {
         "spec": spec,
         "collision": state.metadata,
         "piles": plan.pile_info,
-        "size_classes": extra["size_classes"],
+        "size_classes": run_record.size_classes,
         "stability": {
             "stiffness_margin": plan.stability.stiffness_margin,
             "time_step_margin": plan.stability.time_step_margin,
@@ -365,8 +363,8 @@ def _open(run: PreparedRun, progress, observers, opened: list) -> RunDriver:
     trajectory.append(sim.step_count, sim.time, particles, observables)
     for _, observe in observers:
         observe(sim.step_count, sim.time, particles, observables)
-    write_checkpoint(folder.checkpoint, sim.snapshot(), state, extra)
-    return RunDriver(sim, trajectory, plan, run_dir, log, extra, progress, observers)
+    write_checkpoint(folder.checkpoint, sim.snapshot(), state, run_record.as_checkpoint())
+    return RunDriver(sim, trajectory, plan, run_dir, log, run_record, progress, observers)
 
 
 def execute_ensemble(runs: list[PreparedRun], stop_file=None) -> list[RunResult | BaseException]:
@@ -514,17 +512,17 @@ class RunDriver:
     checkpoints, progress, the overlap and blow-up watches).  The loop that steps the simulation
     (one run's, or an ensemble's shared by several drivers) belongs to the caller."""
 
-    def __init__(self, sim, trajectory, plan: Plan, run_dir: Path, log: RunLog, extra: dict, progress, observers=()):
-        self.sim, self.run_dir, self.log, self.extra = sim, run_dir, log, extra
+    def __init__(self, sim, trajectory, plan: Plan, run_dir: Path, log: RunLog, run_record: RunRecord, progress, observers=()):
+        self.sim, self.run_dir, self.log, self.record = sim, run_dir, log, run_record
         self.trajectory = BackgroundFrames(trajectory)
         self.progress, self.observers = progress, list(observers)
         self.total = plan.steps
         self.output_every = plan.outputs.output_every
         self.checkpoint_every = plan.outputs.checkpoint_every
-        self.size_classes = int(extra["size_classes"])
+        self.size_classes = run_record.size_classes
         self.first_step = sim.step_count
-        self.wall_before = float(extra["wall_seconds"])
-        self.stepping_before = float(extra.get("stepping_seconds", 0.0))  # runs of decco-warp 0.2 did not count it
+        self.wall_before = run_record.wall_seconds
+        self.stepping_before = run_record.stepping_seconds or 0.0  # runs of decco-warp 0.2 did not count it
         self.stepping = 0.0
         # Where the time outside stepping goes (this session): frames' observables, trajectory writes, checkpoints.
         self.outside = {"observables": 0.0, "trajectory": 0.0, "checkpoints": 0.0}
@@ -536,10 +534,10 @@ class RunDriver:
         self.start_energy = sim.energy_start["total_energy"]
         # Dissipation only lowers the total energy; a gain of a fraction of this means the integration broke down.
         self.scale = energy_scale(sim.energy_start)
-        self.overlaps = OverlapWatch(extra, plan.max_overlap, log)
+        self.overlaps = OverlapWatch(run_record, plan.max_overlap, log)
         # A frame's deepest overlap is the deepest since the previous frame, which a resumed run may
         # have written before it stopped (checkpoints of decco-warp 0.2 do not say: then its start).
-        self.last_frame = int(extra.get("last_frame_step", self.first_step))
+        self.last_frame = self.first_step if run_record.last_frame_step is None else run_record.last_frame_step
         self.overflow_noted = False
 
     @property
@@ -564,16 +562,16 @@ class RunDriver:
     def checkpoint(self, step: int) -> None:
         began = _time.perf_counter()
         self.trajectory.flush()  # the frames up to this step are on disk before the checkpoint says so
-        self.extra["wall_seconds"] = self.wall_before + began - self.started
-        self.extra["stepping_seconds"] = self.stepping_before + self.stepping
-        write_checkpoint(RunFolder(self.run_dir).checkpoint, self.sim.snapshot(), self.sim.state, self.extra)
+        self.record.wall_seconds = self.wall_before + began - self.started
+        self.record.stepping_seconds = self.stepping_before + self.stepping
+        write_checkpoint(RunFolder(self.run_dir).checkpoint, self.sim.snapshot(), self.sim.state, self.record.as_checkpoint())
         self.log(f"checkpoint: step {step}")
         self.outside["checkpoints"] += _time.perf_counter() - began
 
     def after_steps(self, seconds: float, stop_signal: str | None = None) -> None:
         """Count ``seconds`` of stepping, then do what is due at the step reached (nothing between
         this run's stops); raises BlowUp, OSError, or RunStopped after a checkpoint when ``stop_signal``."""
-        sim, extra, total = self.sim, self.extra, self.total
+        sim, total = self.sim, self.total
         self.stepping += seconds
         step = sim.step_count
         pause_point("step", step)
@@ -587,9 +585,9 @@ class RunDriver:
                 check_sanity(step, particles)
                 check_energy(step, observables["total_energy"], self.start_energy, self.scale)
             except BlowUp as error:
-                raise BlowUp(f"{error}; likely cause: {likely_cause(sim.stability, self.overlaps, extra)}") from None
+                raise BlowUp(f"{error}; likely cause: {likely_cause(sim.stability, self.overlaps, self.record)}") from None
             warning = self.overlaps.see(step, observables, since=self.last_frame)
-            self.last_frame = extra["last_frame_step"] = step
+            self.last_frame = self.record.last_frame_step = step
             self.note_candidate_overflows(step)
             written = _time.perf_counter()
             self.outside["observables"] += written - began
@@ -702,12 +700,12 @@ def check_sanity(step: int, particles: dict) -> None:
             raise BlowUp(f"step {step}: particle {bad[0]} has a non-finite {name}")
 
 
-def likely_cause(stability: StabilityReport, overlaps: "OverlapWatch", extra: dict) -> str:
+def likely_cause(stability: StabilityReport, overlaps: "OverlapWatch", run_record: RunRecord) -> str:
     """What most probably broke a run, from what it saw: coincident particles at the start, a time
     step too long for the spring (eq. 17), or contacts deeper than a centre (a spring too soft)."""
-    depth = float(extra.get("start_overlap", 0.0))
+    depth = run_record.start_overlap
     if depth > MAX_REST_OVERLAP:
-        i, j = (int(k) for k in extra["start_overlap_pair"])
+        i, j = run_record.start_overlap_pair
         return (
             f"particles {i} and {j} started {depth:.3g} of the smaller radius into each other: coincident or "
             "nearly coincident particles in the input"
@@ -748,21 +746,16 @@ class OverlapWatch:
     """The deepest contact of a run, frame by frame: warned about past each of OVERLAP_WARNINGS
     (once, in run.log and on the progress line), and a stop past ``[run] max_overlap`` if set.
 
-    Its record lives in the run's checkpoint ``extra``, so that a resumed run neither
-    forgets its deepest contact nor warns twice.
+    Its record lives in the run's record (record.py), written into each checkpoint, so that a resumed
+    run neither forgets its deepest contact nor warns twice.
     """
 
-    def __init__(self, extra: dict, limit: float | None, log: Callable[[str], None]):
-        self.extra, self.limit, self.log = extra, limit, log
-        extra.setdefault("deepest_overlap", 0.0)
-        extra.setdefault("deepest_overlap_step", -1)
-        extra.setdefault("deepest_overlap_pair", np.array([-1, -1], dtype=np.int64))
-        extra.setdefault("deepest_overlap_since", -1)
-        extra.setdefault("overlap_warned", 0.0)
+    def __init__(self, run_record: RunRecord, limit: float | None, log: Callable[[str], None]):
+        self.record, self.limit, self.log = run_record, limit, log
 
     @property
     def deepest(self) -> float:
-        return float(self.extra["deepest_overlap"])
+        return self.record.deepest_overlap
 
     def see(self, step: int, observables: dict, since: int | None = None) -> str | None:
         """Note a frame's deepest contact, met at a step after ``since`` (the previous frame) and up
@@ -771,9 +764,8 @@ class OverlapWatch:
         i, j = (int(k) for k in observables["deepest_overlap_pair"])
         since = step - 1 if since is None else since
         if depth > self.deepest:
-            self.extra.update(
-                deepest_overlap=depth, deepest_overlap_step=step, deepest_overlap_since=since, deepest_overlap_pair=np.array([i, j])
-            )
+            r = self.record
+            r.deepest_overlap, r.deepest_overlap_step, r.deepest_overlap_since, r.deepest_overlap_pair = depth, step, since, (i, j)
         when = _steps(since, step)
         if self.limit is not None and depth > self.limit:
             raise BlowUp(
@@ -783,8 +775,8 @@ class OverlapWatch:
             )
         warning = None
         for level, meaning in OVERLAP_WARNINGS.items():
-            if depth > level > float(self.extra["overlap_warned"]):
-                self.extra["overlap_warned"] = level
+            if depth > level > self.record.overlap_warned:
+                self.record.overlap_warned = level
                 warning = (
                     f"warning: {when}: particles {i} and {j} overlap by {depth:.3g} of the smaller radius "
                     f"({meaning}); the run goes on"
@@ -794,10 +786,11 @@ class OverlapWatch:
         return warning
 
     def summary(self) -> str:
-        if self.extra["deepest_overlap_step"] < 0:
+        r = self.record
+        if r.deepest_overlap_step < 0:
             return "no contacts seen at the frames"
-        i, j = (int(k) for k in self.extra["deepest_overlap_pair"])
-        step, since = int(self.extra["deepest_overlap_step"]), int(self.extra["deepest_overlap_since"])
+        i, j = r.deepest_overlap_pair
+        step, since = r.deepest_overlap_step, r.deepest_overlap_since
         when = _steps(since if since >= 0 else step - 1, step)  # runs of decco-warp 0.2 kept no `since`
         return f"deepest overlap {self.deepest:.3g} of the smaller radius at {when} (particles {i} and {j})"
 

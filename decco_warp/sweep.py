@@ -495,14 +495,15 @@ def _prepare(spec: dict, device: str | None) -> tuple[dict, object]:
 def _timed(row: dict) -> dict:
     """A row with the run's wall and stepping time over all its sessions (from its checkpoint)."""
     from .io import read_checkpoint
+    from .record import RunRecord
     from .run import RUN_FAILURES
 
     checkpoint = RunFolder(row["run_dir"]).checkpoint
     try:
         if checkpoint.is_file():
-            extra = read_checkpoint(checkpoint)[2]
-            row["wall_seconds"] = round(float(extra["wall_seconds"]), 3)
-            row["stepping_seconds"] = round(float(extra["stepping_seconds"]), 3) if "stepping_seconds" in extra else None
+            kept = RunRecord.from_checkpoint(read_checkpoint(checkpoint)[2])
+            row["wall_seconds"] = round(kept.wall_seconds, 3)
+            row["stepping_seconds"] = None if kept.stepping_seconds is None else round(kept.stepping_seconds, 3)
     except RUN_FAILURES as error:
         row.update(status="failed", reason=" ".join(str(error).split()))
     row["device_name"] = _device_name(row["device"])

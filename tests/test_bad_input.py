@@ -3,6 +3,7 @@ damaged files of every kind, hypothesis), destinations checked before any work, 
 explained, and a property-based fuzz of the whole CLI."""
 
 import contextlib
+import dataclasses
 import io
 import os
 import shutil
@@ -23,6 +24,7 @@ import decco_warp as dw
 from decco_warp.forming import read_partial
 from decco_warp import spec as specs
 from decco_warp.io import FileFormatError, load_pile, read_checkpoint, save_pile
+from decco_warp.record import RunRecord
 from decco_warp.run import OverlapWatch, RunError, builtin_pile, likely_cause, prepare_start
 from decco_warp.stability import StabilityReport
 
@@ -254,19 +256,19 @@ def _report(dt_margin):
 
 def test_blow_up_causes_are_named_from_what_the_run_saw():
     def watch(depth):
-        extra = {}
-        w = OverlapWatch(extra, None, lambda line: None)
+        record = RunRecord()
+        w = OverlapWatch(record, None, lambda line: None)
         w.see(800, {"deepest_overlap": depth, "deepest_overlap_pair": np.array([4, 9])})
-        return w, extra
+        return w, record
 
-    w, extra = watch(0.1)
-    coincident = {**extra, "start_overlap": 2.0, "start_overlap_pair": np.array([3, 7])}
+    w, record = watch(0.1)
+    coincident = dataclasses.replace(record, start_overlap=2.0, start_overlap_pair=(3, 7))
     assert "particles 3 and 7 started 2 of the smaller radius into each other" in likely_cause(_report(50.0), w, coincident)
-    assert "dt = 0.04 s is too long" in likely_cause(_report(2.0), w, extra)
-    deep, extra = watch(1.4)
-    cause = likely_cause(_report(50.0), deep, extra)
+    assert "dt = 0.04 s is too long" in likely_cause(_report(2.0), w, record)
+    deep, record = watch(1.4)
+    cause = likely_cause(_report(50.0), deep, record)
     assert "too soft" in cause and "1.4 of the smaller radius at step 800 (particles 4 and 9)" in cause
-    assert "no cause stands out" in likely_cause(_report(50.0), w, extra)
+    assert "no cause stands out" in likely_cause(_report(50.0), w, record)
 
 
 # --- a property-based fuzz of the whole command line ------------------------------------------------
@@ -416,3 +418,30 @@ def test_a_checkpoint_in_the_wrong_units_is_refused_on_resume(tmp_path):
     result = cli("resume", str(run_dir), "--steps", "200", "--device", "cpu")
     assert result.returncode == 2 and "a density of" in result.stderr, result.stderr
     assert len(result.stderr.strip().splitlines()) == 1 and not (run_dir / ".lock").exists()
+
+
+def test_files_of_a_newer_decco_warp_are_refused_and_older_checkpoints_resume(tmp_path):
+    import h5py
+
+    newer = tmp_path / "newer"
+    shutil.copytree(_finished_run(tmp_path), newer)
+    with h5py.File(newer / "checkpoint.h5", "r+") as f:
+        f.attrs["format_version"] = 99
+    result = cli("resume", str(newer), "--steps", "200", "--device", "cpu")
+    assert result.returncode == 2 and "format version 99" in result.stderr and "upgrade" in result.stderr, result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and not (newer / ".lock").exists()
+
+    older = tmp_path / "older"  # decco-warp 0.2: no format version, no stepping time, no overlap history
+    shutil.copytree(_finished_run(tmp_path), older)
+    with h5py.File(older / "checkpoint.h5", "r+") as f:
+        del f.attrs["format_version"]
+        for key in ("stepping_seconds", "last_frame_step", "deepest_overlap_since"):
+            for place in (f["run"].attrs, f["run"]):
+                if key in place:
+                    del place[key]
+        f["run"].attrs["a_key_of_the_future"] = 7
+    wall = read_checkpoint(older / "checkpoint.h5")[2]["wall_seconds"]
+    result = cli("resume", str(older), "--steps", "200", "--device", "cpu")
+    assert result.returncode == 0, result.stderr
+    record = RunRecord.from_checkpoint(read_checkpoint(older / "checkpoint.h5")[2])
+    assert record.wall_seconds > wall and record.other.get("a_key_of_the_future") == 7
