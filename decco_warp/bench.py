@@ -226,7 +226,7 @@ def _bench_size(n, device, precision, layout, budget, steps, baseline, gravity, 
     force_seconds = _seconds_per_call(tiled.eval_forces, device, budget)
     # The full step as runs take it: with the energy ledger.
     sim = Simulation(state, params, device=device, scheme=scheme, allow_unstable=True, ledger=True, systems=sizes)
-    block = graph_steps(gravity_every)
+    block = graph_steps(sim.step_multiple)
     steps = block * math.ceil(steps / block)
     first_step, first_builds = sim.step_count, sim.neighbour_list_builds()
     step_seconds = _seconds_per_call(lambda: sim.step(steps), device, budget) / steps
@@ -238,9 +238,8 @@ def _bench_size(n, device, precision, layout, budget, steps, baseline, gravity, 
         baseline_seconds = math.nan
     limit, _ = device_limit_pairs_per_s(device)
     pairs = float(n) * n * systems if gravity == "all-pairs" else math.nan
-    if gravity_every > 1:
-        solver = "the tree" if gravity == "tree" else "each pair once"
-        what = f"gravity every {gravity_every} steps ({solver}), neighbour-list contacts"
+    if scheme.clock_text():
+        what = f"{scheme.clock_text(solver=True)}, neighbour-list contacts"
     else:
         what = layout.describe() if gravity == "all-pairs" else f"tree (theta_open {scheme.theta_open:g}), hash-grid contacts"
     return BenchRow(

@@ -623,7 +623,7 @@ def _integer_or_auto(text: Optional[str], option: str):
 
 def _check(spec: dict) -> None:
     """``simulate --check``: the run's plan (its set-up, margins, predicted deepest overlap and resolved choices); exit 2 if it would be refused."""
-    from .costs import GRAVITY_EVERY_NOTE, run_cost
+    from .costs import cost_note, run_cost
     from .plan import plan_start
 
     try:
@@ -632,9 +632,9 @@ def _check(spec: dict) -> None:
         fail(str(error))
     for line in [*plan.lines(), *plan.choices()]:
         typer.echo(line)
-    typer.echo(f"cost: {run_cost(plan.state.n, plan.scheme.gravity, plan.device, plan.steps, plan.scheme.gravity_every)}")
-    if plan.scheme.gravity_every > 1:
-        typer.echo(GRAVITY_EVERY_NOTE)
+    typer.echo(f"cost: {run_cost(plan.state.n, plan.scheme, plan.device, plan.steps)}")
+    if cost_note(plan.scheme):
+        typer.echo(cost_note(plan.scheme))
     if plan.run_dir.exists():
         typer.echo(f"note: run folder {plan.run_dir} exists (resume continues it, --overwrite replaces it)")
     if not plan.stability.stable and not plan.allow_unstable:

@@ -16,8 +16,9 @@ import numpy as np
 from .arrays import PAIR_OBSERVABLES
 from .gravity_tree import walk_parts
 from .kernels.contacts import CANDIDATES, LEDGER_CHANNELS
-from .layouts import Layout, choose_layout, newton_scratch_bytes, newton_sweep_layout
+from .layouts import newton_scratch_bytes
 from .params import G_CGS
+from .scheme import Scheme
 
 #: H100, the Newton layout's full step (docs/benchmarks.md): 4.5e11 pairs/s at 6 250 particles,
 #: 6.3e11 at 10 240, 1.04e12 at 65 536 (pairs: N^2 a step); the rate grows as the GPU fills.
@@ -42,9 +43,10 @@ CPU_CONTACT_SECONDS_PER_PARTICLE = 5e-8
 GPU_CONTACT_SECONDS_PER_PARTICLE = 5e-9
 
 
-def step_seconds(n: int, gravity: str, device: str, gravity_every: int = 1) -> float:
-    """About how long one step of ``n`` particles takes on ``device`` [s], with gravity evaluated
-    every ``gravity_every`` steps (the contacts every step)."""
+def step_seconds(n: int, scheme: Scheme, device: str) -> float:
+    """About how long one step of ``n`` particles takes on ``device`` [s] by ``scheme`` (its gravity
+    solver, evaluated every ``gravity_every`` steps, the contacts every step)."""
+    gravity, gravity_every = scheme.gravity, scheme.gravity_every
     if not device.startswith("cuda"):
         step = cpu_step_seconds(n, gravity)
         if gravity_every > 1:  # the same cores' share as the pair sums (cpu_step_seconds)
@@ -72,12 +74,12 @@ def duration(seconds: float) -> str:
     return f"{seconds / 86400:.2g} days"
 
 
-def run_cost(n: int, gravity: str, device: str, steps: int, gravity_every: int = 1) -> str:
-    """One line: the wall time of ``steps`` steps of ``n`` particles on ``device`` at ``gravity_every``
+def run_cost(n: int, scheme: Scheme, device: str, steps: int) -> str:
+    """One line: the wall time of ``steps`` steps of ``n`` particles on ``device`` by ``scheme``
     (:func:`step_seconds`), and how it is made."""
-    step = step_seconds(n, gravity, device, gravity_every)
+    step = step_seconds(n, scheme, device)
     where = "an H100's rates" if device.startswith("cuda") else "this CPU"
-    clock = f" at gravity every {gravity_every} steps" if gravity_every > 1 else ""
+    clock = f" at gravity every {scheme.gravity_every} steps" if scheme.gravity_every > 1 else ""
     return f"about {duration(step * steps)} on {device} ({1e3 * step:.3g} ms a step x {steps} steps{clock}; {where}, docs/benchmarks.md)"
 
 
@@ -87,6 +89,11 @@ GRAVITY_EVERY_NOTE = (
     "(measured whole runs: the default collision 7.9x as fast at K = 10 on a 2-core CPU, the paper's 2.0x to 3.1x on an H100); "
     "a collision whose contacts churn rebuilds its neighbour list more often and takes longer"
 )
+
+
+def cost_note(scheme: Scheme) -> str | None:
+    """What a cost by ``scheme`` rests on, where a line should say so (gravity on its own clock)."""
+    return GRAVITY_EVERY_NOTE if scheme.gravity_every > 1 else None
 
 
 def formation_steps(density: float, fill: float, dt: float) -> tuple[int, int]:
@@ -102,7 +109,7 @@ def formation_steps(density: float, fill: float, dt: float) -> tuple[int, int]:
 def formation_cost(n: int, density: float, fill: float, dt: float, gravity: str, device: str) -> str:
     """One line: the steps and wall time a formation of ``n`` particles is likely to take on ``device``."""
     low, high = formation_steps(density, fill, dt)
-    step = step_seconds(n, gravity, device)
+    step = step_seconds(n, Scheme(gravity=gravity), device)
     return (f"settling takes {low} to {high} steps ({FORMATION_FREE_FALLS[0]:g} to {FORMATION_FREE_FALLS[1]:g} free-fall times of the seeding sphere): about "
             f"{duration(step * low)} to {duration(step * high)} on {device} ({1e3 * step:.3g} ms a step)")  # fmt: skip
 
@@ -121,14 +128,12 @@ CPU_SECONDS_PER_PAIR = 5e-9
 CPU_TREE_SECONDS_PER_PARTICLE = 7.5e-6
 
 
-def memory_estimate(
-    n: int, gravity: str, device: str = "cpu", ledger: bool = True, *, gravity_every: int = 1, layout: Layout | None = None,
-    precision: str = "mixed", candidate_width: int = CANDIDATES,
-) -> int:
-    """Bytes a job of ``n`` particles needs on its device (and on the host), an upper estimate:
-    the arrays Engine and GravityTree allocate, taken as for the largest layout, and the Newton
-    sweep's rows where all-pairs gravity takes it (``layout`` Newton, as CUDA's default is up to
-    NEWTON_MAX particles, or gravity on its own clock, ``gravity_every`` > 1, on any device)."""
+def memory_estimate(n: int, scheme: Scheme, device: str = "cpu", ledger: bool = True, *, candidate_width: int = CANDIDATES) -> int:
+    """Bytes a job of ``n`` particles by ``scheme`` needs on its device (and on the host), an upper
+    estimate: the arrays Engine and GravityTree allocate, taken as for the largest layout, and the
+    Newton sweep's rows where all-pairs gravity takes it (Scheme.newton_sweep: a Newton layout, as
+    CUDA's default is up to NEWTON_MAX particles, or gravity on its own clock on any device)."""
+    gravity = scheme.gravity
     vec3d, f64, i32 = 24, 8, 4
     per = 3 * f64 + 5 * vec3d  # radius, mass, inertia; position, velocity, omega, force, torque
     per += (len(LEDGER_CHANNELS) * vec3d + 32) if ledger else 0  # channels, work
@@ -141,8 +146,8 @@ def memory_estimate(
         # last, parent, escape; keys, order (2n); leaf positions, grid points; each walk part's field and potential
         per += 2 * (f64 + vec3d + 72 + 2 * vec3d + 2 * f64 + 16 + 5 * i32) + 4 * i32 + vec3d + 12
         per += walk_parts(n, device) * (vec3d + f64)
-    newton = newton_sweep_layout(gravity, gravity_every, layout or choose_layout(n, device), device)
-    scratch = newton_scratch_bytes(n, newton, 12 if precision == "mixed" else 24, listing=gravity_every == 1) if newton else 0
+    newton = scheme.newton_sweep(n, device)
+    scratch = newton_scratch_bytes(n, newton, 12 if scheme.precision == "mixed" else 24, listing=scheme.gravity_every == 1) if newton else 0
     return int(n * (per + HOST_BYTES_PER_PARTICLE) + scratch + FIXED_BYTES)
 
 
@@ -158,14 +163,14 @@ def cpu_step_seconds(n: int, gravity: str) -> float:
 LONG_ON_CPU = 3600.0
 
 
-def check_fits(n: int, gravity: str, device: str, steps: int, what: str, **forces) -> str | None:
-    """Refuse (InputError) a job whose memory estimate passes the device's free memory; for one that
-    fits but would take hours on the CPU, the line that says so (else None).  ``forces``: the
-    keywords of :func:`memory_estimate` that say how its forces are summed."""
+def check_fits(n: int, scheme: Scheme, device: str, steps: int, what: str, *, candidate_width: int = CANDIDATES) -> str | None:
+    """Refuse (InputError) a job by ``scheme`` whose memory estimate passes the device's free memory;
+    for one that fits but would take hours on the CPU, the line that says so (else None)."""
     from .checks import InputError
     from .device import free_memory
 
-    need = memory_estimate(n, gravity, device, **forces)
+    gravity = scheme.gravity
+    need = memory_estimate(n, scheme, device, candidate_width=candidate_width)
     free = free_memory(device)
     if need > free:
         tree = "" if gravity == "tree" else ", gravity = \"tree\" (its memory grows as N, all-pairs' as N^2 here)"
@@ -175,12 +180,13 @@ def check_fits(n: int, gravity: str, device: str, steps: int, what: str, **force
         )
     if device.startswith("cuda"):
         return None
-    seconds = steps * cpu_step_seconds(n, gravity)
+    step = step_seconds(n, scheme, device)
+    seconds = steps * step
     if seconds < LONG_ON_CPU:
         return None
     return (
         f"note: {what} of {n} particles ({gravity} gravity) will take about {_duration(seconds)} on the CPU "
-        f"({cpu_step_seconds(n, gravity):.3g} s a step, {steps} steps); a GPU (--device cuda) is far faster"
+        f"({step:.3g} s a step, {steps} steps); a GPU (--device cuda) is far faster"
     )
 
 

@@ -21,7 +21,7 @@ import warp as wp
 from .arrays import PAIR_OBSERVABLES, ModelArrays, StateArrays, candidate_width, system_sizes
 from .device import resolve_device
 from .forces import FORCE_PATHS
-from .integrators import INTEGRATORS, check_steps
+from .integrators import check_steps, integrator_for
 from .kernels import observables
 from .kernels.bodies import PACK_KERNELS
 from .kernels.contacts import CANDIDATES, unpack_depth
@@ -65,7 +65,7 @@ class Engine:
         self.state = StateArrays(state, self.device, ledger)
         # The parts, chosen in one place (scheme.force_path; the integrator by the clocks).
         self.path = FORCE_PATHS[force_path(self.scheme)](self.model, self.state, self.scheme)
-        self.integrator = INTEGRATORS[1 if self.scheme.gravity_every == 1 else 2](self.model, self.state, self.path, self.scheme, self.pack_bodies)
+        self.integrator = integrator_for(self.scheme)(self.model, self.state, self.path, self.scheme, self.pack_bodies)
 
     # -- what others read of it ----------------------------------------------------
 

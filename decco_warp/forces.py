@@ -31,7 +31,7 @@ from .kernels.bodies import BODY_TYPES
 from .kernels.contacts import contact_pass
 from .kernels.fused import pair_forces_tiled
 from .kernels.reference import pair_forces_reference
-from .layouts import NEWTON_MAX, newton_sweep_layout
+from .layouts import NEWTON_MAX
 from .scheme import Scheme
 
 #: Threads per particle of the observables kernel on a GPU.
@@ -267,7 +267,7 @@ class ClockedForces(ForcePath):
                     f"gravity_every > 1 sums all-pairs gravity with the Newton sweep, which holds systems of up to "
                     f"{NEWTON_MAX} particles; this one has {largest}: use gravity = \"tree\""
                 )
-            layout = newton_sweep_layout(scheme.gravity, scheme.gravity_every, scheme.layout, model.device)
+            layout = scheme.newton_sweep(largest, model.device)
             self.body = packed_bodies(model, scheme, model.count)
             self.gravity = PairsOnce(model, scheme, layout, self.body)
         self.gravity_force = wp.zeros(model.count, dtype=wp.vec3d, device=model.device)

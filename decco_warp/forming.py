@@ -16,7 +16,7 @@ from .arrays import candidate_width
 from .costs import check_fits
 from .io import FileFormatError, read_checkpoint, save_pile, write_checkpoint
 from .params import Params
-from .scheme import GRAVITY_CHOICES, choose_gravity
+from .scheme import GRAVITY_CHOICES, Scheme, choose_gravity
 from .pile import Formation, FormationError, FormationProgress, check_formation_inputs, grain_sizes
 from .sizes import PowerLaw, parse_size_distribution, touching_limit
 from .stability import MIN_TIME_STEP_MARGIN
@@ -116,7 +116,7 @@ def plan_pile(
     sizes = radii if law is None else (law.r_min, law.r_max)
     check_formation_inputs(particles, sizes, density, ke_threshold, fill, max_steps=max_steps)
     width = candidate_width(min(sizes), max(sizes))
-    note = check_fits(particles, gravity, chosen, min(max_steps, TYPICAL_FORMATION_STEPS), "forming a pile", candidate_width=width)
+    note = check_fits(particles, Scheme(gravity=gravity, precision=precision), chosen, min(max_steps, TYPICAL_FORMATION_STEPS), "forming a pile", candidate_width=width)
     return PilePlan(Path(out), particles, seed, radii, density, ke_threshold, fill, max_steps, params, precision, chosen, note, law, gravity)
 
 

@@ -1,7 +1,7 @@
 """Integrators: kick-drift-kick on one clock, and on two (gravity every K steps), each owning its kick
 launches and its clock (kernels/integrate.py).
 
-    integrator = INTEGRATORS[clocks](model, state, path, scheme, pack)   # as Engine does
+    integrator = integrator_for(scheme)(model, state, path, scheme, pack)   # as Engine does
     integrator.step()            # one step (K > 1: one outer step of K), a launch a stage
     integrator.advance(steps)    # ``steps`` steps, a step's closing kick and the next's opening kick
                                  # and drift in one launch: the same numbers, bit for bit
@@ -152,6 +152,11 @@ class TwoClocks(OneClock):
 
 #: The integrators, by their number of clocks.
 INTEGRATORS = {integrator.clocks: integrator for integrator in (OneClock, TwoClocks)}
+
+
+def integrator_for(scheme: Scheme) -> type:
+    """The integrator of a scheme: one clock at K = 1 (the paper's), two where gravity has its own."""
+    return INTEGRATORS[1 if scheme.gravity_every == 1 else 2]
 
 
 def check_steps(steps: int, every: int) -> None:

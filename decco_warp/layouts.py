@@ -122,18 +122,6 @@ def newton_layout(device: str) -> Layout:
     return Layout(block_dim=1, particles_per_block=4, newton=True)
 
 
-def newton_sweep_layout(gravity: str, gravity_every: int, layout: Layout, device: str) -> Layout | None:
-    """The layout with which a run sums all-pairs gravity by the Newton sweep (each pair once): its
-    own where that is a Newton layout, else, for gravity on its own clock (``gravity_every`` > 1,
-    which takes that sweep on any device), the device's :func:`newton_layout`; None where no Newton
-    sweep runs (the tree, or the fused layout at K = 1)."""
-    if gravity == "tree":
-        return None
-    if layout.newton:
-        return layout
-    return newton_layout(device) if gravity_every > 1 else None
-
-
 #: Host bytes per tile pair while the Newton tables are built (gravity_solvers.newton_tiles: the index pairs
 #: and six columns in int64, then the int32 table that goes to the device).
 NEWTON_TABLE_BYTES = 2 * 8 + 6 * 8 + 6 * 4

@@ -170,7 +170,7 @@ class Plan:
             *self.notes,
             f"parameters: k_in {params.k_in:.6g} dyne/cm, dt {params.dt:.6g} s, {self.steps} steps "
             f"({self.steps * params.dt:.6g} s)"
-            + (f", gravity every {scheme.gravity_every} steps" if scheme.gravity_every > 1 else "")
+            + (f", {scheme.clock_text()}" if scheme.clock_text() else "")
             + (f", force layout {run['layout']}" if run["layout"] != "auto" else ""),
             f"stability: {self.stability.summary()}",
             f"compression: {self.forecast.summary()}",
@@ -184,12 +184,7 @@ class Plan:
             f"physics: restitution {p.restitution:g}, mu_k {p.mu_k:g}, mu_r {p.mu_r:g} ({p.rolling_friction}), "
             f"G {p.G:.6g}, gravity {s.gravity}" + (f" (theta_open {s.theta_open:g})" if s.gravity == "tree" else ""),
             f"device: {self.device}, precision {self.precision}, force layout {self.layout.describe()}"
-            + (
-                f"; gravity every {s.gravity_every} steps ({'the tree' if s.gravity == 'tree' else 'each pair once'}), "
-                "contacts every step from a neighbour list"
-                if s.gravity_every > 1
-                else ""
-            ),
+            + (f"; {s.clock_text(solver=True)}, contacts every step from a neighbour list" if s.clock_text() else ""),
             f"outputs: {self.outputs.run_dir}, a frame every {self.outputs.output_every} steps, "
             f"a checkpoint every {self.outputs.checkpoint_every} steps"
             + (f", stop past an overlap of {self.max_overlap:g}" if self.max_overlap is not None else ""),

@@ -196,8 +196,7 @@ def plan_fits(plan: Plan, n: int, steps: int) -> str | None:
 
     try:
         return check_fits(
-            n, plan.scheme.gravity, plan.device, steps, "a run",
-            gravity_every=plan.scheme.gravity_every, layout=plan.scheme.layout, precision=plan.scheme.precision,
+            n, plan.scheme, plan.device, steps, "a run",
             candidate_width=candidate_width(float(plan.state.radii.min()), float(plan.state.radii.max())),
         )  # fmt: skip
     except InputError as error:

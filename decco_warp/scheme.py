@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 
 from .errors import InputError
 from .kernels.bodies import PRECISIONS
-from .layouts import Layout, choose_layout
+from .layouts import Layout, choose_layout, newton_layout
 from .params import Range, require_number
 
 #: The force kernels a scheme may step with: "tiled" (the layouts of the GPU and CPU) or the plain
@@ -102,6 +102,27 @@ class Scheme:
         if isinstance(every, bool) or not isinstance(every, numbers.Integral) or every < 1:
             raise InputError(f"gravity_every must be an integer >= 1 (steps of dt per gravity evaluation); got {every!r}")
         object.__setattr__(self, "gravity_every", int(every))
+
+    def newton_sweep(self, n: int, device: str) -> Layout | None:
+        """The layout with which all-pairs gravity is summed by the Newton sweep (each pair once):
+        the scheme's own where that is a Newton layout, else, for gravity on its own clock (which
+        takes that sweep on any device), the device's :func:`~decco_warp.layouts.newton_layout`; None
+        where no Newton sweep runs (the tree, or the fused layout at K = 1).  ``n``: the largest
+        system's particles, which choose the layout where the scheme has none yet."""
+        if self.gravity == "tree":
+            return None
+        layout = self.layout or choose_layout(n, device)
+        if layout.newton:
+            return layout
+        return newton_layout(device) if self.gravity_every > 1 else None
+
+    def clock_text(self, solver: bool = False) -> str:
+        """The clock in words ("gravity every K steps", with ``solver`` how it is summed), "" for the
+        paper's (gravity and contacts every step)."""
+        if self.gravity_every == 1:
+            return ""
+        how = f" ({'the tree' if self.gravity == 'tree' else 'each pair once'})" if solver else ""
+        return f"gravity every {self.gravity_every} steps{how}"
 
 
 def choose_scheme(largest: int, device: str, asked: Scheme | None = None, **choices) -> Scheme:

@@ -400,9 +400,9 @@ def _standing(spec: dict) -> tuple[str, int]:
 
 def check_lines(settings: dict, runs: list[dict]) -> list[str]:
     """``sweep --check``: the sweep's runs and where each stands (:func:`run_state`), with, for each
-    one still to make, :func:`run_check`'s line; then the cost of them all, and once what the
-    estimates at gravity_every > 1 rest on."""
-    from .costs import GRAVITY_EVERY_NOTE, duration
+    one still to make, :func:`run_check`'s line; then the cost of them all, and once each note on
+    what the estimates rest on."""
+    from .costs import duration
 
     standing = [_standing(run) for run in runs]
     states = [state for state, _ in standing]
@@ -410,7 +410,7 @@ def check_lines(settings: dict, runs: list[dict]) -> list[str]:
     lines = [f"sweep {settings['name']}: {len(runs)} runs into {Path(settings['out']) / settings['name']} "
              f"({counts['complete']} complete, {counts['resumes']} to resume, {counts['to run']} to run)"]  # fmt: skip
     width = max(len(run["run"]["name"]) for run in runs)
-    total, devices, clocked = 0.0, set(), False
+    total, devices, notes = 0.0, set(), []
     for run, (state, done) in zip(runs, standing):
         lines.append(f"  {run['run']['name']:<{width}}  {state}")
         if not state.startswith("complete"):
@@ -419,14 +419,12 @@ def check_lines(settings: dict, runs: list[dict]) -> list[str]:
             if cost is not None:
                 total += cost.seconds
                 devices.add(cost.device)
-                clocked = clocked or cost.gravity_every > 1
+                notes += [cost.note] if cost.note and cost.note not in notes else []
     left = len(runs) - counts["complete"]
     if left:
         lines.append(f"cost: about {duration(total)} of stepping for the {left} run(s) to make or resume on {', '.join(sorted(devices)) or 'no device'} "
                      "(the sum of the runs' lines; workers that share a device share its time; analysis not included)")  # fmt: skip
-    if clocked:
-        lines.append(GRAVITY_EVERY_NOTE)
-    return lines
+    return lines + notes
 
 
 @dataclass
@@ -435,14 +433,15 @@ class RunCost:
 
     seconds: float
     device: str
-    gravity_every: int
+    note: str | None
+    """What the estimate rests on, where a line should say so (costs.cost_note)."""
 
 
 def run_check(spec: dict, done: int = 0) -> tuple[str, RunCost | None]:
     """A line on a run still to make (``done`` steps made already): its set-up's margins, its
-    predicted deepest overlap and its cost on this machine's device at its gravity_every, or why it
+    predicted deepest overlap and its cost on this machine's device by its scheme, or why it
     would be refused; and that cost (None for a run refused)."""
-    from .costs import run_cost, step_seconds
+    from .costs import cost_note, run_cost, step_seconds
     from .plan import plan_start
     from .run import plan_fits
 
@@ -453,11 +452,11 @@ def run_check(spec: dict, done: int = 0) -> tuple[str, RunCost | None]:
         return f"REFUSED: {error}", None
     stability = plan.stability
     refused = "" if stability.stable or plan.allow_unstable else f"; REFUSED: {'; '.join(stability.problems())}"
-    steps, every = max(0, plan.steps - done), plan.scheme.gravity_every
+    steps = max(0, plan.steps - done)
     line = (f"eta {plan.state.metadata['eta']:.3g}, margins: stiffness {stability.stiffness_margin:.3g} (>= 1), time step "
             f"{stability.time_step_margin:.3g} (>= 10); predicted deepest overlap {plan.forecast.fraction:.2g}; "
-            f"{run_cost(plan.state.n, plan.scheme.gravity, plan.device, steps, every)}{refused}")  # fmt: skip
-    cost = None if refused else RunCost(step_seconds(plan.state.n, plan.scheme.gravity, plan.device, every) * steps, plan.device, every)
+            f"{run_cost(plan.state.n, plan.scheme, plan.device, steps)}{refused}")  # fmt: skip
+    cost = None if refused else RunCost(step_seconds(plan.state.n, plan.scheme, plan.device) * steps, plan.device, cost_note(plan.scheme))
     return line, cost
 
 

@@ -40,7 +40,7 @@ def test_the_memory_estimate_bounds_the_engines_arrays(gravity):
     sim = dw.Simulation(pile, dw.Params(), device="cpu", ledger=True, scheme=dw.Scheme(gravity=gravity))
     engine = sim.engine
     held = _array_bytes(engine)
-    device_part = costs.memory_estimate(pile.n, gravity) - costs.FIXED_BYTES - pile.n * costs.HOST_BYTES_PER_PARTICLE
+    device_part = costs.memory_estimate(pile.n, dw.Scheme(gravity=gravity)) - costs.FIXED_BYTES - pile.n * costs.HOST_BYTES_PER_PARTICLE
     # An upper estimate (the largest layout), but not a loose one: within a factor of 3.
     assert held <= device_part <= 3 * held, (held, device_part)
 
@@ -56,7 +56,7 @@ def test_the_memory_estimate_counts_the_newton_sweeps_rows_where_gravity_takes_i
     for every in (1, 10):
         sim = dw.Simulation(state, dw.Params(), device="cpu", ledger=True, scheme=dw.Scheme(gravity_every=every))
         held[every] = _array_bytes(sim.engine)
-        estimate = costs.memory_estimate(state.n, "all-pairs", gravity_every=every) - costs.FIXED_BYTES
+        estimate = costs.memory_estimate(state.n, dw.Scheme(gravity_every=every)) - costs.FIXED_BYTES
         estimate -= state.n * costs.HOST_BYTES_PER_PARTICLE
         assert held[every] <= estimate <= 3 * held[every], (every, held[every], estimate)
     rows = 2000**2 // 4 * 12  # a float32 vec3 per particle of a tile, for each of the (N / 4)^2 rows
@@ -71,12 +71,12 @@ def test_an_all_pairs_run_whose_newton_rows_do_not_fit_is_refused_before_it_star
     from decco_warp.errors import InputError
 
     monkeypatch.setattr(devices, "free_memory", lambda device: 16 << 30)
-    assert costs.check_fits(100_000, "tree", "cpu", 1_000_000, "a run", gravity_every=10).startswith("note: a run")  # days, but it fits
-    assert costs.check_fits(2_000, "all-pairs", "cpu", 10, "a run", gravity_every=10) is None
+    assert costs.check_fits(100_000, dw.Scheme(gravity="tree", gravity_every=10), "cpu", 1_000_000, "a run").startswith("note: a run")  # days, but it fits
+    assert costs.check_fits(2_000, dw.Scheme(gravity_every=10), "cpu", 10, "a run") is None
     with pytest.raises(InputError, match=r"a run of 100000 particles needs about \d+(\.\d+)? GiB on cpu, which has 16 GiB free; .*gravity = \"tree\""):
-        costs.check_fits(100_000, "all-pairs", "cpu", 10, "a run", gravity_every=10)
-    assert costs.memory_estimate(100_000, "all-pairs", "cpu", gravity_every=10) > 25 * 2**30
-    assert costs.memory_estimate(100_000, "all-pairs", "cpu") < 1 * 2**30  # the CPU's fused layout keeps no rows
+        costs.check_fits(100_000, dw.Scheme(gravity_every=10), "cpu", 10, "a run")
+    assert costs.memory_estimate(100_000, dw.Scheme(gravity_every=10), "cpu") > 25 * 2**30
+    assert costs.memory_estimate(100_000, dw.Scheme(), "cpu") < 1 * 2**30  # the CPU's fused layout keeps no rows
 
 
 def test_the_cpu_time_estimate_follows_the_benchmarks_two_core_steps(monkeypatch):
@@ -91,7 +91,7 @@ def test_a_job_too_large_for_the_device_is_refused_with_the_estimate_and_the_fre
     import decco_warp.device as devices
 
     monkeypatch.setattr(devices, "free_memory", lambda device: 300 << 20)  # 300 MiB
-    need = costs.memory_estimate(200_000, "tree") / 2**30
+    need = costs.memory_estimate(200_000, dw.Scheme(gravity="tree")) / 2**30
     result = CliRunner().invoke(app, ["pile", "--particles", "200000", "--out", str(tmp_path / "p.h5"), "--device", "cpu"])
     assert result.exit_code == EXIT_INPUT, result.stderr
     line = result.stderr.strip().splitlines()[-1]
@@ -105,10 +105,10 @@ def test_a_job_too_large_for_the_device_is_refused_with_the_estimate_and_the_fre
 
 
 def test_a_job_of_hours_on_the_cpu_says_so_and_goes_on(tmp_path, monkeypatch):
-    note = costs.check_fits(50_000, "tree", "cpu", 150_000, "forming a pile")
+    note = costs.check_fits(50_000, dw.Scheme(gravity="tree"), "cpu", 150_000, "forming a pile")
     hours = 150_000 * costs.cpu_step_seconds(50_000, "tree") / 3600
     assert note.startswith("note: forming a pile of 50000 particles (tree gravity) will take about") and hours > 1
-    assert costs.check_fits(450, "all-pairs", "cpu", 2400, "a run") is None  # the demo: seconds
+    assert costs.check_fits(450, dw.Scheme(), "cpu", 2400, "a run") is None  # the demo: seconds
     monkeypatch.setattr(costs, "LONG_ON_CPU", 0.0)  # every CPU job counts as long: the line, then the work
     result = CliRunner().invoke(
         app, ["pile", "--particles", "12", "--seed", "9", "--dt", "0.2", "--ke-threshold", "1e-4", "--out", str(tmp_path / "p.h5"), "--device", "cpu"]

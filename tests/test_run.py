@@ -402,7 +402,7 @@ def test_check_estimates_the_cost_and_a_missing_folder_does_not_exist(tmp_path):
 
     result = cli("simulate", "--check", "--device", "cpu", "--steps", "3000", "--out", str(tmp_path))
     assert result.returncode == 0, result.stderr
-    step = step_seconds(450, "all-pairs", "cpu")
+    step = step_seconds(450, dw.Scheme(), "cpu")
     assert f"cost: about {duration(3000 * step)} on cpu ({1e3 * step:.3g} ms a step x 3000 steps" in result.stdout
     result = cli("pile", "--out", str(tmp_path / "p.h5"), "-n", "400", "--check", "--device", "cpu")
     assert result.returncode == 0, result.stderr

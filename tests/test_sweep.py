@@ -456,7 +456,7 @@ def test_sweep_check_costs_runs_at_their_own_gravity_clock_with_a_total_and_one_
                     + "[params]\ngravity_every = 10\n")  # fmt: skip
     result = cli("sweep", str(path), "--check")
     assert result.returncode == 0, result.stderr
-    k10, k1 = step_seconds(450, "all-pairs", "cpu", 10), step_seconds(450, "all-pairs", "cpu", 1)
+    k10, k1 = step_seconds(450, dw.Scheme(gravity_every=10), "cpu"), step_seconds(450, dw.Scheme(), "cpu")
     assert k1 / k10 == pytest.approx(48.8 / 6.2, rel=0.15)
     costs = re.findall(r"; about ([\d.]+) s on cpu \(([\d.]+) ms a step x 50000 steps at gravity every 10 steps", result.stdout)
     assert len(costs) == 6 and all(float(ms) == pytest.approx(1e3 * k10, rel=0.01) for _, ms in costs)
