@@ -34,6 +34,18 @@ def fail(message: str, code: int = EXIT_INPUT) -> None:
     raise typer.Exit(code)
 
 
+def fail_on(error: Exception) -> None:
+    """The one map from an error to how a command ends: decco-warp's errors (errors.py) with their own
+    exit code (a blow-up saying the last checkpoint is kept), any other bad input (a ValueError:
+    parsing, Params' checks) with exit code 2; always one line."""
+    from .errors import BlowUp
+
+    message = " ".join(str(error).split())
+    if isinstance(error, BlowUp):
+        message = f"the run blew up: {message}; the last checkpoint is kept"
+    fail(message, error.exit_code if isinstance(error, DeccoError) else EXIT_INPUT)
+
+
 def write_failed(error: OSError, kept: str) -> None:
     """Exit 5 with one line: the write that failed (``error``), and what is kept."""
     from .durable import describe_write_error
@@ -75,8 +87,10 @@ def main_entry() -> None:
         typer.echo(f"decco-warp: error: {describe_write_error(error)}; the files written before it are whole", err=True)
         _end(EXIT_OUTPUT, before)
     except DeccoError as error:  # one that no command caught (each adds what it keeps): still one line, its exit code
-        typer.echo(f"decco-warp: error: {error.line}", err=True)
-        _end(error.exit_code, before)
+        try:
+            fail_on(error)
+        except typer.Exit as done:
+            _end(done.exit_code, before)
     except Exception as error:  # typer's (or click's) usage errors carry a message and an exit code
         if type(error).__name__ == "Abort":
             typer.echo("decco-warp: aborted", err=True)
@@ -330,7 +344,6 @@ def _pile_from_ss(source: Path, out: Path, overwrite: bool, check: bool) -> None
 
     from .checks import check_destination
     from .collision import pile_radius
-    from .errors import FileFormatError, InputError
     from .interchange import pile_from_ss
     from .io import save_pile
 
@@ -340,8 +353,8 @@ def _pile_from_ss(source: Path, out: Path, overwrite: bool, check: bool) -> None
         if not check:
             check_destination(out, "pile file")
         pile = pile_from_ss(source)
-    except (InputError, FileFormatError) as error:
-        fail(str(error))
+    except DeccoError as error:
+        fail_on(error)
     meta = pile.metadata
     what = (f"{pile.n} particles ({_size_classes(pile)}), mass {pile.total_mass:.4g} g, radius {pile_radius(pile) / 1e5:.4g} km, from {source} "
             f"(pkdgrav {meta['ss_format']} .ss, t = {meta['ss_time']:.6g} s); its bulk velocity {np.linalg.norm(meta['removed_velocity']):.3g} cm/s "
@@ -421,7 +434,7 @@ def _rerun_observer(prepared, mode_text: str | None, every: int | None):
         if prepared.resume:  # drifts are measured from the run's first frame, not from the restart
             logger.set_reference(first_particles, first_observables)
     except (ValueError, RerunUnavailable) as error:
-        fail(str(error))
+        fail_on(error)
     if logger.url:
         typer.echo(f"rerun: serving {logger.url}; open the printed web viewer address, or: rerun --connect {logger.url}")
     return logger, [(every, logger.log_frame)]
@@ -430,9 +443,7 @@ def _rerun_observer(prepared, mode_text: str | None, every: int | None):
 def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: int | None = None, **kwargs):
     """Prepare a run (every input problem exits with code 2, nothing written), then run it with a
     progress bar; (its RunResult, the rerun recording it wrote or None)."""
-    from .checks import InputError
-    from .io import FileFormatError
-    from .run import BlowUp, OutputError, RunError, RunStopped, execute
+    from .run import execute
     from .stability import StabilityError
 
     try:
@@ -467,16 +478,10 @@ def _run_with_progress(prepare, *args, rerun: str | None = None, rerun_every: in
             try:
                 result = execute(prepared, progress=show, observers=observers)
                 finished, stopped_by = True, None
-            except (RunError, FileFormatError, InputError) as error:  # InputError: the folder's lock was taken
-                stopped_by = (str(error), EXIT_INPUT)
-            except RunStopped as stopped:
-                stopped_by = (str(stopped), EXIT_STOPPED)
-            except BlowUp as error:
-                stopped_by = (f"the run blew up: {error}; the last checkpoint is kept", EXIT_BLOW_UP)
-            except OutputError as error:
-                stopped_by = (str(error), EXIT_OUTPUT)
+            except DeccoError as error:  # a stop, a blow-up, a failed write, a lock taken: each its own end
+                stopped_by = error
         if stopped_by is not None:
-            fail(*stopped_by)
+            fail_on(stopped_by)
     finally:
         recording = None
         if logger is not None:
@@ -666,7 +671,6 @@ def resume(
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Continue a stopped or killed run from its last checkpoint (or extend it, with --steps or --until-settled)."""
-    from .errors import FileFormatError, NotSettled, RunError
     from .run import prepare_resume, resume_until_settled
 
     if not until_settled:
@@ -687,8 +691,8 @@ def resume(
 
     try:
         resume_until_settled(run_dir, advance, max_steps, min_members, device, say=typer.echo)
-    except (RunError, FileFormatError, NotSettled) as error:
-        fail(str(error), error.exit_code)
+    except DeccoError as error:
+        fail_on(error)
 
 
 # --- bench -------------------------------------------------------------------------------
@@ -733,8 +737,8 @@ def bench(
     import warp as wp
 
     from . import bench as benchmarks
-    from .checks import InputError, check_destination
-    from .device import DeviceError, resolve_device
+    from .checks import check_destination
+    from .device import resolve_device
     from .scheme import PRECISIONS
     from .layouts import parse_layout
     from .scheme import GRAVITY_SOLVERS
@@ -743,8 +747,8 @@ def bench(
         chosen = resolve_device(device)
         if json_out is not None:
             check_destination(json_out, "benchmark table")
-    except (DeviceError, InputError) as error:
-        fail(str(error))
+    except DeccoError as error:
+        fail_on(error)
     if precision not in PRECISIONS:
         fail(f"--precision must be one of {', '.join(PRECISIONS)}; got {precision!r}")
     solvers = [g.strip() for g in gravity.split(",") if g.strip()]
@@ -823,7 +827,6 @@ def analyze(
     from .analysis.runs import outcome_text
     from .checks import InputError
     from .device import DeviceError, resolve_device
-    from .io import FileFormatError
     from .watch import analyse_runs, check_analysable, find_runs, write_cross_run_results
 
     if min_members is not None and min_members < 1 or every < 1 or not poll > 0:
@@ -858,8 +861,8 @@ def analyze(
             runs_analysed = analyse_runs(runs, min_members, every, device, follow=follow, poll=poll, on_run=frames_of, on_follow=following)
             for result in runs_analysed:  # each kept as it comes, so that a failed write can say how many are whole
                 results.append(result)
-        except (FileFormatError, InputError) as error:
-            fail(str(error))
+        except DeccoError as error:
+            fail_on(error)
         except OSError as error:
             failed = error
     if failed is not None:
@@ -1068,7 +1071,7 @@ def view(
             fail(" ".join(str(error).split()))
         write_failed(error, f"{save_to} is not written (a recording is renamed into place only when whole; any earlier one is as it was)")
     except (ValueError, RerunUnavailable) as error:
-        fail(" ".join(str(error).split()))
+        fail_on(error)
     if save_to is not None:
         typer.echo(f"wrote {save_to} (view it with: rerun {save_to})")
     elif logger.url:
@@ -1164,8 +1167,7 @@ def export(
 
 def _export_xdmf(path: Path) -> None:
     """``export --xdmf``: trajectory.xdmf beside the run's trajectory."""
-    from .checks import InputError, check_destination
-    from .io import FileFormatError
+    from .checks import check_destination
     from .repair import clear_write_flags
     from .lock import RunFolderBusy
     from .xdmf import write_xdmf
@@ -1183,7 +1185,7 @@ def _export_xdmf(path: Path) -> None:
         except RunFolderBusy:
             running = True
         frames = write_xdmf(trajectory, destination)
-    except (InputError, FileFormatError, OSError) as error:
+    except (DeccoError, OSError) as error:  # an unreadable trajectory is bad input here, as a missing one
         fail(" ".join(str(error).split()))
     typer.echo(f"wrote {destination}: {frames} frame(s) of {trajectory.name}, read in place; open it in ParaView or VisIt")
     if running:
@@ -1196,15 +1198,14 @@ def _export_xdmf(path: Path) -> None:
 def _export_ss(path: Path, destination: Path, frame, reduced: bool) -> None:
     """``export --ss``: a frame, every frame or a pile as pkdgrav .ss."""
     from .checks import check_destination
-    from .errors import FileFormatError, InputError
     from .interchange import export_ss, is_pile_file
 
     try:
         check_destination(destination, "folder of .ss files" if frame == "all" else ".ss file", folder=frame == "all")
         pile = is_pile_file(path)
         written = export_ss(path, destination, frame, reduced)
-    except (InputError, FileFormatError) as error:
-        fail(str(error))
+    except DeccoError as error:
+        fail_on(error)
     except OSError as error:
         write_failed(error, "each .ss file written before it is whole")
     kind = "reduced" if reduced else "standard"
@@ -1219,7 +1220,6 @@ def _export_ss(path: Path, destination: Path, frame, reduced: bool) -> None:
 def _export_rebound(path: Path, destination: Path, frame) -> None:
     """``export --rebound``: an analysed frame's fragments as a REBOUND simulation file."""
     from .checks import check_destination
-    from .errors import FileFormatError, InputError
     from .interchange import handoff_bodies, write_rebound
 
     if not path.is_dir():
@@ -1228,8 +1228,8 @@ def _export_rebound(path: Path, destination: Path, frame) -> None:
         check_destination(destination, "REBOUND file")
         bodies = handoff_bodies(path, frame)
         write_rebound(destination, bodies)
-    except (InputError, FileFormatError) as error:
-        fail(str(error))
+    except DeccoError as error:
+        fail_on(error)
     except OSError as error:
         write_failed(error, f"{destination} is not written (any earlier one is as it was)")
     typer.echo(
@@ -1344,7 +1344,7 @@ def piles(
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Build every pile a TOML file lists (the paper's: runs/paper/piles.toml), skipping those already built."""
-    from .checks import InputError, check_destination
+    from .checks import check_destination
     from .spec import SpecError, check_pile_list, load_spec_file, pile_options
 
     try:
@@ -1360,8 +1360,8 @@ def piles(
         for out in outs:  # every destination, before the first pile is built
             if overwrite or not out.exists():
                 check_destination(out, "pile file")
-    except (SpecError, InputError) as error:
-        fail(str(error))
+    except DeccoError as error:
+        fail_on(error)
     for entry, out in zip(entries, outs):
         if out.exists() and not overwrite:
             typer.echo(f"{out}: exists, skipped")

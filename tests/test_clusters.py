@@ -229,21 +229,10 @@ def test_screening_lone_seeds_changes_no_cluster(piles, monkeypatch):
         _moved(_sparse_and_dense(offset=(4e7, 0, 0), velocity=(45.0, 0, 0)), (50 * distance, 0, 0), (0, 0, 0)),
     )
     screened = dw.find_clusters(state, min_members=20)
-    # The screen is its definition, computed over every pair in float64: touching nobody, binding
-    # nobody within NEAR_RADII of the largest radius by its own escape speed, and no other particle
-    # slower relative to it than escape from the heaviest at that distance.
+    # The screen is its definition, computed over every pair in float64 (_alone_oracle).
     x, v, m, radii = state.positions, state.velocities, state.masses, state.radii
-    d = np.linalg.norm(x[:, None] - x[None], axis=-1)
-    dv2 = ((v[:, None] - v[None]) ** 2).sum(axis=-1)
-    np.fill_diagonal(d, np.inf)
-    np.fill_diagonal(dv2, np.inf)
-    near = finder.NEAR_RADII * radii.max()
-    touching = (d <= radii[:, None] + radii[None]).any(axis=1)
-    binding = ((d <= near) & (dv2 * d < 2 * dw.G_CGS * m[:, None])).any(axis=1)
-    slow_partner = (dv2 <= 2 * dw.G_CGS * m.max() / near).any(axis=1)
-    oracle = ~touching & ~binding & ~slow_partner
     alone = finder._alone(x, v, m, radii, finder.contact_graph(x, radii), dw.G_CGS)
-    assert np.array_equal(alone, oracle)
+    assert np.array_equal(alone, _alone_oracle(state))
     assert finder._alone(state.positions, state.velocities, state.masses, state.radii,
                          finder.contact_graph(state.positions, state.radii), dw.G_CGS).sum() >= 40  # fmt: skip
     monkeypatch.setattr(finder, "_alone", lambda x, *rest: np.zeros(len(x), dtype=bool))
@@ -278,7 +267,9 @@ def _debris_field(pile, seed, pairs=80):
 
 
 def _alone_oracle(state):
-    """The lone-seed screen by its definition over every pair, in float64."""
+    """The lone-seed screen by its definition over every pair, in float64: touching nobody, binding
+    nobody within NEAR_RADII of the largest radius by its own escape speed, and no other particle
+    slower relative to it than escape from the heaviest at that distance."""
     from decco_warp.analysis import clusters as finder
 
     x, v, m, radii = state.positions, state.velocities, state.masses, state.radii
