@@ -34,10 +34,9 @@ PAIR_OBSERVABLES = {
 
 def candidate_width(min_radius: float, max_radius: float) -> int:
     """Contact candidates a particle's list holds on the paths that list them (the Newton layout, the
-    tree): CANDIDATES, or more for a wide size range (sizes.contact_list_rule of the radius ratio), so
-    that a large grain among many small ones does not overflow into a walk over its whole system.
-    Gravity on its own clock keeps CANDIDATES: its build holds a row in a fixed vector
-    (kernels/neighbours.py NeighbourRow)."""
+    tree, the neighbour list of gravity on its own clock): CANDIDATES, or more for a wide size range
+    (sizes.contact_list_rule of the radius ratio), so that a large grain among many small ones does
+    not overflow into a walk over its whole system."""
     return max(CANDIDATES, contact_list_rule(max_radius / min_radius))
 
 

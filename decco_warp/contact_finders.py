@@ -117,15 +117,16 @@ class NeighbourList(ContactFinder):
     sets how the contact pass's lanes share a particle's contacts (and so the rounding of their sum):
     each system of an ensemble keeps the lists it would keep alone, and a snapshot holds them
     (:meth:`arrays`), so that a restart goes on with the same lists.  The grid's cell tables take
-    8 bytes per cell, GRID_CELLS^3 cells per system (2 MiB).  Its lists are CANDIDATES wide: the
-    build keeps a row in a vector of that length."""
+    8 bytes per cell, GRID_CELLS^3 cells per system (2 MiB).  Its lists are ``width`` wide (the
+    model's candidate_width: wider for a wide size range, so that a large grain among many small
+    ones keeps its list; the build sorts each row in place)."""
 
     name = "neighbour-list"
     graph_conditionals = True  # the rebuild: wp.capture_if
     current = True  # every drift checks the lists against the positions
 
     def __init__(self, model: ModelArrays, width: int = CANDIDATES):
-        super().__init__(model, CANDIDATES)
+        super().__init__(model, width)
         device, count = model.device, model.count
         systems = len(model.systems)
         self.skin = SKIN_FRACTION * model.min_radius

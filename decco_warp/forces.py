@@ -272,7 +272,7 @@ class ClockedForces(ForcePath):
             self.gravity = PairsOnce(model, scheme, layout, self.body)
         self.gravity_force = wp.zeros(model.count, dtype=wp.vec3d, device=model.device)
         """Gravity at the positions of the last outer step [dyne]."""
-        self.finder = NeighbourList(model)
+        self.finder = NeighbourList(model, model.candidate_width)
         self.contact_pass = ContactPass(model, accumulate=False)
 
     def evaluate(self) -> None:

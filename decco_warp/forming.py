@@ -79,7 +79,7 @@ class PilePlan:
             f"smallest grain: radius {r_min / 1e5:.4g} km, {4.0 / 3.0 * math.pi * self.density * r_min**3:.3g} g; eq. 17's time scale "
             f"sqrt(m/k_in) = {scale:.3g} s: dt = {self.params.dt:g} s has a margin of {scale / self.params.dt:.3g} (need >= {MIN_TIME_STEP_MARGIN:g})",
             f"largest grain: radius {r_max / 1e5:.4g} km ({r_max / r_min:.3g} x the smallest), touched by at most {touching_limit(r_max, r_min)} "
-            f"of the smallest (were they to cover it); the contact lists of the Newton layout (CUDA) and the tree hold {candidate_width(r_min, r_max)} "
+            f"of the smallest (were they to cover it); the contact lists hold {candidate_width(r_min, r_max)} "
             "a particle (8 + 4 (R_max/R_min)^2, at least 64; a particle that meets more looks at its whole pile, slower)",
         ]  # fmt: skip
 

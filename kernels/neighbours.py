@@ -22,8 +22,6 @@ system of an ensemble keeps the lists it would keep alone.
 
 import warp as wp
 
-from .contacts import CANDIDATES
-
 wp.set_module_options({"enable_backward": False})
 
 #: Relative margin on a list's reach R_i + R_j + skin: it covers the rounding of the float64
@@ -91,10 +89,6 @@ def cell_ranges(
     sorted_position_out[k] = position_in[i]
 
 
-#: A particle's neighbours as the build meets them, kept in increasing j in the thread's own memory.
-NeighbourRow = wp.types.vector(length=CANDIDATES, dtype=wp.int32)
-
-
 @wp.kernel
 def build_neighbour_list(
     # Model:
@@ -112,7 +106,7 @@ def build_neighbour_list(
     # Out:
     reference_out: wp.array(dtype=wp.vec3d),  # the positions of this build
     candidate_count_out: wp.array(dtype=wp.int32),  # neighbours met (past the list's width: an overflow)
-    candidates_out: wp.array2d(dtype=wp.int32),  # the first of them, in increasing j
+    candidates_out: wp.array2d(dtype=wp.int32),  # the first of them (as many as its columns), in increasing j
 ):
     """Thread k lists the k-th particle in key order: the threads of a warp share cells, and a cell's
     particles are read from the sorted copies one after another, not gathered from all over memory.
@@ -127,7 +121,7 @@ def build_neighbour_list(
     radius = sorted_radius_in[k]
     margin = wp.float64(REACH_MARGIN)
     own = cell_of(x, cell_width)
-    row = NeighbourRow()
+    width = candidates_out.shape[1]  # the list's width: sized for the pile's radius ratio (arrays.candidate_width)
     noted = int(0)
     for neighbour in range(27):  # the 3 x 3 x 3 cells around its own
         cell = own + wp.vec3i(neighbour % 3 - 1, (neighbour // 3) % 3 - 1, neighbour // 9 - 1)
@@ -138,17 +132,15 @@ def build_neighbour_list(
                 r = sorted_position_in[m] - x
                 if wp.dot(r, r) < reach * reach:
                     j = int(order_in[m])
-                    if noted < wp.static(CANDIDATES):  # insert j (met once: a particle lies in one cell) in order
+                    if noted < width:  # insert j (met once: a particle lies in one cell) in order, in its row
                         s = noted
                         while s > 0:
-                            if row[s - 1] < j:
+                            if candidates_out[i, s - 1] < j:
                                 break
-                            row[s] = row[s - 1]
+                            candidates_out[i, s] = candidates_out[i, s - 1]
                             s -= 1
-                        row[s] = wp.int32(j)
+                        candidates_out[i, s] = wp.int32(j)
                     noted += 1  # past the row's width only counted: an overflow
-    for s in range(wp.min(noted, wp.static(CANDIDATES))):
-        candidates_out[i, s] = row[s]
     candidate_count_out[i] = wp.int32(noted)
     reference_out[i] = x
 

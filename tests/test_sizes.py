@@ -87,14 +87,15 @@ def _large_among_small(count, ratio, seed=6):
     return dw.State.from_arrays(x, rng.normal(size=(count + 1, 3)), rng.normal(size=(count + 1, 3)) * 1e-4, radii, masses)
 
 
-@pytest.mark.parametrize("gravity", ["all-pairs", "tree"])
-def test_lists_sized_for_the_radius_ratio_hold_a_large_grains_contacts(gravity):
+@pytest.mark.parametrize("gravity, every", [("all-pairs", 1), ("tree", 1), ("all-pairs", 5)])
+def test_lists_sized_for_the_radius_ratio_hold_a_large_grains_contacts(gravity, every):
     """100 grains on one five times larger: more than CANDIDATES, fewer than the 108 the ratio sizes
-    the lists for. The Newton layout's list (all-pairs) and the tree's grid list hold them all, and
-    the forces are the plain loop's."""
+    the lists for. The Newton layout's list (all-pairs), the tree's grid list and the neighbour list
+    of gravity on its own clock hold them all, and the forces are the plain loop's."""
     state = _large_among_small(100, 5.0)
     params = dw.Params() if gravity == "all-pairs" else dw.Params(G=0.0)
-    engine = Engine(state, params, "cpu", "float64", layout=dw.Layout(1, 4, newton=True), scheme=dw.Scheme(gravity=gravity))
+    scheme = dw.Scheme(gravity=gravity, gravity_every=every)
+    engine = Engine(state, params, "cpu", "float64", layout=dw.Layout(1, 4, newton=True), scheme=scheme)
     engine.eval_forces()
     assert engine.candidates.shape[1] == 108
     assert engine.candidate_count.numpy()[0] == 100 > CANDIDATES and engine.candidate_overflows() == 0
@@ -134,7 +135,7 @@ def test_check_says_what_the_smallest_grain_costs_and_what_the_largest_touches(t
     scale = math.sqrt(m_min / 1e18)
     assert f"sqrt(m/k_in) = {scale:.3g} s: dt = 0.04 s has a margin of {scale / 0.04:.3g} (need >= 10)" in result.stdout
     width = max(64, math.ceil(8 + 4 * (radii.max() / radii.min()) ** 2))
-    assert f"largest grain: radius {radii.max() / 1e5:.4g} km" in result.stdout and f"the tree hold {width} a particle" in result.stdout
+    assert f"largest grain: radius {radii.max() / 1e5:.4g} km" in result.stdout and f"the contact lists hold {width} a particle" in result.stdout
     counts = np.bincount(np.clip(np.digitize(radii, 10 ** np.linspace(math.log10(5e5), math.log10(2.5e6), 4)[1:-1]), 0, 2))
     assert f"of {', '.join(str(c) for c in counts)} particles" in result.stdout and not (tmp_path / "p.h5").exists()
     # Grains of 1 km want a shorter step than the paper's 0.04 s: said before any work, exit 2.

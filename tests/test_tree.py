@@ -214,13 +214,17 @@ def test_tree_frames_give_the_all_pairs_observables_in_n_log_n(device, scene):
     assert rms[0.2] < rms[0.4] < rms[0.7]
 
 
-def test_a_run_whose_contact_lists_overflow_says_so_once_in_its_log(tmp_path):
-    """A 75 km sphere touched by 150 small ones, more than the neighbour list of gravity on its own
-    clock holds (64; the tree's own lists are sized for the radius ratio, 408 here): the run's
-    contacts stay right (the overflow walks the whole system), and run.log says, once, that this
-    slows it."""
-    from helpers import cli
+def test_a_run_whose_contact_lists_overflow_says_so_once_in_its_log(tmp_path, monkeypatch):
+    """A 75 km sphere touched by 150 small ones: the lists are sized for the radius ratio (408
+    candidates at 10; the tree's and the neighbour list of gravity on its own clock alike) and hold
+    them all.  Narrowed to 64, both overflow: the contacts stay right (the overflow walks the whole
+    system, tests/test_forces.py), and a run's log says, once, that this slows it."""
+    import decco_warp.engine as engines
     from scenes import sphere_mass
+    from typer.testing import CliRunner
+
+    from decco_warp.cli import app
+    from decco_warp.engine import Engine
 
     count = 150
     k = np.arange(count) + 0.5
@@ -229,19 +233,20 @@ def test_a_run_whose_contact_lists_overflow_says_so_once_in_its_log(tmp_path):
     radii = np.array([7.5e6] + [0.75e6] * count)
     x = np.vstack([[0.0, 0.0, 0.0], direction * (7.5e6 + 0.75e6 - 100.0)])
     pile = dw.State.from_arrays(x, np.zeros_like(x), np.zeros_like(x), radii, sphere_mass(radii))
-    from decco_warp.engine import Engine
-
-    listed = Engine(pile, dw.Params(), "cpu", scheme=dw.Scheme(gravity="tree"))
-    listed.eval_forces()
-    assert listed.candidate_overflows() == 0 and listed.candidates.shape[1] >= count
-    engine = Engine(pile, dw.Params(), "cpu", scheme=dw.Scheme(gravity="tree", gravity_every=5))
-    engine.eval_forces()
-    assert engine.candidate_overflows() == 1  # the large sphere only
+    for every in (1, 5):
+        listed = Engine(pile, dw.Params(), "cpu", scheme=dw.Scheme(gravity="tree", gravity_every=every))
+        listed.eval_forces()
+        assert listed.candidate_overflows() == 0 and listed.candidates.shape[1] == 408
+    monkeypatch.setattr(engines, "candidate_width", lambda r_min, r_max: 64)
+    for every in (1, 5):
+        engine = Engine(pile, dw.Params(), "cpu", scheme=dw.Scheme(gravity="tree", gravity_every=every))
+        engine.eval_forces()
+        assert engine.candidate_overflows() == 1  # the large sphere only
     dw.save_pile(pile, tmp_path / "urchin.h5")
-    result = cli(
+    result = CliRunner().invoke(app, [
         "simulate", "--target", str(tmp_path / "urchin.h5"), "--projectile", str(builtin_pile("projectile")), "--gravity", "tree",
         "--gravity-every", "5", "--steps", "20", "--output-every", "10", "--device", "cpu", "--out", str(tmp_path), "--name", "urchin",
-    )  # fmt: skip
-    assert result.returncode == 0, result.stderr
+    ])  # fmt: skip
+    assert result.exit_code == 0, result.stderr
     notes = [line for line in (tmp_path / "urchin" / "run.log").read_text().splitlines() if "more contact candidates" in line]
     assert len(notes) == 1 and "at step 10, 1 of the particles met" in notes[0]
