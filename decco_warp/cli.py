@@ -1307,11 +1307,14 @@ def sweep(
             bar.console.print(finished_line(row))
 
         def stopping() -> None:
-            bar.console.print("stopping: each run stepping writes a checkpoint and ends (a second Ctrl-C stops at once, "
-                              "losing their work since their last checkpoints)", soft_wrap=True, highlight=False)  # fmt: skip
+            note("stopping: each run stepping writes a checkpoint and ends (a second Ctrl-C stops at once, "
+                 "losing their work since their last checkpoints)")  # fmt: skip
+
+        def note(line: str) -> None:
+            bar.console.print(line, soft_wrap=True, highlight=False)
 
         try:
-            job.run(scheduler, workers, analysis_workers, gpus, on_row=report, on_progress=show, on_stopping=stopping)
+            job.run(scheduler, workers, analysis_workers, gpus, on_row=report, on_progress=show, on_stopping=stopping, on_note=note)
         except OSError as error:  # summary.csv could not be written: the runs' own folders are whole
             write_failed(error, f"the finished runs' folders and the last summary.csv are whole; {AGAIN}")
     try:

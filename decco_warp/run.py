@@ -195,17 +195,29 @@ def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None
 def plan_fits(plan: Plan, n: int, steps: int) -> str | None:
     """Refuse (RunError) a run of ``n`` particles that its device has no memory for, its force path
     counted (the Newton sweep's rows, O(N^2 / tile)); a line for one that takes hours on the CPU."""
-    from .arrays import candidate_width
     from .costs import check_fits
 
     try:
-        return check_fits(
-            n, plan.params.gravity, plan.device, steps, "a run",
-            gravity_every=plan.params.gravity_every, layout=plan.layout, precision=plan.precision,
-            candidate_width=candidate_width(float(plan.state.radii.min()), float(plan.state.radii.max())),
-        )  # fmt: skip
+        return check_fits(n, plan.params.gravity, plan.device, steps, "a run", **_force_sums(plan))
     except InputError as error:
         raise RunError(str(error)) from None
+
+
+def plan_memory(plan: Plan) -> int:
+    """Bytes a run's plan needs on its device (costs.memory_estimate of its force path)."""
+    from .costs import memory_estimate
+
+    return memory_estimate(plan.state.n, plan.params.gravity, plan.device, **_force_sums(plan))
+
+
+def _force_sums(plan: Plan) -> dict:
+    """The keywords of costs.memory_estimate that say how a plan's forces are summed."""
+    from .arrays import candidate_width
+
+    return dict(
+        gravity_every=plan.params.gravity_every, layout=plan.layout, precision=plan.precision,
+        candidate_width=candidate_width(float(plan.state.radii.min()), float(plan.state.radii.max())),
+    )  # fmt: skip
 
 
 def prepare_resume(run_dir, steps: int | None = None, device: str | None = None) -> PreparedRun:
