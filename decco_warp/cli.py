@@ -1268,7 +1268,7 @@ def sweep(
     from .checks import InputError
     from .device import DeviceError, gpus_to_use
     from .spec import SpecError
-    from .sweep import AGAIN, SweepJob, check_lines, finished_line, load_sweep, select_runs
+    from .sweep import SweepJob, check_lines, load_sweep, select_runs
 
     try:
         settings, runs = load_sweep(spec_file, {"resolution": resolution})
@@ -1296,9 +1296,19 @@ def sweep(
     except InputError as error:
         fail(str(error))
     typer.echo(f"sweep {settings['name']}: {len(runs)} runs into {job.folder}")
+    try:
+        _sweep_claimed(job, scheduler, workers, analysis_workers, gpus)
+    finally:
+        job.release()  # however it ends (a Python caller may go on in this process)
+
+
+def _sweep_claimed(job, scheduler, workers, analysis_workers, gpus) -> None:
+    """``sweep`` once its folder is claimed: the runs, the record, the table and figures, the end."""
+    from .sweep import AGAIN, finished_line
+
     bar = _progress_bar("sweep", "runs")
     with bar:
-        task = bar.add_task(settings["name"], total=len(runs), runs="")
+        task = bar.add_task(job.settings["name"], total=len(job.runs), runs="")
 
         def show() -> None:
             bar.update(task, completed=job.completed, runs=job.progress_text())
@@ -1321,7 +1331,6 @@ def sweep(
         job.save_record()
     except OSError as error:
         write_failed(error, f"the runs' folders and summary.csv are whole; {AGAIN}")
-    job.release()
     if job.stopped:
         fail(job.stopped_line(), code=EXIT_STOPPED)
     try:

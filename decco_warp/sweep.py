@@ -806,6 +806,7 @@ def run_sweep(
                 finish(k, {**row, "status": "failed", "reason": f"analysis: {' '.join(str(error).split())}"})
 
     abandoned = False
+    lost = None  # why the scheduler was lost, once it was
     signals = StopRequests()  # from here on, through the workers' closing, a signal stops in order
     signals.__enter__()
     try:
@@ -835,7 +836,6 @@ def run_sweep(
         stepped = {k: 0.0 for k in todo}  # never lowered: a checkpoint being replaced reads as none
         looked = -math.inf
         stopping = None  # the signal that stops the sweep, once one came
-        lost = None  # why the scheduler was lost, once it was
         while not simulations.is_empty() or pending or arrived:
             if signals.count > 1:  # asked twice: go at once
                 abandoned = True
@@ -860,7 +860,7 @@ def run_sweep(
                 try:
                     arrived.append((batch, future.result()))
                 except CancelledError as error:  # the client lost its scheduler: every future is cancelled
-                    lost = lost or " ".join(str(error).split())
+                    lost = lost or getattr(error, "reason", None) or "cancelled"
                     stopped += [{"run": runs[k]["run"]["name"], "step": None} for k in batch]
                 except Exception as error:  # a worker that died too often (KilledWorker): record it, go on
                     reason = f"its worker was lost while stepping it ({' '.join(str(error).split())}); {RETRY}"
@@ -907,12 +907,31 @@ def run_sweep(
     finally:
         try:
             analyses.shutdown(wait=not abandoned)
-            client.close()
+            _close(client, quietly=lost is not None)
             if cluster is not None:
                 close_cluster(cluster, 0 if abandoned or signals.count > 1 else WORKER_CLOSE_SECONDS)
         finally:
             signals.__exit__(None, None, None)
     return rows
+
+
+def _close(client, quietly: bool) -> None:
+    """Close ``client``; ``quietly`` where it lost its scheduler: Dask then logs a traceback as its
+    attempts to reconnect are ended, which the sweep's own line says in words."""
+    import logging
+
+    logger = logging.getLogger("distributed.client")
+    level = logger.level
+    if quietly:
+        logger.setLevel(logging.CRITICAL)
+    try:
+        client.close(timeout=CLIENT_CLOSE_SECONDS)
+    finally:
+        logger.setLevel(level)
+
+
+#: How long a client that lost its scheduler may take to close [s].
+CLIENT_CLOSE_SECONDS = 5
 
 
 #: What a run whose worker failed it is to do.
