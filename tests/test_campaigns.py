@@ -9,6 +9,8 @@ finished by then."""
 
 import csv
 import os
+import re
+import shlex
 import signal
 import subprocess
 import sys
@@ -208,3 +210,77 @@ def test_a_disk_that_fills_mid_sweep_ends_it_with_exit_5_and_the_same_command_fi
     assert again.returncode == 0, again.stderr
     _assert_whole(sweep_dir, reference, {"steps100": "skipped (complete)", "steps200": "ok"})
     assert "resume: from step 100 of 200" in (sweep_dir / "steps200" / "run.log").read_text()
+
+
+# --- Slurm job arrays ---------------------------------------------------------------------------------
+
+
+def test_a_job_array_run_as_a_local_loop_then_collected_gives_the_sweep_s_summary(reference, tmp_path, monkeypatch):
+    """`--array` writes the script; its tasks, run one by one as Slurm would run them (bash, with
+    SLURM_ARRAY_TASK_ID), step and analyse their runs; a task run again skips its run; `--collect`
+    writes the summary.csv that a sweep on Dask workers writes, rows and outcomes."""
+    monkeypatch.chdir(tmp_path)
+    path = _grid(tmp_path)
+    made = cli_here("sweep", str(path), "--array")
+    assert made.returncode == 0, made.stderr
+    script = tmp_path / "out" / "campaign" / "array" / "array.sh"
+    assert f"submit: sbatch {script}" in made.stdout
+    text = script.read_text()
+    assert "#SBATCH --array=0-1\n#SBATCH --time=00:11:00\n" in text and "--gres" not in text  # 0.2 s of stepping on the CPU
+    commands = dict(re.findall(r"^  (\d+)\) exec (decco-warp sweep .*) ;;$", text, re.M))
+    assert {k: shlex.split(c)[3:] for k, c in commands.items()} == {"0": ["--task", "steps100"], "1": ["--task", "steps200"]}
+    for k in commands:
+        task = subprocess.run(["bash", str(script)], env={**os.environ, "SLURM_ARRAY_TASK_ID": k}, capture_output=True, text=True)
+        assert task.returncode == 0, task.stderr
+        assert task.stdout.startswith(f"steps{100 * (int(k) + 1)}: ok"), task.stdout
+    again = cli_here(*shlex.split(commands["0"])[1:])  # a task submitted again
+    assert again.returncode == 0 and again.stdout.startswith("steps100: skipped (complete)"), again.stdout + again.stderr
+    collected = cli_here("sweep", str(path), "--collect")
+    assert collected.returncode == 0, collected.stderr
+    sweep_dir = tmp_path / "out" / "campaign"
+    _assert_whole(sweep_dir, reference, {"steps100": "ok", "steps200": "ok"})
+    assert (sweep_dir / "figures" / "largest_fragment.png").stat().st_size > 1000
+    assert cli_here("sweep", str(path), "--array").returncode == 2  # nothing left to make: one line, exit 2
+
+
+def test_a_gpu_sweep_s_array_asks_each_task_for_a_gpu_for_its_estimated_time(tmp_path, monkeypatch):
+    """Runs on "auto" ask each task for a GPU, and for the time --check's cost gives at an H100's rates
+    (this machine needs none: the runs are planned on its CPU); a task of runs still to make only."""
+    from decco_warp import jobarray
+    from decco_warp.costs import step_seconds
+
+    monkeypatch.chdir(tmp_path)
+    path = tmp_path / "gpu.toml"
+    path.write_text(GRID.format(out=tmp_path / "out").replace('device = "cpu"', 'device = "auto"').replace("[100, 200]", "[40000000, 80000000]"))
+    made = cli_here("sweep", str(path), "--array")
+    assert made.returncode == 0, made.stderr
+    text = (tmp_path / "out" / "campaign" / "array" / "array.sh").read_text()
+    both = step_seconds(450, "all-pairs", "cuda:0") * 120_000_000  # one task: "auto" packs runs on a GPU, up to 8 to a worker
+    assert "#SBATCH --array=0-0\n" in text and "--task steps40000000 --task steps80000000 ;;" in text
+    assert "#SBATCH --gres=gpu:1" in text and f"#SBATCH --time={jobarray.time_limit(both)}\n" in text
+    assert jobarray.time_limit(0) == "00:10:00" and jobarray.time_limit(3600) == "01:40:00" and jobarray.time_limit(2 * 86400) == "3-00:10:00"
+
+
+def test_the_documented_dask_jobqueue_configuration_asks_slurm_for_a_single_threaded_worker_a_gpu(monkeypatch):
+    """docs/sweeps.md's SLURMCluster, made as written (its scheduler on this machine, no job
+    submitted): each job one worker of one thread, with a GPU and the walltime asked for."""
+    pytest.importorskip("dask_jobqueue")
+    import dask
+    import dask_jobqueue
+
+    text = (Path(__file__).parents[1] / "docs" / "sweeps.md").read_text()
+    (block,) = re.findall(r"^```python\n(from dask_jobqueue import SLURMCluster\n.*?)^```$", text, re.S | re.M)
+    scaled = []
+    monkeypatch.setattr(dask_jobqueue.SLURMCluster, "scale", lambda self, *args, **kwargs: scaled.append((args, kwargs)))
+    names: dict = {}
+    with dask.config.set({"jobqueue.slurm.scheduler-options": {"host": "127.0.0.1"}}):
+        exec(compile(block, "docs/sweeps.md", "exec"), names)
+    cluster = names["cluster"]
+    try:
+        script = cluster.job_script()
+    finally:
+        cluster.close()
+    assert ((), {"jobs": 4}) in scaled  # the block's own call (closing scales to 0)
+    assert "#SBATCH --gres=gpu:1" in script and "#SBATCH -t 04:00:00" in script and "source .venv/bin/activate" in script
+    worker = next(line for line in script.splitlines() if "dask_worker" in line)
+    assert "--nthreads 1 " in worker and "--nworkers" not in worker and cluster.scheduler_address in worker
