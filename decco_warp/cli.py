@@ -1365,12 +1365,7 @@ def _sweep_collected(job, analysis_workers) -> None:
     if missing:
         fail(f"{len(missing)} run(s) not finished ({'; '.join(missing)}); summary.csv holds the {len(job.finished)} finished: "
              "submit the array again (decco-warp sweep FILE --array writes it for the runs left), then --collect", code=EXIT_STOPPED)  # fmt: skip
-    try:
-        summary = job.finish()
-    except OSError as error:
-        write_failed(error, f"the runs' folders are whole, and summary.csv and each figure whole or absent; {AGAIN}")
-    for line in job.summary_lines(summary):
-        typer.echo(line)
+    _sweep_end(job)
 
 
 def _sweep_claimed(job, scheduler, workers, analysis_workers, gpus) -> None:
@@ -1404,6 +1399,14 @@ def _sweep_claimed(job, scheduler, workers, analysis_workers, gpus) -> None:
         write_failed(error, f"the runs' folders and summary.csv are whole; {AGAIN}")
     if job.stopped:
         fail(job.stopped_line(), code=EXIT_STOPPED)
+    _sweep_end(job)
+
+
+def _sweep_end(job) -> None:
+    """A sweep whose runs are all finished: summary.csv in grid order and the figures, its last lines,
+    and exit 5 when runs could not write their folders."""
+    from .sweep import AGAIN
+
     try:
         summary = job.finish()
     except OSError as error:
