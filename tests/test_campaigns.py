@@ -273,7 +273,7 @@ def test_the_documented_dask_jobqueue_configuration_asks_slurm_for_a_single_thre
     scaled = []
     monkeypatch.setattr(dask_jobqueue.SLURMCluster, "scale", lambda self, *args, **kwargs: scaled.append((args, kwargs)))
     names: dict = {}
-    with dask.config.set({"jobqueue.slurm.scheduler-options": {"host": "127.0.0.1"}}):
+    with dask.config.set({"jobqueue.slurm.scheduler-options": {"host": "127.0.0.1", "dashboard_address": None}}):
         exec(compile(block, "docs/sweeps.md", "exec"), names)
     cluster = names["cluster"]
     try:
