@@ -1263,13 +1263,27 @@ def sweep(
     resolution: Optional[float] = typer.Option(
         None, "--resolution", help="Replace [sweep] resolution: R x the particles (piles NAME_xR.h5), k_in and dt x R^(-1/3) unless scale_contacts = false."
     ),
+    array: bool = typer.Option(
+        False, "--array", help="Write a Slurm job-array script (SWEEP/array/array.sh) of the runs to make, one task per run or ensemble, then stop."
+    ),
+    task: Optional[List[str]] = typer.Option(
+        None, "--task", help="A job array's task: step these runs (by name, repeatable) here without Dask, analyse them, record their rows."
+    ),
+    collect: bool = typer.Option(
+        False, "--collect", help="Gather what a job array's tasks made: analyse what is left, write summary.csv and the figures."
+    ),
 ) -> None:
     """Run a grid of collisions with Dask (skipping finished runs), analysing each as it finishes."""
     from .checks import InputError
     from .device import DeviceError, gpus_to_use
     from .spec import SpecError
-    from .sweep import AGAIN, SweepJob, check_lines, finished_line, load_sweep, select_runs
+    from .sweep import SweepJob, check_lines, load_sweep, select_runs
 
+    modes = [name for name, on in (("--check", check), ("--array", array), ("--task", task), ("--collect", collect)) if on]
+    if len(modes) > 1:
+        fail(f"{' and '.join(modes)} do different things: give one")
+    if modes and modes[0] != "--check" and (scheduler or gpus is not None or workers is not None):
+        fail(f"{modes[0]} runs without Dask workers: leave --scheduler, --gpus and --workers out")
     try:
         settings, runs = load_sweep(spec_file, {"resolution": resolution})
         if only:
@@ -1281,6 +1295,9 @@ def sweep(
     if check:
         for line in check_lines(settings, runs):
             typer.echo(line)
+        return
+    if array or task:
+        _sweep_array(settings, runs, spec_file, resolution, task)
         return
     if workers is not None and workers < 1 or analysis_workers is not None and analysis_workers < 1:
         fail("--workers and --analysis-workers must be >= 1")
@@ -1295,10 +1312,69 @@ def sweep(
         job.claim()  # one sweep per folder: a second one started is refused
     except InputError as error:
         fail(str(error))
-    typer.echo(f"sweep {settings['name']}: {len(runs)} runs into {job.folder}")
+    typer.echo(f"sweep {settings['name']}: {len(runs)} runs {'gathered from its job array in' if collect else 'into'} {job.folder}")
+    try:
+        if collect:
+            _sweep_collected(job, analysis_workers)
+        else:
+            _sweep_claimed(job, scheduler, workers, analysis_workers, gpus)
+    finally:
+        job.release()  # however it ends (a Python caller may go on in this process)
+
+
+def _sweep_array(settings: dict, runs: list, spec_file: Path, resolution: Optional[float], names: Optional[List[str]]) -> None:
+    """``sweep --array`` (the job-array script) or ``sweep --task RUN ...`` (one of its tasks)."""
+    from .checks import InputError
+    from .jobarray import run_task, write_script
+    from .run import OUTPUT_FAILURE
+    from .spec import SpecError
+    from .sweep import AGAIN, finished_line
+
+    try:
+        if not names:
+            for line in write_script(settings, runs, spec_file, resolution)[1]:
+                typer.echo(line)
+            return
+        rows = run_task(settings, runs, names)
+    except (SpecError, InputError) as error:
+        fail(str(error))
+    except OSError as error:  # a row could not be recorded: the runs' folders are whole
+        write_failed(error, f"the runs' folders are whole; {AGAIN}")
+    for row in rows:
+        typer.echo(finished_line(row))
+    stopped = [row["run"] for row in rows if row["status"] == "stopped"]
+    if stopped:
+        fail(f"task stopped: {', '.join(stopped)} wrote a checkpoint where it stopped; the same task (or the script submitted again) resumes it",
+             code=EXIT_STOPPED)  # fmt: skip
+    unwritten = [row for row in rows if OUTPUT_FAILURE in row.get("reason", "")]
+    if unwritten:
+        fail(f"{unwritten[0]['run']}: {unwritten[0]['reason']}; {AGAIN}", EXIT_OUTPUT)
+
+
+def _sweep_collected(job, analysis_workers) -> None:
+    """``sweep --collect`` once its folder is claimed: the tasks' rows gathered and analysed, the record,
+    then the table and figures (or, with runs not finished, the table of those that are)."""
+    from .jobarray import collect_job
+    from .sweep import AGAIN, finished_line
+
+    try:
+        missing = collect_job(job, analysis_workers, on_row=lambda row: typer.echo(finished_line(row)))
+        job.save_record()
+    except OSError as error:
+        write_failed(error, f"the runs' folders are whole, and summary.csv whole or absent; {AGAIN}")
+    if missing:
+        fail(f"{len(missing)} run(s) not finished ({'; '.join(missing)}); summary.csv holds the {len(job.finished)} finished: "
+             "submit the array again (decco-warp sweep FILE --array writes it for the runs left), then --collect", code=EXIT_STOPPED)  # fmt: skip
+    _sweep_end(job)
+
+
+def _sweep_claimed(job, scheduler, workers, analysis_workers, gpus) -> None:
+    """``sweep`` once its folder is claimed: the runs, the record, the table and figures, the end."""
+    from .sweep import AGAIN, finished_line
+
     bar = _progress_bar("sweep", "runs")
     with bar:
-        task = bar.add_task(settings["name"], total=len(runs), runs="")
+        task = bar.add_task(job.settings["name"], total=len(job.runs), runs="")
 
         def show() -> None:
             bar.update(task, completed=job.completed, runs=job.progress_text())
@@ -1307,20 +1383,30 @@ def sweep(
             bar.console.print(finished_line(row))
 
         def stopping() -> None:
-            bar.console.print("stopping: each run stepping writes a checkpoint and ends (a second Ctrl-C stops at once, "
-                              "losing their work since their last checkpoints)", soft_wrap=True, highlight=False)  # fmt: skip
+            note("stopping: each run stepping writes a checkpoint and ends (a second Ctrl-C stops at once, "
+                 "losing their work since their last checkpoints)")  # fmt: skip
+
+        def note(line: str) -> None:
+            bar.console.print(line, soft_wrap=True, highlight=False)
 
         try:
-            job.run(scheduler, workers, analysis_workers, gpus, on_row=report, on_progress=show, on_stopping=stopping)
+            job.run(scheduler, workers, analysis_workers, gpus, on_row=report, on_progress=show, on_stopping=stopping, on_note=note)
         except OSError as error:  # summary.csv could not be written: the runs' own folders are whole
             write_failed(error, f"the finished runs' folders and the last summary.csv are whole; {AGAIN}")
     try:
         job.save_record()
     except OSError as error:
         write_failed(error, f"the runs' folders and summary.csv are whole; {AGAIN}")
-    job.release()
     if job.stopped:
         fail(job.stopped_line(), code=EXIT_STOPPED)
+    _sweep_end(job)
+
+
+def _sweep_end(job) -> None:
+    """A sweep whose runs are all finished: summary.csv in grid order and the figures, its last lines,
+    and exit 5 when runs could not write their folders."""
+    from .sweep import AGAIN
+
     try:
         summary = job.finish()
     except OSError as error:

@@ -102,3 +102,32 @@ def free_memory(device: str) -> int:
     """Bytes free on ``device`` now: a GPU's free memory, or the host's available memory for the CPU."""
     init_warp()
     return int(wp.get_device(device).free_memory)
+
+
+def gpu_uuid(device: str | None) -> str | None:
+    """The UUID of the GPU ``device`` names in this process (None for the CPU): the same GPU has the
+    same UUID in every process and on every host, whatever CUDA_VISIBLE_DEVICES calls it there."""
+    if not device or not str(device).startswith("cuda"):
+        return None
+    init_warp()
+    return str(wp.get_device(device).uuid)
+
+
+def local_gpus() -> dict[str, str]:
+    """This process's GPUs, UUID -> its name here ("cuda:N")."""
+    init_warp()
+    return {str(d.uuid): d.alias for d in wp.get_cuda_devices()}
+
+
+def device_problem(device: str | None) -> str | None:
+    """Why ``device`` cannot take work now (a GPU that is not there, or that fails a one-word
+    allocation: one fallen off the bus, say), else None."""
+    try:
+        name = resolve_device(device)
+        if name.startswith("cuda"):
+            probe = wp.zeros(1, dtype=wp.int32, device=name)
+            wp.synchronize_device(name)
+            del probe
+    except (DeviceError, RuntimeError) as error:
+        return " ".join(str(error).split())
+    return None

@@ -105,7 +105,8 @@ def write_point(what: str) -> None:
     """Every write of every command (a frame, a checkpoint, a log line, a figure, a table) passes
     here first.  Test hooks: DECCO_TEST_WRITES=FILE appends "k what" for the k-th write of the
     process; DECCO_TEST_FAIL_WRITE="k[:ENOSPC|:EIO]" fails the k-th write as a full disk (or an
-    I/O error) would."""
+    I/O error) would; DECCO_TEST_FULL=FILE fails every write as a full disk while FILE exists (a
+    disk that fills, then is freed, under every process of a sweep at once)."""
     global _writes
     with _writes_lock:
         _writes += 1
@@ -114,6 +115,9 @@ def write_point(what: str) -> None:
     if journal:
         with open(journal, "a", encoding="utf-8") as f:
             f.write(f"{k} {what}\n")
+    full = os.environ.get("DECCO_TEST_FULL")
+    if full and os.path.exists(full):
+        raise outside_hdf5(OSError(errno.ENOSPC, f"{os.strerror(errno.ENOSPC)} (DECCO_TEST_FULL)", what))
     wanted = os.environ.get("DECCO_TEST_FAIL_WRITE")
     if wanted:
         index, _, kind = wanted.partition(":")

@@ -133,3 +133,13 @@ class SweepStopped(DeccoError, RuntimeError):
         self.signal_name, self.stopped, self.unanalysed = signal_name, stopped, unanalysed
         self.at_once = at_once  # a second signal: the runs stepping were not waited for
         super().__init__(f"sweep stopped by {signal_name}")
+
+
+class SchedulerLost(SweepStopped):
+    """A sweep's Dask scheduler went away (stopped, its node lost): the runs finished are kept, those
+    stepping keep their last periodic checkpoints; the same command continues once a scheduler is
+    there again.  ``why``: what the client said."""
+
+    def __init__(self, scheduler: str, why: str, stopped: list[dict], unanalysed: list[str]):
+        self.scheduler, self.why = scheduler, why
+        super().__init__("the scheduler's loss", stopped, unanalysed)

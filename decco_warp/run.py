@@ -191,16 +191,26 @@ def prepare_start(spec: dict, overwrite: bool = False, device: str | None = None
 def plan_fits(plan: Plan, n: int, steps: int) -> str | None:
     """Refuse (RunError) a run of ``n`` particles that its device has no memory for, its force path
     counted (the Newton sweep's rows, O(N^2 / tile)); a line for one that takes hours on the CPU."""
-    from .arrays import candidate_width
     from .costs import check_fits
 
     try:
-        return check_fits(
-            n, plan.scheme, plan.device, steps, "a run",
-            candidate_width=candidate_width(float(plan.state.radii.min()), float(plan.state.radii.max())),
-        )  # fmt: skip
+        return check_fits(n, plan.scheme, plan.device, steps, "a run", candidate_width=_candidate_width(plan))
     except InputError as error:
         raise RunError(str(error)) from None
+
+
+def plan_memory(plan: Plan) -> int:
+    """Bytes a run's plan needs on its device (costs.memory_estimate of its force path)."""
+    from .costs import memory_estimate
+
+    return memory_estimate(plan.state.n, plan.scheme, plan.device, candidate_width=_candidate_width(plan))
+
+
+def _candidate_width(plan: Plan) -> int:
+    """The contact lists' width of a plan's particles (arrays.candidate_width)."""
+    from .arrays import candidate_width
+
+    return candidate_width(float(plan.state.radii.min()), float(plan.state.radii.max()))
 
 
 def prepare_resume(run_dir, steps: int | None = None, device: str | None = None) -> PreparedRun:

@@ -43,7 +43,7 @@ import multiprocessing
 import os
 import platform
 import time
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import CancelledError, Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -320,19 +320,23 @@ def simulate_batch(batch: list[dict], max_particles: int | None = None, stop_fil
     same particle count, up to that many, go together.  Once ``stop_file`` exists (the sweep was
     stopped) a stepping run checkpoints and ends as "stopped" (``step``: where), and a run not
     started is left as "stopped" with ``step`` None."""
-    from .run import RUN_FAILURES, RunStopped, execute, execute_ensemble
+    from .device import device_problem
+    from .run import RUN_FAILURES, RunStopped, execute, execute_ensemble, run_dir_of
     from .stops import StopRequests
 
     device = _worker_device()
     stop = StopRequests(stop_file)
+    untouched = [{"run": spec["run"]["name"], "run_dir": str(run_dir_of(spec)), "device": device} for spec in batch]
     if stop.signal is not None:  # asked to stop before this batch began: leave it whole
-        from .run import run_dir_of
-
-        return [{"run": spec["run"]["name"], "run_dir": str(run_dir_of(spec)), "device": device, "status": "stopped", "step": None}
-                for spec in batch]  # fmt: skip
+        return [{**row, "status": "stopped", "step": None} for row in untouched]
+    problem = device_problem(device)
+    if problem is not None:  # a GPU gone from this worker: the sweep hands the batch to another
+        worker = _worker()
+        return [{**row, "status": UNAVAILABLE, "reason": problem, "worker": worker and worker.address} for row in untouched]
     rows, prepared = zip(*(_prepare(spec, device) for spec in batch))
-    rows = list(rows)
-    for members in ensemble_groups(prepared, max_particles):
+    rows, prepared = list(rows), list(prepared)
+    groups = [group for members in ensemble_groups(prepared, max_particles) for group in fit_in_memory(members, prepared)]
+    for members in groups:
         if stop.signal is not None:
             outcomes = [None] * len(members)  # not started
         else:
@@ -356,7 +360,34 @@ def simulate_batch(batch: list[dict], max_particles: int | None = None, stop_fil
                 rows[k].update(status="failed", reason=" ".join(str(outcome).split()))
             else:
                 rows[k].update(status="ok", session_seconds=round(outcome.session_wall_seconds, 3))
+            prepared[k].sim = None  # its device arrays (an ensemble's too) freed before the next group is built
     return [_timed(row) for row in rows]
+
+
+#: A batch's rows when its worker's device cannot take work: the sweep hands the runs to another worker.
+UNAVAILABLE = "device unavailable"
+
+
+def fit_in_memory(members: list[int], prepared: list) -> list[list[int]]:
+    """The ``members`` of an ensemble (indices into ``prepared``) cut, in order, into ensembles that
+    their device's free memory holds beside the members' own arrays (allocated as each was prepared,
+    and each checked then): eight runs that fit one at a time need not fit joined."""
+    from .costs import FIXED_BYTES
+    from .device import free_memory
+    from .run import plan_memory
+
+    if len(members) < 2:
+        return [members]
+    free = free_memory(prepared[members[0]].plan.device)
+    groups, need = [[]], 0
+    for k in members:
+        own = plan_memory(prepared[k].plan)
+        if groups[-1] and need + own - FIXED_BYTES > free:
+            groups.append([])
+            need = 0
+        need += own - (FIXED_BYTES if groups[-1] else 0)  # Warp's modules and the like once an ensemble
+        groups[-1].append(k)
+    return groups
 
 
 
@@ -473,7 +504,10 @@ def select_runs(runs: list[dict], patterns: list[str]) -> list[dict]:
 
 
 def _prepare(spec: dict, device: str | None) -> tuple[dict, object]:
-    """A sweep run's row so far, and the run prepared to start or resume (None if complete or failed)."""
+    """A sweep run's row so far, and the run prepared to start or resume (None if complete or failed):
+    the row names its GPU by UUID too (``device_uuid``), which the sweep's analysis finds its own name
+    for, and a resumed run the step it resumed from."""
+    from .device import gpu_uuid
     from .run import RUN_FAILURES, prepare_resume, prepare_start, run_dir_of
 
     run_dir = run_dir_of(spec)
@@ -484,7 +518,9 @@ def _prepare(spec: dict, device: str | None) -> tuple[dict, object]:
             row["status"] = "skipped (complete)"
             return row, None
         prepared = prepare_resume(run_dir, device=device) if folder.checkpoint.is_file() else prepare_start(spec, overwrite=True, device=device)
-        row["device"] = prepared.sim.device
+        row.update(device=prepared.sim.device, device_uuid=gpu_uuid(prepared.sim.device), n_particles=prepared.plan.state.n)
+        if prepared.resume:
+            row["resumed_from"] = prepared.sim.step_count
         return row, prepared
     except RUN_FAILURES as error:
         row.update(status="failed", reason=" ".join(str(error).split()))
@@ -570,15 +606,22 @@ def _analyse(run_dir: Path, min_members: int, analyze_every: int, keep_trajector
     return summary
 
 
-def _worker_device() -> str | None:
-    """The device of this Dask worker: the one it was pinned to (its own $DECCO_DEVICE, set by
-    :func:`local_cluster`, or by whoever started a remote worker), else None (the run's own
-    choice); each worker with its own Warp kernel cache."""
+def _worker():
+    """The Dask worker this task runs on, else None (not on a worker: a job array's task)."""
     try:
         from distributed import get_worker
 
-        worker = get_worker()
+        return get_worker()
     except (ImportError, ValueError):
+        return None
+
+
+def _worker_device(worker=None) -> str | None:
+    """The device of this Dask worker (``worker``, else the one running this task): the one it was
+    pinned to (its own $DECCO_DEVICE, set by :func:`local_cluster`, or by whoever started a remote
+    worker), else None (the run's own choice); each worker with its own Warp kernel cache."""
+    worker = worker or _worker()
+    if worker is None:
         return None
     import warp as wp
 
@@ -589,6 +632,76 @@ def _worker_device() -> str | None:
     if wp.config.kernel_cache_dir is None or "warp-worker-" not in str(wp.config.kernel_cache_dir):
         wp.config.kernel_cache_dir = str(cache)
     return os.environ.get(ENV_VARIABLE) or None
+
+
+def worker_device(dask_worker=None) -> dict:
+    """What a Dask worker steps on (``client.run`` calls this on each): its device as its runs
+    resolve it, that GPU's UUID (None on a CPU), and why the device cannot take work (None if it can)."""
+    from .device import device_problem, gpu_uuid, resolve_device
+
+    device = _worker_device(dask_worker)
+    problem = device_problem(device)
+    if problem is not None:
+        return {"device": device, "uuid": None, "problem": problem}
+    device = resolve_device(device)
+    return {"device": device, "uuid": gpu_uuid(device), "problem": None}
+
+
+def worker_devices(client, on_note=None) -> dict[str, dict]:
+    """:func:`worker_device` of each worker of ``client``'s scheduler (waiting for the first to join),
+    by address: so that a sweep handed to a scheduler packs its ensembles for the workers' devices,
+    not for this machine's."""
+    if not client.scheduler_info()["workers"]:
+        if on_note is not None:
+            on_note(f"waiting for a worker to join the scheduler at {client.scheduler.address}")
+        client.wait_for_workers(1)
+    return client.run(worker_device)
+
+
+#: Runs of fewer particles are analysed on the CPU: there the O(N^2) density of a frame takes 7 ms at
+#: 1 000 particles (0.65 s at 5 000; 2-core CPU), while a GPU costs each analysis process Warp's
+#: start and a CUDA context (hundreds of MB of the GPU's memory) before its first frame.
+ANALYSIS_GPU_MIN_PARTICLES = 1000
+
+
+def analysis_device(row: dict, gpus: dict[str, str], turn: int = 0) -> str:
+    """Where a finished run (its row) is analysed on this machine, whose GPUs are ``gpus`` (UUID ->
+    name): a small run on the CPU (ANALYSIS_GPU_MIN_PARTICLES); else on the GPU that stepped it, so that
+    the analyses spread over the GPUs as the runs do, beside one stepping worker each, instead of all
+    landing on cuda:0; a run stepped elsewhere (another host, a CPU) on this machine's GPUs in
+    ``turn``; the CPU where this machine has none."""
+    n = row.get("n_particles")
+    if not gpus or (n is not None and n < ANALYSIS_GPU_MIN_PARTICLES):
+        return "cpu"
+    return gpus.get(row.get("device_uuid") or "") or list(gpus.values())[turn % len(gpus)]
+
+
+class Analyses:
+    """The analyses of finished runs, in processes of this machine: a pool of processes per device,
+    so that each process opens one CUDA context (a process that took runs of every GPU would hold a
+    context on each), ``processes`` on the CPU and a share of them on each GPU."""
+
+    def __init__(self, processes: int, gpus: dict[str, str]):
+        self.processes, self.gpus = processes, gpus
+        self.pools: dict[str, ProcessPoolExecutor] = {}
+        self.turn = 0
+
+    def submit(self, row: dict, settings: dict) -> Future:
+        """:func:`analyse_one` of a finished run's row, on :func:`analysis_device`."""
+        from .stops import ignore_stops
+
+        device = analysis_device(row, self.gpus, self.turn)
+        self.turn += 1
+        if device not in self.pools:
+            share = self.processes if device == "cpu" else max(1, -(-self.processes // len(self.gpus)))
+            context = multiprocessing.get_context("spawn")
+            self.pools[device] = ProcessPoolExecutor(max_workers=share, mp_context=context, initializer=ignore_stops)
+        args = (row["run_dir"], settings["min_members"], settings["analyze_every"], settings["keep_trajectory"], device)
+        return self.pools[device].submit(analyse_one, *args)
+
+    def shutdown(self, wait: bool) -> None:
+        for pool in self.pools.values():
+            pool.shutdown(wait=wait, cancel_futures=True)
 
 
 #: The module each local worker loads as it starts (Dask's preload: its ``dask_setup``).
@@ -640,12 +753,20 @@ def run_sweep(
     on_progress=None,
     stop_file=None,
     on_stopping=None,
+    on_note=None,
 ) -> list[dict]:
     """Simulate every run with Dask and analyse each here as it finishes; one row per run, in grid order.
     Local workers: one per GPU (the first ``gpus``, default all, see :func:`local_cluster`), else
-    ``workers`` (default 2) on the CPU; a ``scheduler``'s workers each use their own device.
+    ``workers`` (default 2) on the CPU; a ``scheduler``'s workers each use their own device, and the
+    ensembles are packed for their devices (:func:`worker_devices`).
     ``on_progress(runs_stepped)`` hears, every PROGRESS_SECONDS and as runs finish, how many runs'
-    worth of steps are made (complete runs count whole, stepping ones by their last checkpoint).
+    worth of steps are made (complete runs count whole, stepping ones by their last checkpoint);
+    ``on_note(line)`` what the sweep does about a fault (a worker whose device is gone).
+
+    Faults: a worker that dies has its runs handed to another by Dask, where they resume from their
+    last checkpoints (the row says ``retried``); a worker whose device cannot take work has its batch
+    handed to the others (the rows fail, saying so, when no other is left); a scheduler lost ends
+    the sweep with SchedulerLost once the analyses under way have finished.
 
     SIGINT or SIGTERM once the workers are up stops the sweep in order: the signal's name is written
     to ``stop_file`` (a path every worker sees: the sweep folder), where each stepping run reads it,
@@ -653,25 +774,16 @@ def run_sweep(
     began); the analyses under way finish, those not begun are left; then SweepStopped.  A second
     signal stops at once, the work of the runs since their last checkpoints lost (SweepStopped with
     ``at_once``).  A signal before the workers are up is a KeyboardInterrupt (nothing had started)."""
-    from distributed import Client, as_completed
+    from distributed import as_completed
 
-    from .device import cuda_device_count, gpus_to_use
-    from .errors import SweepStopped
-    from .stops import StopRequests, ignore_stops, request_stop
+    from .device import local_gpus
+    from .errors import SchedulerLost, SweepStopped
+    from .stops import StopRequests, request_stop
 
-    if scheduler:
-        gpus = cuda_device_count()
-        client = Client(scheduler)
-        cluster = None
-        simulating = max(1, len(client.scheduler_info().get("workers", {})))  # those connected now
-    else:
-        gpus = gpus_to_use(gpus)
-        simulating = workers or (gpus if gpus > 0 else min(2, os.cpu_count() or 1))
-        cluster = local_cluster(simulating, gpus)
-        client = Client(cluster)
-    # Analysis runs here, beside the workers, in fresh processes (its density on this machine's GPU if any).
-    analysers = analysis_workers or max(1, (os.cpu_count() or 1) - (0 if gpus > 0 else simulating))
-    pool = ProcessPoolExecutor(max_workers=analysers, mp_context=multiprocessing.get_context("spawn"), initializer=ignore_stops)
+    note = on_note or (lambda line: None)
+    client, cluster, gpus, simulating = _workers_for(scheduler, workers, gpus, note)
+    # Analysis runs here, beside the workers, in fresh processes (its density on the GPU that stepped the run).
+    analyses = Analyses(analysis_workers or max(1, (os.cpu_count() or 1) - (0 if gpus > 0 else simulating)), local_gpus())
     rows: list[dict | None] = [None] * len(runs)
     pending: dict[Future, tuple[int, dict]] = {}
     stopped: list[dict] = []  # the rows of runs that a stop left part-way (or not started)
@@ -689,12 +801,12 @@ def run_sweep(
                 unanalysed.append(row["run"])
                 continue
             try:
-                summary = future.result()
-                finish(k, {**row, **{key: value for key, value in summary.items() if key not in SWEEP_OWN}, "run": row["run"]})
+                finish(k, analysed(row, future.result()))
             except Exception as error:  # a damaged trajectory, a full disk: this run only
                 finish(k, {**row, "status": "failed", "reason": f"analysis: {' '.join(str(error).split())}"})
 
     abandoned = False
+    lost = None  # why the scheduler was lost, once it was
     signals = StopRequests()  # from here on, through the workers' closing, a signal stops in order
     signals.__enter__()
     try:
@@ -704,11 +816,22 @@ def run_sweep(
         # hold only runs to step and pack into full ensembles.
         done = {k: _complete_row(spec) for k, spec in enumerate(runs)}
         todo = [k for k, row in done.items() if row is None]
+        begun = {k: _standing(runs[k])[1] for k in todo}  # the steps each had: more resumed from means a worker was lost
         size, max_particles = ensemble_plan(settings.get("ensemble", 1), gpus, len(todo), simulating)
-        batches = [todo[k : k + size] for k in range(0, len(todo), size)]
         request = None if stop_file is None else str(stop_file)
-        futures = {client.submit(simulate_batch, [runs[k] for k in batch], max_particles, request, pure=False): batch for batch in batches}
-        simulations = as_completed(futures)
+        futures: dict = {}
+        unusable: dict[str, str] = {}  # workers whose device cannot take work -> why
+
+        def submit(batch: list[int]) -> None:
+            # Away from workers whose device failed; loosely, so that the batch is not stranded if those left die too.
+            usable = {"workers": [w for w in client.scheduler_info()["workers"] if w not in unusable], "allow_other_workers": True}
+            future = client.submit(simulate_batch, [runs[k] for k in batch], max_particles, request, pure=False, **(usable if unusable else {}))
+            futures[future] = batch
+            simulations.add(future)
+
+        simulations = as_completed()
+        for start in range(0, len(todo), size):
+            submit(todo[start : start + size])
         arrived = [([k for k, row in done.items() if row is not None], [row for row in done.values() if row is not None])]
         stepped = {k: 0.0 for k in todo}  # never lowered: a checkpoint being replaced reads as none
         looked = -math.inf
@@ -733,43 +856,136 @@ def run_sweep(
                 on_progress(len(runs) - len(todo) + sum(stepped.values()))
             # Poll both kinds of work, so that each run is reported as soon as its analysis ends.
             for future in simulations.next_batch(block=False):
-                batch = futures[future]
+                batch = futures.pop(future)
                 try:
                     arrived.append((batch, future.result()))
-                except Exception as error:  # a worker that died: record it, go on
-                    arrived.append((batch, [{"run": runs[k]["run"]["name"], "status": "failed", "reason": f"worker lost: {error}"} for k in batch]))
+                except CancelledError as error:  # the client lost its scheduler: every future is cancelled
+                    lost = lost or getattr(error, "reason", None) or "cancelled"
+                    stopped += [{"run": runs[k]["run"]["name"], "step": None} for k in batch]
+                except Exception as error:  # a worker that died too often (KilledWorker): record it, go on
+                    reason = f"its worker was lost while stepping it ({' '.join(str(error).split())}); {RETRY}"
+                    arrived.append((batch, [{"run": runs[k]["run"]["name"], "status": "failed", "reason": reason} for k in batch]))
             while arrived:
                 batch, results = arrived.pop(0)
+                again = []
                 for k, row in zip(batch, results):
+                    if row["status"] == UNAVAILABLE:
+                        unusable[row.get("worker") or "?"] = row["reason"]
+                        again.append(k)
+                        continue
                     if k in stepped and row["status"] != "stopped":
                         stepped[k] = 1.0
                         looked = -math.inf  # reported at the next poll
-                    collision = runs[k]["collision"]
-                    row.update(set_up_values(runs[k], settings.get("swept", [])))
-                    row.update(eta=collision.get("eta"), speed=collision.get("speed"), theta_deg=collision["theta_deg"])
-                    row.update(realization=realization_of(runs[k]), orientation_seed=collision.get("orientation_seed"))
+                    if k in begun and (row["status"] == "skipped (complete)" or row.get("resumed_from", 0) > begun[k]):
+                        row.update(status="ok", retried=True)  # made in this sweep, on a worker lost since
+                    row.update(with_set_up(row, runs[k], settings))
                     if row["status"] == "stopped":
                         stopped.append(row)
                     elif row["status"] == "failed":
                         finish(k, row)
-                    elif stopping is not None:
+                    elif stopping is not None or lost is not None:
                         unanalysed.append(row["run"])  # complete: the sweep run again analyses it
                     else:
-                        args = (row["run_dir"], settings["min_members"], settings["analyze_every"], settings["keep_trajectory"])
-                        pending[pool.submit(analyse_one, *args)] = (k, row)
+                        pending[analyses.submit(row, settings)] = (k, row)
+                if again:
+                    names = ", ".join(runs[k]["run"]["name"] for k in again)
+                    usable = set(client.scheduler_info()["workers"]) - set(unusable)
+                    worker, why = next(iter(unusable.items()))
+                    if usable:
+                        note(f"worker {worker} cannot use its device ({why}): its runs ({names}) go to the other workers")
+                        submit(again)
+                    else:
+                        reason = f"no worker can use its device (worker {worker}: {why}); {RETRY}"
+                        for k in again:
+                            finish(k, with_set_up({"run": runs[k]["run"]["name"], "status": "failed", "reason": reason}, runs[k], settings))
             collect()
             time.sleep(POLL_SECONDS)
+        if lost is not None:
+            raise SchedulerLost(scheduler or "local", lost, stopped, unanalysed)
         if stopping is not None:
             raise SweepStopped(stopping, stopped, unanalysed)
     finally:
         try:
-            pool.shutdown(wait=not abandoned, cancel_futures=True)
-            client.close()
+            analyses.shutdown(wait=not abandoned)
+            _close(client, quietly=lost is not None)
             if cluster is not None:
                 close_cluster(cluster, 0 if abandoned or signals.count > 1 else WORKER_CLOSE_SECONDS)
         finally:
             signals.__exit__(None, None, None)
     return rows
+
+
+def _close(client, quietly: bool) -> None:
+    """Close ``client``; ``quietly`` where it lost its scheduler: Dask then logs a traceback as its
+    attempts to reconnect are ended, which the sweep's own line says in words."""
+    import logging
+
+    logger = logging.getLogger("distributed.client")
+    level = logger.level
+    if quietly:
+        logger.setLevel(logging.CRITICAL)
+    try:
+        client.close(timeout=CLIENT_CLOSE_SECONDS)
+    finally:
+        logger.setLevel(level)
+
+
+#: How long a client that lost its scheduler may take to close [s].
+CLIENT_CLOSE_SECONDS = 5
+
+
+#: What a run whose worker failed it is to do.
+RETRY = "run the sweep again: it resumes from its last checkpoint"
+
+
+def _workers_for(scheduler: str | None, workers: int | None, gpus: int | None, note) -> tuple:
+    """(client, local cluster or None, GPUs among the workers, workers): a ``scheduler``'s workers as
+    they report their devices, else a local cluster of ``workers`` (one per GPU of the first
+    ``gpus``, else 2 on the CPU)."""
+    from distributed import Client
+
+    from .device import gpus_to_use
+
+    if scheduler:
+        client = connect(scheduler)
+        devices = worker_devices(client, note)
+        return client, None, sum(1 for d in devices.values() if d["uuid"]), max(1, len(devices))
+    gpus = gpus_to_use(gpus)
+    simulating = workers or (gpus if gpus > 0 else min(2, os.cpu_count() or 1))
+    cluster = local_cluster(simulating, gpus)
+    return Client(cluster), cluster, gpus, simulating
+
+
+def connect(scheduler: str):
+    """A Dask client of the scheduler at ``scheduler``; InputError where none answers there."""
+    from distributed import Client
+
+    from .errors import InputError
+
+    try:
+        return Client(scheduler, timeout=SCHEDULER_CONNECT_SECONDS)
+    except (OSError, TimeoutError) as error:
+        raise InputError(f"no Dask scheduler answers at {scheduler} ({' '.join(str(error).split())}); "
+                         "start one (dask scheduler), or leave --scheduler out to run on workers of this machine") from None  # fmt: skip
+
+
+#: How long a sweep tries to reach the scheduler it is given before it says none answers [s].
+SCHEDULER_CONNECT_SECONDS = 30
+
+
+def analysed(row: dict, summary: dict) -> dict:
+    """A finished run's row with its analysis (its summary.json's columns, but the sweep's own)."""
+    return {**row, **{key: value for key, value in summary.items() if key not in SWEEP_OWN}, "run": row["run"]}
+
+
+def with_set_up(row: dict, spec: dict, settings: dict) -> dict:
+    """``row`` with the set-up columns its spec gives (so that a run that failed has them too)."""
+    collision = spec["collision"]
+    return {
+        **row, **set_up_values(spec, settings.get("swept", [])),
+        "eta": collision.get("eta"), "speed": collision.get("speed"), "theta_deg": collision["theta_deg"],
+        "realization": realization_of(spec), "orientation_seed": collision.get("orientation_seed"),
+    }  # fmt: skip
 
 
 #: How long a local worker may take to exit once idle (its interpreter and Warp shutting down on a
@@ -863,6 +1079,9 @@ def finished_line(row: dict) -> str:
         spent = f"{total if session is None else session:.1f} s on {row.get('device')}{together}"
         if row.get("resumed") and session is not None:
             spent += f"; {total:.1f} s over all its sessions"
+        if row.get("retried"):
+            spent += ("; its worker was lost: Dask handed it to another, which resumed it from its checkpoint of step "
+                      f"{row['resumed_from']}" if "resumed_from" in row else "; its worker was lost after it finished")  # fmt: skip
     return f"{row['run']}: {outcome}{detail} ({spent})"
 
 
@@ -936,12 +1155,14 @@ class SweepJob:
     def progress_text(self) -> str:
         return f"{len(self.finished)}/{len(self.runs)} runs, {100 * self.stepped / len(self.runs):.0f} % of the steps made"
 
-    def run(self, scheduler=None, workers=None, analysis_workers=None, gpus=None, on_row=None, on_progress=None, on_stopping=None) -> bool:
+    def run(self, scheduler=None, workers=None, analysis_workers=None, gpus=None, on_row=None, on_progress=None, on_stopping=None,
+            on_note=None) -> bool:  # fmt: skip
         """:func:`run_sweep` (its arguments), with SIGTERM (a batch scheduler's stop) taken as Ctrl-C.
         Each finished run's row is added to summary.csv, then told to ``on_row(row)``; ``on_progress()``
         hears of each change of :attr:`completed`; ``on_stopping()`` that a stop began (the running
-        runs checkpoint).  Returns False when stopped (the rows so far in :attr:`finished`, what the
-        stop left in :attr:`stop`); OSError when summary.csv could not be written."""
+        runs checkpoint); ``on_note(line)`` what the sweep did about a fault.  Returns False when
+        stopped or its scheduler was lost (the rows so far in :attr:`finished`, what the stop left in
+        :attr:`stop`); OSError when summary.csv could not be written."""
         import signal
 
         from .errors import SweepStopped
@@ -962,7 +1183,7 @@ class SweepJob:
         try:
             self.rows = run_sweep(
                 self.settings, self.runs, scheduler, workers, report, analysis_workers=analysis_workers, gpus=gpus,
-                on_progress=progress, stop_file=self.stop_file, on_stopping=on_stopping,
+                on_progress=progress, stop_file=self.stop_file, on_stopping=on_stopping, on_note=on_note,
             )  # fmt: skip
         except SweepStopped as stop:
             self.stopped, self.stop = True, stop
@@ -979,7 +1200,9 @@ class SweepJob:
 
     def stopped_line(self) -> str:
         """What a stopped sweep kept, and how to go on: the runs finished (in summary.csv, if any),
-        each run the stop ended with its checkpoint's step, the runs left to analyse."""
+        each run the stop ended with its checkpoint's step, the runs left to analyse; for a sweep
+        that lost its scheduler, that it did."""
+        from .errors import SchedulerLost
         finished = len(self.finished)
         table = f"summary.csv holds the {finished} finished" if finished else "no run had finished, so there is no summary.csv yet"
         if finished == len(self.runs):  # stopped while its workers shut down: nothing to continue
@@ -987,6 +1210,12 @@ class SweepJob:
                     "run it again to draw them (every run is skipped)")  # fmt: skip
         parts = [f"sweep stopped after {finished} of {len(self.runs)} runs ({table})"]
         stop = self.stop
+        if isinstance(stop, SchedulerLost):
+            parts[0] = parts[0].replace("sweep stopped", f"sweep ended: it lost its Dask scheduler at {stop.scheduler} ({stop.why})")
+            parts.append("runs that were stepping keep their last periodic checkpoints")
+            parts.append("start a scheduler there with its workers and run the same command: finished runs are skipped, "
+                         "the others resume from their checkpoints")  # fmt: skip
+            return "; ".join(parts)
         if stop is None:
             parts.append("it stopped before its workers were up, so no run had started")
         elif stop.at_once:
