@@ -539,6 +539,7 @@ class RunDriver:
         # have written before it stopped (checkpoints of decco-warp 0.2 do not say: then its start).
         self.last_frame = self.first_step if run_record.last_frame_step is None else run_record.last_frame_step
         self.overflow_noted = False
+        self.history_overflow_noted = False
 
     @property
     def done(self) -> bool:
@@ -615,7 +616,18 @@ class RunDriver:
 
     def note_candidate_overflows(self, step: int) -> None:
         """Say once, at a frame, that some particles met more contact candidates than their list
-        holds: right, but each walks its whole system every step, so a run slows down."""
+        holds: right, but each walks its whole system every step, so a run slows down; and once
+        that some touched more particles than their contact history holds (a law with springs per
+        pair): the springs of those contacts were not kept."""
+        if self.sim.params.keeps_springs and not self.history_overflow_noted:
+            overflows = self.sim.history_overflows()
+            if overflows:
+                self.history_overflow_noted = True
+                self.log(
+                    f"warning: at step {step}, {overflows} of the particles touched more particles than their contact "
+                    "history holds; the springs of the contacts past it start afresh at every step (static friction "
+                    "and the rolling and twisting springs are lost there)"
+                )
         if self.overflow_noted:
             return  # said once: no more copies of the counts from the device
         overflows = self.sim.candidate_overflows()

@@ -217,6 +217,11 @@ class Simulation:
         """Particles whose contact candidates overflowed their list at the last force evaluation."""
         return self.engine.candidate_overflows()
 
+    def history_overflows(self) -> int:
+        """Particles that touched more particles than their contact history holds at the last force
+        evaluation (a law with springs per pair; 0 otherwise): the springs of the others were not kept."""
+        return self.engine.history_overflows()
+
     def take_deepest_contact(self) -> dict:
         """The deepest contact any step met since the last call (or since this simulation was made or
         restored): ``deepest_overlap`` (fraction of the smaller radius) and ``deepest_overlap_pair``."""

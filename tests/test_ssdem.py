@@ -1,0 +1,309 @@
+"""contact_law = "ssdem", pkdgrav's soft-sphere law (Schwartz, Richardson & Michel 2012): its pair forces
+and motion against the float64 NumPy oracle (tests/oracle.py ``ssdem_forces``), its contact history
+(carried across list rebuilds, dropped when a contact breaks, saved in snapshots and checkpoints, the
+same in an ensemble and on the GPU's layouts), its conservation and energy ledger, and benchmarks in
+the style of Chung & Ooi (2011) with analytic answers (docs/ssdem-design.md sect. 13)."""
+
+import numpy as np
+import pytest
+from conftest import DEVICES
+from oracle import ssdem_constants, ssdem_forces, ssdem_run
+from scenes import approaching_clumps, contact_cluster, sphere_mass
+
+import decco_warp as dw
+from decco_warp import contact_finders
+from decco_warp.errors import InputError
+
+#: Every branch acts: the tangential, rolling and twisting springs each stick at some contacts and
+#: slide at others, with both dashpots.
+SSDEM = dict(contact_law="ssdem", mu_s=0.3, mu_r=0.05, mu_t=0.3, eps_t=0.5, restitution=0.8)
+#: float64: the kernels and the oracle agree to round-off (relative to the largest force or spin).
+FLOAT64_TOLERANCE = 1e-12
+#: mixed: gravity is summed in float32 (and the fused layout's contact sums), each contact in float64.
+MIXED_TOLERANCE = 1e-4
+
+
+def _clump(n=30, seed=3):
+    return contact_cluster(n, seed=seed, overlap_range=(1.0, 1e3), speed=20.0, spin=1e-4)
+
+
+def _oracle_args(state):
+    return state.positions, state.velocities, state.omegas, state.radii, state.masses
+
+
+# --- pair forces and motion against the oracle --------------------------------------------------
+
+
+@pytest.mark.parametrize("precision", ["float64", "mixed"])
+@pytest.mark.parametrize("kernel", ["tiled", "reference"])
+def test_a_first_evaluation_matches_the_oracle(kernel, precision, device):
+    """A state's first evaluation (no springs yet: each tangential spring is u_t dt): force and torque."""
+    state = _clump()
+    params = dw.Params(**SSDEM)
+    force, torque = dw.compute_forces(state, params, device=device, precision=precision, force_kernel=kernel)
+    want_force, want_torque, springs = ssdem_forces(*_oracle_args(state), ssdem_constants(params), params.G, {})
+    assert len(springs) >= state.n - 1
+    tolerance = FLOAT64_TOLERANCE if precision == "float64" else MIXED_TOLERANCE
+    assert np.abs(force - want_force).max() <= tolerance * np.abs(want_force).max()
+    # (The fused layout sums the contacts in the sweep's precision too.)
+    assert np.abs(torque - want_torque).max() <= tolerance * np.abs(want_torque).max()
+
+
+#: Force paths, each with the contacts' springs carried from step to step: the plain kernel, the
+#: fused and Newton layouts, the tree's hash grid (found afresh at every step) and the neighbour list
+#: of gravity on its own clock (rebuilt every few steps here: its skin made tiny).
+PATHS = {
+    "reference": {"force_kernel": "reference"},
+    "fused": {},
+    "newton": {"layout": dw.Layout(1, 4, newton=True)},
+    "tree": {"scheme": dw.Scheme(gravity="tree")},
+    "clocked": {"scheme": dw.Scheme(gravity_every=5)},
+}
+
+
+@pytest.mark.parametrize("path", sorted(PATHS))
+def test_motion_with_the_contacts_springs_matches_the_oracle(path, monkeypatch):
+    """150 steps of two clumps flying apart into each other, whose contacts stick, slide, break and form,
+    without gravity (so that every path, the tree's and the clocked one's too, has the oracle's forces):
+    positions, velocities and spins equal the oracle's to round-off, and so do the springs each
+    contact holds at the end."""
+    monkeypatch.setattr(contact_finders, "SKIN_FRACTION", 2e-4)  # the neighbour list rebuilt every few steps
+    state = approaching_clumps()
+    params = dw.Params(**SSDEM, G=0.0)
+    steps = 150
+    sim = dw.Simulation(state, params, device="cpu", precision="float64", **PATHS[path])
+    sim.step(steps)
+    x, v, w, springs = ssdem_run(*_oracle_args(state), ssdem_constants(params), 0.0, steps)
+    got = sim.state
+    assert np.abs(got.positions - x).max() <= 1e-9  # [cm], of ~200 cm moved
+    assert np.abs(got.positions - state.positions).max() > 100.0
+    assert np.abs(got.velocities - v).max() <= FLOAT64_TOLERANCE * np.abs(v).max()
+    assert np.abs(got.omegas - w).max() <= FLOAT64_TOLERANCE * np.abs(w).max()
+    # Contacts broke and formed on the way.
+    _, _, first = ssdem_forces(*_oracle_args(state), ssdem_constants(params), 0.0, {})
+    assert set(first) - set(springs) and set(springs) - set(first)
+    # The history holds exactly the touching pairs, with the oracle's springs, on both sides.
+    snapshot = sim.snapshot()
+    count, partner = snapshot["contact_count"], snapshot["contact_partner"]
+    held = {(i, int(partner[i, row])): row for i in range(state.n) for row in range(count[i])}
+    assert len(held) == 2 * len(springs)
+    for (p, q), (spring, normal, rolling, twist) in springs.items():
+        for i, j in ((p, q), (q, p)):
+            row = held[(i, j)]
+            np.testing.assert_allclose(snapshot["contact_spring"][i, row], spring, rtol=0, atol=1e-9 * np.abs(spring).max())
+            np.testing.assert_allclose(snapshot["contact_normal"][i, row], normal, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(snapshot["contact_rolling"][i, row], rolling, rtol=0, atol=1e-9 * np.abs(rolling).max())
+            assert snapshot["contact_twist"][i, row] == pytest.approx(twist, rel=1e-9, abs=1e-18)
+    if path == "clocked":
+        assert sim.neighbour_list_builds() >= 5
+
+
+def test_every_branch_of_the_law_acts_in_the_oracle_scene():
+    """The scenes of the tests above are worth their name: each of the three springs sticks at some
+    contact steps and slides at others."""
+    state = approaching_clumps()
+    params = dw.Params(**SSDEM, G=0.0)
+    regimes = []
+    ssdem_run(*_oracle_args(state), ssdem_constants(params), 0.0, 60, regimes)
+    slid = np.array(regimes).mean(axis=0)
+    assert np.all((0.05 < slid) & (slid < 0.95)), slid
+
+
+# --- the contact history --------------------------------------------------------------------------
+
+
+def _oblique_pair(radius=1.0, speed=50.0, theta_deg=45.0, gap=1e-6):
+    """Two equal spheres (radius [cm], density 2.7) just apart on the x axis, approaching at ``speed``
+    each, at ``theta_deg`` from the line of centres, without spin."""
+    t = np.radians(theta_deg)
+    x = np.array([[-radius - gap / 2, 0, 0], [radius + gap / 2, 0, 0]])
+    v = speed * np.array([[np.cos(t), np.sin(t), 0], [-np.cos(t), -np.sin(t), 0]])
+    radii = np.full(2, radius)
+    return dw.State.from_arrays(x, v, np.zeros((2, 3)), radii, sphere_mass(radii))
+
+
+def _impact_params(state, overlap=0.002, steps_per_contact=50, **constants):
+    """Params of a pair's impact: k_n for a deepest overlap of ``overlap`` radii undamped, dt a
+    ``steps_per_contact``-th of the undamped contact, no gravity."""
+    reduced = state.masses[0] * state.masses[1] / state.masses.sum()
+    approach = np.linalg.norm(state.velocities[1] - state.velocities[0])
+    k_n = reduced * (approach / (overlap * state.radii[0])) ** 2
+    dt = np.pi * np.sqrt(reduced / k_n) / steps_per_contact
+    return dw.Params(**{"contact_law": "ssdem", "k_in": 2 * k_n, "dt": dt, "G": 0.0, "mu_r": 0.0, **constants})
+
+
+def test_a_contact_is_held_once_on_each_side_the_same_bits_and_dropped_when_it_breaks(device):
+    state = _oblique_pair()
+    params = _impact_params(state, restitution=0.9, mu_s=0.1)
+    sim = dw.Simulation(state, params, device=device, precision="float64")
+    seen = 0
+    for _ in range(120):
+        sim.step(1)
+        snap = sim.snapshot()
+        touching = np.linalg.norm(sim.state.positions[1] - sim.state.positions[0]) < 2 * state.radii[0]
+        assert list(snap["contact_count"]) == ([1, 1] if touching else [0, 0])
+        if touching:
+            seen += 1
+            assert list(snap["contact_partner"][:, 0]) == [1, 0]
+            for key in ("contact_spring", "contact_normal", "contact_rolling", "contact_twist"):
+                assert np.array_equal(snap[key][0], snap[key][1]), key  # the pair's one copy, twice
+            assert np.linalg.norm(snap["contact_spring"][0, 0]) > 0
+    assert 40 < seen < 60  # the contact lasted its ~50 steps, and is gone
+    assert sim.history_overflows() == 0
+
+
+def test_the_history_is_kept_only_by_the_law_with_springs():
+    state = _clump()
+    for law, kept in (("paper", False), ("decco-code", False), ("ssdem", True)):
+        sim = dw.Simulation(state, dw.Params(contact_law=law), device="cpu")
+        assert ("contact_count" in sim.snapshot()) == kept
+
+
+@pytest.mark.parametrize("scheme", [dw.Scheme(), dw.Scheme(gravity_every=5)], ids=["one-clock", "gravity-every-5"])
+def test_a_resumed_run_with_springs_is_the_uninterrupted_one_bit_for_bit(scheme, tmp_path, device):
+    """Through a snapshot, and through a checkpoint file (HDF5) as a run resumes."""
+    from decco_warp.io import read_checkpoint, write_checkpoint
+
+    state = _clump(40, seed=9)
+    params = dw.Params(**SSDEM)
+    straight = dw.Simulation(state, params, device=device, ledger=True, scheme=scheme)
+    straight.step(130)
+    first = dw.Simulation(state, params, device=device, ledger=True, scheme=scheme)
+    first.step(55)
+    write_checkpoint(tmp_path / "checkpoint.h5", first.snapshot(), first.state, {})
+    del first
+    snapshot, static, _ = read_checkpoint(tmp_path / "checkpoint.h5")
+    second = dw.Simulation.from_snapshot(static, params, snapshot, device=device, scheme=scheme)
+    second.step(75)
+    a, b = straight.snapshot(), second.snapshot()
+    assert a.keys() == b.keys() and "contact_spring" in a
+    for key, value in a.items():
+        if isinstance(value, np.ndarray):
+            assert np.array_equal(value, b[key]), key
+    assert a["energy_start"] == b["energy_start"]
+    assert a["contact_count"].sum() > state.n  # contacts held their springs across the restart
+
+
+def test_a_snapshot_without_the_history_is_refused_for_the_law_with_springs():
+    state = _clump()
+    params = dw.Params(**SSDEM)
+    snapshot = dw.Simulation(state, params, device="cpu").snapshot()
+    del snapshot["contact_spring"]
+    with pytest.raises(InputError, match="contact history"):
+        dw.Simulation.from_snapshot(state, params, snapshot, device="cpu")
+
+
+ENSEMBLE_SIZES = (23, 31)
+
+
+@pytest.mark.parametrize("scheme", [dw.Scheme(), dw.Scheme(gravity_every=5)], ids=["one-clock", "gravity-every-5"])
+def test_each_system_of_an_ensemble_keeps_the_springs_it_would_keep_alone(scheme, device):
+    """An ensemble made from its members' Simulations (as a sweep makes one) steps each system bit for
+    bit as alone, and each system's view saves the snapshot (contact history included, in its own
+    numbering) that it would save alone."""
+    from decco_warp.ensemble import Ensemble
+
+    states = [contact_cluster(n, seed=seed, speed=1e3) for seed, n in enumerate(ENSEMBLE_SIZES)]
+    params = dw.Params(**SSDEM)
+    members = [dw.Simulation(s, params, device=device, ledger=True, scheme=scheme) for s in states]
+    for sim in members:
+        sim.step(10)
+    ensemble = Ensemble(members)
+    alone = [dw.Simulation.from_snapshot(s, params, sim.snapshot(), device=device, scheme=scheme) for s, sim in zip(states, members)]
+    ensemble.step(40)
+    for view, sim in zip(ensemble.views, alone):
+        sim.step(40)
+        mine, own = view.snapshot(), sim.snapshot()
+        for key, value in own.items():
+            if isinstance(value, np.ndarray):
+                assert np.array_equal(mine[key], value), key
+        assert own["contact_count"].sum() > 0
+
+
+CPU_BLOCKS = """
+import sys
+import numpy as np, warp as wp
+wp.config.enable_cpu_blocks = True  # the CPU runs every lane of a block, as a GPU does
+wp.config.kernel_cache_dir = sys.argv[1]
+sys.path.insert(0, sys.argv[2])
+import decco_warp as dw
+from scenes import contact_cluster
+state = contact_cluster(45, seed=3, overlap_range=(1.0, 1e3), speed=20.0, spin=1e-4)
+# (No gravity: the clock of gravity_every = 5 then changes nothing.)
+params = dw.Params(contact_law="ssdem", mu_s=0.3, mu_r=0.05, mu_t=0.3, eps_t=0.5, restitution=0.8, G=0.0)
+
+def run(**options):
+    sim = dw.Simulation(state, params, device="cpu", precision="float64", **options)
+    sim.step(60)
+    snap = sim.snapshot()
+    rows = {(i, int(snap["contact_partner"][i, r])): snap["contact_spring"][i, r] for i in range(state.n) for r in range(snap["contact_count"][i])}
+    return sim.state, rows
+
+want, want_rows = run(force_kernel="reference")
+for name, options in (("32x3", {"layout": dw.Layout(32, 3, 2)}), ("16x4", {"layout": dw.Layout(16, 4, 1)}),
+                      ("newton", {"layout": dw.Layout(1, 4, newton=True)}), ("clocked", {"scheme": dw.Scheme(gravity_every=5)})):
+    got, rows = run(**options)
+    moved = np.abs(want.positions - state.positions).max()
+    assert np.abs(got.positions - want.positions).max() <= 1e-12 * moved, name
+    assert np.abs(got.omegas - want.omegas).max() <= 1e-12 * np.abs(want.omegas).max(), name
+    assert rows.keys() == want_rows.keys(), name
+    for key, spring in want_rows.items():
+        assert np.abs(rows[key] - spring).max() <= 1e-9 * np.abs(spring).max() + 1e-30, (name, key)
+print("SAME", len(want_rows))
+"""
+
+
+def test_the_gpu_layouts_keep_the_springs_lane_by_lane_on_the_cpu(tmp_path):
+    """The fused layout's lanes (blocks of 32 and 16 striding over j, rows placed by a scan of the lanes'
+    counts, slots overflowing), the Newton layout's and the neighbour list's contact pass, run with
+    Warp's CPU blocks in a fresh interpreter: 60 steps equal the plain kernel's to round-off, with the
+    same contacts holding the same springs."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    tests = str(Path(__file__).parent)
+    done = subprocess.run([sys.executable, "-c", CPU_BLOCKS, str(tmp_path / "cache"), tests], capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0 and "SAME" in done.stdout, (done.stdout + done.stderr)[-3000:]
+
+
+# --- the law's constants ----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "constants, message",
+    [
+        ({"mu_s": -0.1}, "mu_s must be >= 0; got -0.1"),
+        ({"mu_t": -1.0}, "mu_t must be >= 0; got -1.0"),
+        ({"eps_t": 0.0}, "eps_t must be in (0, 1]; got 0.0"),
+        ({"beta": -0.5}, "beta must be >= 0 [R_r / R*]; got -0.5"),
+        ({"k_t_ratio": float("nan")}, "k_t_ratio must be >= 0 [k_t / k_n]; got nan"),
+        ({"rolling_friction": "paper"}, "contact_law 'ssdem' has its own"),
+    ],
+)
+def test_the_law_s_constants_are_checked_with_one_line(constants, message):
+    with pytest.raises(InputError) as raised:
+        dw.Params(contact_law="ssdem", **constants)
+    assert str(raised.value) == message or message in str(raised.value)
+    assert "\n" not in str(raised.value)
+
+
+def test_the_law_s_stiffnesses_follow_k_in():
+    params = dw.Params(contact_law="ssdem", k_in=3e17, k_t_ratio=0.5)
+    assert params.k_n == 1.5e17 and params.k_t == 0.75e17 and params.keeps_springs
+    assert dw.Params().k_t == pytest.approx(2 / 7 * 5e17) and not dw.Params().keeps_springs
+
+
+@pytest.mark.skipif(len(DEVICES) < 2, reason="no CUDA device")
+def test_cuda_keeps_the_springs_as_the_cpu_does():
+    """One kernel source: 60 steps on CUDA equal the CPU's to round-off, with the same contacts."""
+    state = _clump()
+    params = dw.Params(**SSDEM)
+    runs = []
+    for device in ("cpu", DEVICES[1]):
+        sim = dw.Simulation(state, params, device=device, precision="float64")
+        sim.step(60)
+        runs.append((sim.state, sim.snapshot()))
+    (a, snap_a), (b, snap_b) = runs
+    assert np.abs(a.positions - b.positions).max() <= 1e-12 * np.abs(a.positions - state.positions).max()
+    assert np.array_equal(snap_a["contact_count"], snap_b["contact_count"])
