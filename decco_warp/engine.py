@@ -153,7 +153,10 @@ class Engine:
         overlap [cm], and its deepest contact as a fraction of the pair's smaller radius with that partner."""
         outputs = {name: wp.zeros(self.count, dtype=dtype, device=self.device) for name, dtype in PAIR_OBSERVABLES.items()}
         self.path.observables(outputs)
-        return {name: array.numpy() for name, array in outputs.items()}
+        pairs = {name: array.numpy() for name, array in outputs.items()}
+        if self.state.history.kept:  # the contacts' springs (a law with springs per pair)
+            pairs["elastic_tangential"], pairs["elastic_rolling"] = self.state.history.spring_energies(self.model.radius.numpy(), self.params)
+        return pairs
 
     def history_overflows(self, first: int = 0, end: int | None = None) -> int:
         """Particles (of rows [first, end)) that touched more particles than their contact history holds at

@@ -119,6 +119,8 @@ def record(sim: Simulation, size_classes: int) -> tuple[dict, dict]:
         "kinetic_rotational": d["kinetic_rotational"],
         "potential": d["potential"],
         "elastic": d["elastic"],
+        # The energy held in the contacts' springs (a law with springs per pair: "ssdem").
+        **({key: d[key] for key in ("elastic_tangential", "elastic_rolling")} if sim.params.keeps_springs else {}),
         "total_energy": d["total_energy"],
         **ledger,
         "momentum": d["momentum"],

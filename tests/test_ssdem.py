@@ -9,9 +9,11 @@ import pytest
 from conftest import DEVICES
 from oracle import ssdem_constants, ssdem_forces, ssdem_run
 from scenes import approaching_clumps, contact_cluster, sphere_mass
+from test_conservation import _momenta
 
 import decco_warp as dw
 from decco_warp import contact_finders
+from decco_warp.diagnostics import energy_ledger
 from decco_warp.errors import InputError
 
 #: Every branch acts: the tangential, rolling and twisting springs each stick at some contacts and
@@ -157,6 +159,7 @@ def test_the_history_is_kept_only_by_the_law_with_springs():
     for law, kept in (("paper", False), ("decco-code", False), ("ssdem", True)):
         sim = dw.Simulation(state, dw.Params(contact_law=law), device="cpu")
         assert ("contact_count" in sim.snapshot()) == kept
+        assert ("elastic_tangential" in sim.pair_observables()) == kept
 
 
 @pytest.mark.parametrize("scheme", [dw.Scheme(), dw.Scheme(gravity_every=5)], ids=["one-clock", "gravity-every-5"])
@@ -218,6 +221,7 @@ def test_each_system_of_an_ensemble_keeps_the_springs_it_would_keep_alone(scheme
             if isinstance(value, np.ndarray):
                 assert np.array_equal(mine[key], value), key
         assert own["contact_count"].sum() > 0
+        assert view.diagnostics()["elastic_tangential"] == sim.diagnostics()["elastic_tangential"] > 0
 
 
 CPU_BLOCKS = """
@@ -265,6 +269,95 @@ def test_the_gpu_layouts_keep_the_springs_lane_by_lane_on_the_cpu(tmp_path):
     tests = str(Path(__file__).parent)
     done = subprocess.run([sys.executable, "-c", CPU_BLOCKS, str(tmp_path / "cache"), tests], capture_output=True, text=True, timeout=900)
     assert done.returncode == 0 and "SAME" in done.stdout, (done.stdout + done.stderr)[-3000:]
+
+
+# --- conservation and the energy ledger -------------------------------------------------------------
+
+
+def test_momentum_and_angular_momentum_are_conserved_to_round_off(device):
+    """Each pair from its lower index, the same bits on either side: the contacts move no momentum or
+    angular momentum (orbital and spin) out of the system; gravity on, float64, 1000 steps."""
+    clump = contact_cluster(100, seed=7, overlap_range=(1.0, 1e3), speed=20.0, spin=1e-5)
+    sim = dw.Simulation(clump, dw.Params(**SSDEM), device=device, precision="float64")
+    sim.step(1000)
+    p0, l0, p_scale, l_scale = _momenta(clump)
+    p1, l1, _, _ = _momenta(sim.state)
+    assert np.linalg.norm(p1 - p0) <= 1e-13 * p_scale
+    assert np.linalg.norm(l1 - l0) <= 1e-13 * l_scale
+    assert np.abs(sim.state.positions - clump.positions).max() > 1e3
+
+
+def _books(sim):
+    now = sim.diagnostics()
+    ledger = energy_ledger(now, sim.energy_start, sim.work())
+    return now, ledger, now["total_energy"] + sum(ledger.values())
+
+
+def test_the_ledger_closes_with_the_springs_energy(device):
+    clump = _clump(60, seed=5)
+    sim = dw.Simulation(clump, dw.Params(**SSDEM), device=device, precision="float64", ledger=True)
+    e0 = sim.energy_start["total_energy"]
+    assert sim.energy_start["elastic_tangential"] > 0  # the first evaluation stretched the springs
+    sim.step(600)
+    now, ledger, balance = _books(sim)
+    assert abs(balance - e0) <= 1e-10 * abs(e0)
+    for channel in ("dissipated_sliding", "dissipated_rolling", "dissipated_hysteresis"):
+        assert ledger[channel] > 0, channel
+    assert now["elastic_tangential"] > 0 and now["elastic_rolling"] > 0
+
+
+def test_a_sticking_contact_stores_its_tangential_work_and_dissipates_none(device):
+    """Elastic, and sticking throughout (mu_s huge, no dashpots, no rolling): mid-contact the tangential
+    force's work is held in the spring (elastic_tangential), not booked as dissipated; after the
+    contact the spring is gone and the energy is back in motion."""
+    state = _oblique_pair(theta_deg=30.0)
+    params = _impact_params(state, restitution=1.0, eps_t=1.0, mu_s=1e6)
+    sim = dw.Simulation(state, params, device=device, precision="float64", ledger=True)
+    e0 = sim.energy_start["total_energy"]
+    sim.step(25)  # about half the contact
+    now, ledger, balance = _books(sim)
+    assert now["elastic_tangential"] > 1e-3 * e0
+    # The energy the tangential force took is the spring's, to the step's discretization (the whole of
+    # it would be booked as dissipated without the spring's channel).
+    sliding_work = -sim.work()[:, 2].sum()
+    assert abs(sliding_work - now["elastic_tangential"]) <= 5e-3 * now["elastic_tangential"]
+    assert abs(ledger["dissipated_sliding"]) <= 5e-3 * now["elastic_tangential"]
+    assert abs(balance - e0) <= 1e-10 * e0
+    sim.step(75)
+    now, ledger, balance = _books(sim)
+    assert now["number_of_contacts"] == 0 and now["elastic_tangential"] == 0.0
+    assert abs(ledger["dissipated_sliding"]) <= 1e-3 * e0 and abs(balance - e0) <= 1e-10 * e0
+
+
+def test_a_run_with_springs_records_their_energy_closes_its_books_and_resumes_bit_for_bit(tmp_path):
+    """Through run.py, as decco-warp simulate and resume run it: the trajectory records the springs'
+    energy beside the others, the books balance at every frame, and a run stopped halfway and resumed
+    from its checkpoint (the contact history in it) is the uninterrupted run."""
+    from helpers import assert_same_run
+
+    from decco_warp import spec as specs
+    from decco_warp.io import read_checkpoint
+    from decco_warp.run import resume_run, start_run
+
+    def spec(name, steps):
+        run = {"name": name, "out": str(tmp_path), "device": "cpu", "steps": steps, "output_every": 50, "checkpoint_every": 100}
+        return specs.resolve_spec({"run": run, "params": {"contact_law": "ssdem", "mu_t": 0.3}})
+
+    start_run(spec("straight", 300))
+    start_run(spec("parts", 150))
+    resume_run(tmp_path / "parts", steps=300)
+    frames = dw.read_trajectory(tmp_path / "straight" / "trajectory.h5")
+    assert_same_run(frames, dw.read_trajectory(tmp_path / "parts" / "trajectory.h5"))
+    a, _, _ = read_checkpoint(tmp_path / "straight" / "checkpoint.h5")
+    b, _, _ = read_checkpoint(tmp_path / "parts" / "checkpoint.h5")
+    assert a["contact_count"].sum() > 0
+    for key, value in a.items():
+        if isinstance(value, np.ndarray):
+            assert np.array_equal(value, b[key]), key
+    obs = frames["observables"]
+    assert (obs["elastic_tangential"][1:] > 0).all() and (obs["elastic_rolling"][1:] > 0).all()
+    books = obs["total_energy"] + obs["dissipated_sliding"] + obs["dissipated_rolling"] + obs["dissipated_hysteresis"] + obs["integration_error"]
+    np.testing.assert_allclose(books, obs["total_energy"][0], rtol=1e-10)
 
 
 # --- the law's constants ----------------------------------------------------------------------------
