@@ -360,6 +360,160 @@ def test_a_run_with_springs_records_their_energy_closes_its_books_and_resumes_bi
     np.testing.assert_allclose(books, obs["total_energy"][0], rtol=1e-10)
 
 
+# --- benchmarks (Chung & Ooi 2011 style; analytic answers of docs/ssdem-design.md sect. 13) ----------
+
+
+@pytest.mark.parametrize("restitution", [1.0, 0.9, 0.5])
+def test_normal_impact_gives_the_restitution_asked_for(restitution):
+    """Head on: the linear spring-dashpot's rebound is eps_n (Schwartz et al. 2012 eqs. 24-28, the force
+    never clamped), its contact lasts pi / omega_1 and its deepest overlap is the damped oscillator's."""
+    state = _oblique_pair(theta_deg=0.0, gap=2e-3)
+    params = _impact_params(state, overlap=0.01, restitution=restitution)
+    sim = dw.Simulation(state, params, device="cpu", precision="float64")
+    inside, deepest = 0, 0.0
+    for _ in range(400):
+        sim.step(1)
+        overlap = 2.0 - (sim.state.positions[1, 0] - sim.state.positions[0, 0])
+        if overlap > 0:
+            inside, deepest = inside + 1, max(deepest, overlap)
+        elif inside:
+            break
+    v = sim.state.velocities
+    rebound = (v[1, 0] - v[0, 0]) / 100.0
+    reduced = state.masses[0] / 2
+    k_n = params.k_n
+    log = np.log(restitution)
+    alpha = -log / np.sqrt(np.pi**2 + log**2) * np.sqrt(k_n / reduced)  # C_n / (2 mu)
+    omega_1 = np.sqrt(k_n / reduced - alpha**2)
+    assert rebound == pytest.approx(restitution, abs=0.006)
+    assert abs(inside * params.dt - np.pi / omega_1) <= 2 * params.dt
+    peak = np.arctan2(omega_1, alpha) / omega_1  # x(t) = (v0 / omega_1) exp(-alpha t) sin(omega_1 t)
+    assert deepest == pytest.approx(100.0 / omega_1 * np.exp(-alpha * peak) * np.sin(omega_1 * peak), rel=0.01)
+
+
+@pytest.mark.parametrize("theta_deg", [45.0, 60.0, 75.0])
+def test_oblique_impact_in_gross_sliding_gives_the_rigid_impulse_answer(theta_deg):
+    """Two equal spheres meeting at theta from their line of centres slide throughout when tan theta >
+    3.5 mu_s (1 + e) (here 33.6 degrees): each sphere's tangential velocity falls to e_t = 1 - mu_s (1 +
+    e) / tan theta of itself and it spins up to 2.5 mu_s (1 + e) v cos theta / R (docs/ssdem-design.md
+    13.3).  pkdgrav's own slip rule (the spring zeroed) would give e_t ~0.94 at 50 degrees, not 0.84."""
+    mu_s, e = 0.1, 0.9
+    state = _oblique_pair(theta_deg=theta_deg)
+    sim = dw.Simulation(state, _impact_params(state, restitution=e, mu_s=mu_s), device="cpu", precision="float64")
+    sim.step(200)
+    after = sim.state
+    assert np.linalg.norm(after.positions[1] - after.positions[0]) > 2.0  # apart again
+    t = np.radians(theta_deg)
+    assert after.velocities[0, 1] / (50.0 * np.sin(t)) == pytest.approx(1 - mu_s * (1 + e) / np.tan(t), abs=0.003)
+    assert -after.omegas[0, 2] == pytest.approx(2.5 * mu_s * (1 + e) * 50.0 * np.cos(t), rel=0.01)
+
+
+def _sticking_restitution(params, reduced):
+    """Schwartz et al. 2012 eq. 35: the contact point's tangential restitution of a sticking linear
+    spring-dashpot over a normal contact; then each sphere's, 1 - (2/7)(1 - eps_t) (equal spheres)."""
+    k_n, k_t = params.k_n, params.k_t
+    log_n, log_t = np.log(params.restitution), np.log(params.eps_t)
+    alpha_n = -log_n / np.sqrt(np.pi**2 + log_n**2) * np.sqrt(k_n / reduced)
+    omega_n = np.sqrt(k_n / reduced - alpha_n**2)
+    damping_t = -2 * log_t * np.sqrt(k_t * reduced / (np.pi**2 + log_t**2))
+    alpha_t = 7 * damping_t / (4 * reduced)
+    omega_t = np.sqrt(7 * k_t / (2 * reduced) - alpha_t**2)
+    contact = np.exp(-alpha_t * np.pi / omega_n) * (np.cos(np.pi * omega_t / omega_n) - alpha_t / omega_t * np.sin(np.pi * omega_t / omega_n))
+    return 1 - 2 / 7 * (1 - contact)
+
+
+@pytest.mark.parametrize("eps_t", [1.0, 0.5])
+@pytest.mark.parametrize("theta_deg", [5.0, 20.0])
+def test_oblique_impact_while_sticking_gives_the_tangential_spring_s_answer(theta_deg, eps_t):
+    """mu_s huge: the tangential spring stretches and gives back (with its dashpot), so that the contact
+    point's tangential velocity reverses: each sphere keeps 0.43 of its tangential velocity at eps_t 1
+    (eq. 35), where a rigid sticking contact (no spring) keeps 5/7; its spin is 5/2 of the tangential
+    velocity lost over R (angular momentum about the contact point)."""
+    state = _oblique_pair(theta_deg=theta_deg)
+    params = _impact_params(state, restitution=0.9, mu_s=1e6, eps_t=eps_t)
+    sim = dw.Simulation(state, params, device="cpu", precision="float64")
+    sim.step(200)
+    after = sim.state
+    v_t = 50.0 * np.sin(np.radians(theta_deg))
+    e_t = after.velocities[0, 1] / v_t
+    assert e_t == pytest.approx(_sticking_restitution(params, state.masses[0] / 2), abs=0.004)
+    assert -after.omegas[0, 2] == pytest.approx(2.5 * (1 - e_t) * v_t, rel=0.01)
+
+
+def _sphere_on_two_spheres(spacing=1.2):
+    """A sphere on two others that rest on a floor (a sphere of 1e3 cm under a field of g = 1e3 cm/s^2 at
+    its surface), all of radius 1 cm, the bottom centres 2 ``spacing`` cm apart (not touching); nothing
+    overlaps yet."""
+    radius, floor, g = 1.0, 1000.0, 1000.0
+    planet_mass = g * floor**2 / dw.G_CGS
+    height = np.sqrt(4 * radius**2 - spacing**2)
+    x = np.array([[0, 0, 0], [-spacing, 0, floor + radius], [spacing, 0, floor + radius], [0, 0, floor + radius + height]])
+    radii = np.array([floor, radius, radius, radius])
+    masses = np.array([planet_mass, *sphere_mass(radii[1:])])
+    return dw.State.from_arrays(x, np.zeros((4, 3)), np.zeros((4, 3)), radii, masses), g
+
+
+def test_a_sphere_on_two_spheres_stands_by_static_friction_and_falls_without():
+    """The bottom spheres, free to roll and slide on the floor, are pushed apart by the top one: with no
+    rolling resistance the three stand iff mu_s >= tan(alpha / 2) = 1/3 here (docs/ssdem-design.md 13.5).
+    At mu_s = 0.45 they stand still, the springs holding; at 0.25 and 0 they fall apart.  The paper's
+    law, with no spring, creeps apart at mu_k = 0.45."""
+    state, g = _sphere_on_two_spheres()
+    m = state.masses[1]
+    k_n = 1.5 * m * g / 0.01  # a bottom sphere's floor contact 0.01 cm deep
+    dt = np.pi * np.sqrt(m / 2 / k_n) / 50
+
+    def heights(mu, law="ssdem"):
+        params = dw.Params(contact_law=law, k_in=2 * k_n, restitution=0.3, dt=dt, mu_s=mu, mu_k=mu, mu_r=0.0)
+        sim = dw.Simulation(state, params, device="cpu", precision="float64")
+        out = []
+        for _ in range(4):
+            sim.step(1000)
+            x = sim.state.positions
+            out.append((x[3, 2] - state.positions[3, 2], x[2, 0] - x[1, 0] - 2.4))  # top's drop, bottoms' spread
+        return np.array(out)
+
+    standing = heights(0.45)
+    assert np.abs(standing[0]).max() < 0.03  # settled into its contacts (~1 % of a radius)
+    assert np.abs(standing[-1] - standing[0]).max() < 2e-3  # and stays
+    for mu in (0.25, 0.0):
+        falling = heights(mu)
+        assert falling[1, 0] < -1.0 and falling[-1, 1] > 2.0, mu  # the top fell between the bottoms
+    creeping = heights(0.45, law="paper")
+    assert creeping[-1, 1] - creeping[0, 1] > 0.03  # slides on, slowly, with no static friction
+
+
+@pytest.mark.parametrize("mu_t", [0.5, 0.25, 0.0])
+def test_a_twisting_contact_s_relative_spin_decays_at_the_rate_mu_t_sets(mu_t):
+    """Two spheres held together by their gravity, one spinning about the line of centres: the twisting
+    couple slides at mu_t mu_s R_r N (pkdgrav's cap, R_r = beta R*), so that their relative spin falls
+    at mu_t mu_s R_r N (1/I_1 + 1/I_2) until the twisting spring holds (none without mu_t)."""
+    from scipy.optimize import brentq
+
+    radius, normal, k_n, mu_s, beta = 1.0, 1e4, 1e6, 0.5, 0.5
+    m = float(sphere_mass(radius))
+    G = normal * (2 * radius) ** 2 / m**2
+    d = brentq(lambda d: k_n * (2 * radius - d) - G * m * m / d**2, 2 * radius - 0.1, 2 * radius)  # at rest: spring = gravity
+    dt = np.pi * np.sqrt(m / 2 / k_n) / 50
+    params = dw.Params(contact_law="ssdem", k_in=2 * k_n, restitution=0.5, dt=dt, G=G, mu_s=mu_s, mu_t=mu_t, beta=beta, mu_r=0.1)
+    x = np.array([[-d / 2, 0, 0], [d / 2, 0, 0]])
+    w = np.array([[10.0, 0, 0], [0, 0, 0]])
+    state = dw.State.from_arrays(x, np.zeros((2, 3)), w, np.full(2, radius), np.full(2, m))
+    sim = dw.Simulation(state, params, device="cpu", precision="float64", allow_unstable=True)
+    relative = []
+    for _ in range(100):
+        sim.step(1)
+        relative.append(sim.state.omegas[0, 0] - sim.state.omegas[1, 0])
+    inertia = 0.4 * m * radius**2
+    rate = mu_t * mu_s * beta * radius / 2 * k_n * (2 * radius - d) * 2 / inertia
+    slope = np.polyfit(dt * np.arange(10, 100), relative[10:], 1)[0]
+    if mu_t == 0:
+        assert np.all(np.array(relative) == 10.0)
+    else:
+        assert -slope == pytest.approx(rate, rel=0.01)
+    assert np.abs(sim.state.velocities).max() < 1e-9  # the pure twist moves nothing else
+
+
 # --- the law's constants ----------------------------------------------------------------------------
 
 
