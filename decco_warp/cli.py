@@ -731,6 +731,9 @@ def bench(
     particle_blocks: str = typer.Option(
         "", "--particle-blocks", help="Also time the step with these threads a block for the kernels of one thread a particle (kicks, drift, gather, list build), e.g. 32,64, at K = 1 and each --gravity-every K, against the default (decco_warp.layouts.PARTICLE_BLOCK); the motion is the same at any."
     ),
+    contact_law: str = typer.Option(
+        "paper", "--contact-law", help="Contact laws to time, each with its default constants, e.g. paper,ssdem: every row of each law after the first against the first's."
+    ),
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Pairs/s of the force kernel and of the full step, beside a one-thread-per-particle baseline."""
@@ -743,6 +746,7 @@ def bench(
     from .device import DeviceError, resolve_device
     from .scheme import PRECISIONS
     from .layouts import parse_layout
+    from .params import CONTACT_LAWS
     from .scheme import GRAVITY_SOLVERS
 
     try:
@@ -766,6 +770,9 @@ def bench(
     blocks = _integer_list(particle_blocks)
     if any(b < 1 or b > 1024 for b in blocks):
         fail(f"--particle-blocks must list threads a block from 1 to 1024, e.g. 32,64; got {particle_blocks!r}")
+    laws = list(dict.fromkeys(law.strip() for law in contact_law.split(",") if law.strip()))
+    if not laws or any(law not in CONTACT_LAWS for law in laws):
+        fail(f"--contact-law must list {', '.join(CONTACT_LAWS)}; got {contact_law!r}")
     kinds = [k.strip() for k in system.split(",") if k.strip()]
     if not kinds or any(k not in benchmarks.TEST_SYSTEMS for k in kinds):
         fail(f"--system must list {' and/or '.join(benchmarks.TEST_SYSTEMS)}; got {system!r}")
@@ -785,7 +792,7 @@ def bench(
     header = f"{'N':>8} {'force pairs/s':>14} {'step pairs/s':>13} {'step ms':>9} {'particles/s':>12} {'of limit':>9} {'baseline pairs/s':>17} {'speed-up':>9}  layout"
     typer.echo(header)
     rows = []
-    for row in benchmarks.bench_rows(sizes, kinds, chosen, precision, budget, steps, solvers, extra_layouts, ensembles, clocks, blocks):
+    for row in benchmarks.bench_rows(sizes, kinds, chosen, precision, budget, steps, solvers, extra_layouts, ensembles, clocks, blocks, laws):
         rows.append(row)
         baseline = not math.isnan(row.baseline_seconds)
         fraction = f"{100 * row.fraction_of_limit:8.1f}%" if row.fraction_of_limit is not None else f"{'n/a':>9}"
