@@ -76,6 +76,7 @@ def contact_model(params: Params) -> ContactModel:
         model.mu_s = wp.float64(params.mu_s)
         model.mu_t = wp.float64(params.mu_t)
         model.beta = wp.float64(params.beta)
+        model.cohesion = wp.float64(params.cohesion)
         model.dt = wp.float64(params.dt)
     return model
 

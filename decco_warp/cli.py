@@ -553,6 +553,7 @@ def simulate(
     beta: Optional[float] = typer.Option(None, "--beta", help="ssdem: shape parameter, the rolling and twisting radius over R*, >= 0."),
     eps_t: Optional[float] = typer.Option(None, "--eps-t", help="ssdem: tangential damping as a restitution, in (0, 1] (1: none)."),
     k_t_ratio: Optional[float] = typer.Option(None, "--k-t-ratio", help="ssdem: k_t / k_n, >= 0 (default 2/7)."),
+    cohesion: Optional[float] = typer.Option(None, "--cohesion", help="ssdem: cohesive strength, a tensile stress [dyne/cm^2], >= 0 (0: none)."),
     check: bool = typer.Option(False, "--check", help="Set up the collision, print its margins and predicted deepest overlap, run nothing."),
     output_every: Optional[int] = typer.Option(None, "--output-every", help="Steps between trajectory frames."),
     checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Steps between checkpoints."),
@@ -593,7 +594,7 @@ def simulate(
             "params": {"dt": _number_or_auto(dt, "--dt"), "k_in": _number_or_auto(k_in, "--k-in"), "gravity": gravity,
                        "gravity_every": _integer_or_auto(gravity_every, "--gravity-every"), "contact_law": contact_law,
                        "restitution": restitution, "mu_k": mu_k, "mu_r": mu_r, "mu_s": mu_s, "mu_t": mu_t, "beta": beta,
-                       "eps_t": eps_t, "k_t_ratio": k_t_ratio},
+                       "eps_t": eps_t, "k_t_ratio": k_t_ratio, "cohesion": cohesion},
         }
         spec = specs.resolve_spec(raw, overrides)
     except specs.SpecError as error:
@@ -982,7 +983,7 @@ def compare(
         help="Keep only the runs with one of these values in COLUMN (repeatable, every column must match; numbers within 1 %), e.g. --where mass_ratio=1 --where eta=3,6."
     ),
     allow_mixed: bool = typer.Option(
-        False, "--allow-mixed", help="Compare runs at one point that differ in a set-up column (mass_ratio, theta_deg, k_in, dt, gravity_every, eta_potential, n_particles, restitution, mu_k, mu_r, G, rolling_friction, contact_law, k_t_ratio, eps_t, mu_s, mu_t, beta) other than --by and --at."
+        False, "--allow-mixed", help="Compare runs at one point that differ in a set-up column (mass_ratio, theta_deg, k_in, dt, gravity_every, eta_potential, n_particles, restitution, mu_k, mu_r, G, rolling_friction, contact_law, k_t_ratio, eps_t, mu_s, mu_t, beta, cohesion) other than --by and --at."
     ),
     allow_single: bool = typer.Option(
         False, "--allow-single", help="Accept groups of one run: shown without spread or interval (without it, the table is printed and the command exits 2 naming them)."

@@ -24,7 +24,7 @@ ROLLING_FRICTION_FORMS = ("couple", "paper")
 CONTACT_LAWS = ("paper", "decco-code", "ssdem")
 
 #: The constants of the soft-sphere law alone (contact_law = "ssdem"): the other laws read none of them.
-SSDEM_CONSTANTS = ("k_t_ratio", "eps_t", "mu_s", "mu_t", "beta")
+SSDEM_CONSTANTS = ("k_t_ratio", "eps_t", "mu_s", "mu_t", "beta", "cohesion")
 
 
 @dataclass(frozen=True)
@@ -53,6 +53,7 @@ PHYSICS_RANGES = {
     "mu_s": Range(lambda v: v >= 0, ">= 0"),
     "mu_t": Range(lambda v: v >= 0, ">= 0"),
     "beta": Range(lambda v: v >= 0, ">= 0", "R_r / R*"),
+    "cohesion": Range(lambda v: v >= 0, ">= 0", "dyne/cm^2"),
     "dt": Range(lambda v: v > 0, "> 0", "s"),
     "G": Range(lambda v: v >= 0, ">= 0", "cm^3 g^-1 s^-2"),
 }
@@ -98,6 +99,9 @@ class Params:
     beta: float = 0.5
     """ssdem: shape parameter: rolling and twisting act at R_r = beta R_i R_j / (R_i + R_j); the
     rolling couple slides at mu_r R_r |F_N|."""
+    cohesion: float = 0.0
+    """ssdem: cohesive strength c, a tensile stress [dyne/cm^2] (pkdgrav's dCohesiveCoeff, model 0): a
+    touching pair attracts with c 4 R_r^2, outside the friction caps."""
 
     def __post_init__(self):
         for name, allowed in PHYSICS_RANGES.items():

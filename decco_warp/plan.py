@@ -95,7 +95,7 @@ def _contact_words(p: Params) -> str:
     """The contact law's constants in words, for ``--check``."""
     if p.contact_law == "ssdem":
         return (f"contact law ssdem (k_n {p.k_n:.6g} dyne/cm, k_t {p.k_t:.6g} dyne/cm, eps_n {p.restitution:g}, eps_t {p.eps_t:g}, "
-                f"mu_s {p.mu_s:g}, mu_r {p.mu_r:g}, mu_t {p.mu_t:g}, beta {p.beta:g})")  # fmt: skip
+                f"mu_s {p.mu_s:g}, mu_r {p.mu_r:g}, mu_t {p.mu_t:g}, beta {p.beta:g}, cohesion {p.cohesion:g} dyne/cm^2)")  # fmt: skip
     return f"restitution {p.restitution:g}, mu_k {p.mu_k:g}, mu_r {p.mu_r:g} ({p.rolling_friction})"
 
 

@@ -7,7 +7,7 @@ A specification has four tables, every key optional (defaults below):
     [piles]      target, projectile          (pile files, or builtin:target / builtin:projectile)
     [collision]  eta | speed, eta_potential, theta_deg, gap, target_spin, target_spin_axis, projectile_spin,
                  projectile_spin_axis, orientation_seed
-    [params]     k_in, restitution, mu_k, mu_r, dt, G, rolling_friction, contact_law, k_t_ratio, eps_t, mu_s, mu_t, beta,
+    [params]     k_in, restitution, mu_k, mu_r, dt, G, rolling_friction, contact_law, k_t_ratio, eps_t, mu_s, mu_t, beta, cohesion,
                  gravity, theta_open, gravity_every,
                  max_compression
 

@@ -42,6 +42,7 @@ class ContactModel:
     mu_s: wp.float64  # static friction coefficient: |F_T| <= mu_s |F_N|
     mu_t: wp.float64  # twisting friction coefficient: |M_t| <= mu_t mu_s R_r |F_N|
     beta: wp.float64  # shape parameter: the rolling and twisting radius R_r = beta R_i R_j / (R_i + R_j)
+    cohesion: wp.float64  # c, the cohesive tensile strength [dyne/cm^2]: a touching pair attracts with 4 c R_r^2
     dt: wp.float64  # the step over which a contact's springs are carried and stretched [s]
 
 
@@ -422,6 +423,12 @@ def carried(v: wp.vec3d, normal_before: wp.vec3d, n: wp.vec3d, spin_sum: wp.vec3
 
 
 @wp.func
+def cohesive_force(cohesion: wp.float64, radius_r: wp.float64) -> wp.float64:
+    """|F_c| = c 4 R_r^2 [dyne]: a tensile strength c over the area (2 R_r)^2, R_r = beta R* (pkdgrav's model 0)."""
+    return f64(4.0) * cohesion * radius_r * radius_r
+
+
+@wp.func
 def ssdem_contact(
     model: ContactModel,
     position_p: wp.vec3d,
@@ -503,6 +510,9 @@ def ssdem_contact(
         now.twist = now.twist - model.dt * twist_rate
     else:
         twisting = twisting + f64(2.0) * damping_t * area * twist_rate
+    # Cohesion (pkdgrav's model 0, Zhang & Richardson's note eqs. 2-3): c over the area (2 R_r)^2, towards
+    # q while touching; added after the caps, which it does not raise.
+    normal = normal + cohesive_force(model.cohesion, radius_r) * n
     lever_torque = wp.cross(n, tangential)
     return normal, tangential, lever_p * lever_torque, lever_q * lever_torque, rolling + twisting * n, now
 

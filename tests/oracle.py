@@ -151,7 +151,7 @@ def _dashpot(restitution, stiffness, reduced_mass):
 def ssdem_constants(params):
     """The soft-sphere law's constants of a Params, by the names of docs/model.md."""
     return dict(k_n=params.k_in / 2, k_t=params.k_t_ratio * params.k_in / 2, eps_n=params.restitution, eps_t=params.eps_t,
-                mu_s=params.mu_s, mu_r=params.mu_r, mu_t=params.mu_t, beta=params.beta, dt=params.dt)  # fmt: skip
+                mu_s=params.mu_s, mu_r=params.mu_r, mu_t=params.mu_t, beta=params.beta, dt=params.dt, cohesion=params.cohesion)  # fmt: skip
 
 
 def ssdem_forces(x, v, w, radii, masses, constants, G, springs, regimes=None):
@@ -228,6 +228,7 @@ def ssdem_forces(x, v, w, radii, masses, constants, G, springs, regimes=None):
             else:
                 m_t = m_t + 2 * c_t * radius_r**2 * twist_rate
             couple = m_r + m_t * n
+            f_n = f_n + c.get("cohesion", 0.0) * 4 * radius_r**2 * n  # cohesion: towards q, after the caps
             force[p] += f_n + f_t
             force[q] -= f_n + f_t
             torque[p] += l_p * np.cross(n, f_t) + couple

@@ -514,6 +514,56 @@ def test_a_twisting_contact_s_relative_spin_decays_at_the_rate_mu_t_sets(mu_t):
     assert np.abs(sim.state.velocities).max() < 1e-9  # the pure twist moves nothing else
 
 
+# --- cohesion ----------------------------------------------------------------------------------------
+
+
+def test_motion_with_cohesion_matches_the_oracle():
+    """Cohesion (a pull of c 4 R_r^2 while touching, outside the caps) in the clumps of the oracle test."""
+    state = approaching_clumps()
+    params = dw.Params(**SSDEM, G=0.0, cohesion=3e8)  # ~1e20 dyne a contact: as strong as the springs
+    sim = dw.Simulation(state, params, device="cpu", precision="float64")
+    sim.step(150)
+    x, v, w, springs = ssdem_run(*_oracle_args(state), ssdem_constants(params), 0.0, 150)
+    assert np.abs(sim.state.positions - x).max() <= 1e-9
+    assert np.abs(sim.state.velocities - v).max() <= FLOAT64_TOLERANCE * np.abs(v).max()
+    without = dw.Simulation(state, dw.Params(**SSDEM, G=0.0), device="cpu", precision="float64")
+    without.step(150)
+    assert np.abs(without.state.positions - x).max() > 10.0  # cohesion changed the motion
+
+
+@pytest.mark.parametrize("times_escape", [0.8, 1.25, 1.5])
+def test_a_cohesive_pair_parts_only_above_its_escape_speed(times_escape):
+    """Two spheres at the cohesive pair's equilibrium (k_n x = F_c), elastic, drawn apart at f times the
+    speed that climbs the well's depth F_c^2 / (2 k_n): below it they never part, above it they
+    leave at sqrt(f^2 - 1) of it (energy; within 2 %, the force's step at parting costing ~F_c v dt).
+    The ledger keeps the well's energy: bound, nothing is booked as dissipated."""
+    radius, k_n, beta, depth = 1.0, 1e6, 0.5, 0.005
+    m = float(sphere_mass(radius))
+    reduced = m / 2
+    pull = k_n * depth
+    escape = pull / np.sqrt(reduced * k_n)
+    params = dw.Params(contact_law="ssdem", k_in=2 * k_n, restitution=1.0, dt=np.pi * np.sqrt(reduced / k_n) / 200, G=0.0,
+                       beta=beta, cohesion=pull / (4 * (beta * radius / 2) ** 2))  # fmt: skip
+    d = 2 * radius - depth
+    speed = times_escape * escape
+    state = dw.State.from_arrays(np.array([[-d / 2, 0, 0], [d / 2, 0, 0]]), np.array([[-speed / 2, 0, 0], [speed / 2, 0, 0]]),
+                                 np.zeros((2, 3)), np.full(2, radius), np.full(2, m))  # fmt: skip
+    sim = dw.Simulation(state, params, device="cpu", precision="float64", ledger=True)
+    assert sim.energy_start["elastic"] == pytest.approx(-(pull**2) / (2 * k_n), rel=1e-9)  # the well: k_n x^2 / 2 - F_c x
+    gap = []
+    for _ in range(40):
+        sim.step(50)
+        gap.append(sim.state.positions[1, 0] - sim.state.positions[0, 0] - 2 * radius)
+    parting = sim.state.velocities[1, 0] - sim.state.velocities[0, 0]
+    if times_escape < 1:
+        assert max(gap) <= 0
+        ledger = energy_ledger(sim.diagnostics(), sim.energy_start, sim.work())
+        assert abs(ledger["dissipated_hysteresis"]) <= 1e-6 * pull**2 / (2 * k_n)
+    else:
+        assert gap[-1] > 0.1
+        assert parting == pytest.approx(np.sqrt(times_escape**2 - 1) * escape, rel=0.02 if times_escape < 1.4 else 0.005)
+
+
 # --- the law's constants ----------------------------------------------------------------------------
 
 
@@ -525,6 +575,7 @@ def test_a_twisting_contact_s_relative_spin_decays_at_the_rate_mu_t_sets(mu_t):
         ({"eps_t": 0.0}, "eps_t must be in (0, 1]; got 0.0"),
         ({"beta": -0.5}, "beta must be >= 0 [R_r / R*]; got -0.5"),
         ({"k_t_ratio": float("nan")}, "k_t_ratio must be >= 0 [k_t / k_n]; got nan"),
+        ({"cohesion": -1.0}, "cohesion must be >= 0 [dyne/cm^2]; got -1.0"),
         ({"rolling_friction": "paper"}, "contact_law 'ssdem' has its own"),
     ],
 )
