@@ -123,12 +123,14 @@ CPU_TREE_SECONDS_PER_PARTICLE = 7.5e-6
 
 def memory_estimate(
     n: int, gravity: str, device: str = "cpu", ledger: bool = True, *, gravity_every: int = 1, layout: Layout | None = None,
-    precision: str = "mixed", candidate_width: int = CANDIDATES,
+    precision: str = "mixed", candidate_width: int = CANDIDATES, contact_history: bool = False,
 ) -> int:
     """Bytes a job of ``n`` particles needs on its device (and on the host), an upper estimate:
     the arrays Engine and GravityTree allocate, taken as for the largest layout, and the Newton
     sweep's rows where all-pairs gravity takes it (``layout`` Newton, as CUDA's default is up to
-    NEWTON_MAX particles, or gravity on its own clock, ``gravity_every`` > 1, on any device)."""
+    NEWTON_MAX particles, or gravity on its own clock, ``gravity_every`` > 1, on any device), and with
+    ``contact_history`` the contact history of a law with springs per pair (arrays.ContactHistory:
+    ``candidate_width`` rows a particle, current and next)."""
     vec3d, f64, i32 = 24, 8, 4
     per = 3 * f64 + 5 * vec3d  # radius, mass, inertia; position, velocity, omega, force, torque
     per += (len(LEDGER_CHANNELS) * vec3d + 32) if ledger else 0  # channels, work
@@ -137,6 +139,8 @@ def memory_estimate(
     per += 3 * vec3d + f64 + 5 * i32  # gravity on its own clock: gravity, the list's build positions, the build's sorted
     # positions and radii; system, cell keys and order (2 N)
     per += len(PAIR_OBSERVABLES) * f64  # a frame's pair observables
+    if contact_history:  # count; per row partner, spring, normal, rolling, twist; twice (current and next)
+        per += 2 * (i32 + candidate_width * (i32 + 3 * vec3d + f64)) + 2 * f64  # (and the springs' energies of a frame)
     if gravity == "tree":  # nodes (2n): mass, centre, quadrupole, box, size, offset, links (16), child, first,
         # last, parent, escape; keys, order (2n); leaf positions, grid points; each walk part's field and potential
         per += 2 * (f64 + vec3d + 72 + 2 * vec3d + 2 * f64 + 16 + 5 * i32) + 4 * i32 + vec3d + 12

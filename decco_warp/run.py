@@ -201,6 +201,7 @@ def plan_fits(plan: Plan, n: int, steps: int) -> str | None:
             n, plan.scheme.gravity, plan.device, steps, "a run",
             gravity_every=plan.scheme.gravity_every, layout=plan.scheme.layout, precision=plan.scheme.precision,
             candidate_width=candidate_width(float(plan.state.radii.min()), float(plan.state.radii.max())),
+            contact_history=plan.params.keeps_springs,
         )  # fmt: skip
     except InputError as error:
         raise RunError(str(error)) from None
