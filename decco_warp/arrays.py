@@ -8,13 +8,14 @@ of the engine.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
 import warp as wp
 
 from .errors import InputError
-from .kernels.contacts import CANDIDATES, LEDGER_CHANNELS
+from .kernels.contacts import CANDIDATES, LEDGER_CHANNELS, PairHistory, commit_springs
 from .kernels.pair import ContactModel
 from .params import Params
 from .sizes import contact_list_rule
@@ -48,6 +49,13 @@ def system_sizes(systems: Sequence[int] | None, count: int) -> np.ndarray:
     return sizes
 
 
+def damping_factor(restitution: float, stiffness: float) -> float:
+    """A dashpot per sqrt(reduced mass) that gives a linear spring of ``stiffness`` that restitution:
+    -2 ln(eps) sqrt(k / (pi^2 + ln^2 eps)) [g^1/2 s^-1] (Schwartz, Richardson & Michel 2012 eq. 15)."""
+    log = math.log(restitution)
+    return -2.0 * log * math.sqrt(stiffness / (math.pi**2 + log * log))
+
+
 def contact_model(params: Params) -> ContactModel:
     """The constants every force kernel reads, as the kernels' struct."""
     model = ContactModel()
@@ -56,7 +64,126 @@ def contact_model(params: Params) -> ContactModel:
     model.k_out = wp.float64(params.k_out)
     model.mu_k = wp.float64(params.mu_k)
     model.mu_r = wp.float64(params.mu_r)
+    if params.contact_law == "ssdem":
+        # The elastic energy of the observables, (k/4) delta^2 with k = k_in on either side of the
+        # pair, is then ssdem's k_n delta^2 / 2 whether the pair approaches or recedes.
+        model.k_out = wp.float64(params.k_in)
+        model.k_n = wp.float64(params.k_n)
+        model.k_t = wp.float64(params.k_t)
+        model.damping_n = wp.float64(damping_factor(params.restitution, params.k_n))
+        model.damping_t = wp.float64(damping_factor(params.eps_t, params.k_t))
+        model.mu_s = wp.float64(params.mu_s)
+        model.mu_t = wp.float64(params.mu_t)
+        model.beta = wp.float64(params.beta)
+        model.cohesion = wp.float64(params.cohesion)
+        model.dt = wp.float64(params.dt)
     return model
+
+
+#: The snapshot keys of a contact history (ContactHistory.arrays), per particle: its contacts' count,
+#: and per contact the partner and the springs.
+HISTORY_ARRAYS = ("contact_count", "contact_partner", "contact_spring", "contact_normal", "contact_rolling", "contact_twist")
+
+
+def pair_history(count: int, width: int, device: str) -> PairHistory:
+    """A PairHistory of ``count`` particles with ``width`` rows each, zeroed."""
+    history = PairHistory()
+    history.count = wp.zeros(count, dtype=wp.int32, device=device)
+    history.partner = wp.zeros((count, width), dtype=wp.int32, device=device)
+    history.spring = wp.zeros((count, width), dtype=wp.vec3d, device=device)
+    history.normal = wp.zeros((count, width), dtype=wp.vec3d, device=device)
+    history.rolling = wp.zeros((count, width), dtype=wp.vec3d, device=device)
+    history.twist = wp.zeros((count, width), dtype=wp.float64, device=device)
+    return history
+
+
+class ContactHistory:
+    """Each particle's contacts with pair identity (the partner's index) and the pair's springs, for a
+    contact law that keeps springs (params.Params.keeps_springs; kernels/contacts.py PairHistory):
+    ``current`` holds the last contact evaluation's, which the next reads while writing ``next``;
+    :meth:`commit` then makes those current.  Keyed by partner, a contact's springs are carried
+    across any rebuild of the candidate lists; a pair that stops touching is dropped.  ``width``
+    rows a particle (0: none kept, the arrays empty)."""
+
+    def __init__(self, count: int, width: int, device: str):
+        self.count, self.width, self.device = count, width, device
+        rows = count if width > 0 else 0
+        self.current = pair_history(rows, width, device)
+        self.next = pair_history(rows, width, device)
+
+    @property
+    def kept(self) -> bool:
+        return self.width > 0
+
+    def commit(self) -> None:
+        """The rows the last contact evaluation wrote become the current ones (no-op where none are kept)."""
+        if self.kept:
+            wp.launch(commit_springs, dim=self.count, inputs=[self.next], outputs=[self.current], device=self.device)
+
+    def overflows(self, first: int = 0, end: int | None = None) -> int:
+        """Particles (of rows [first, end)) with more contacts than rows at the last evaluation: the springs
+        of those past the rows were not kept (they start afresh at each step)."""
+        if not self.kept:
+            return 0
+        return int((self.current.count.numpy()[first:end] > self.width).sum())
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The rows as a snapshot holds them (host copies), as many columns as the most contacts use
+        (at least one); none where none are kept."""
+        if not self.kept:
+            return {}
+        h = self.current
+        count = h.count.numpy().copy()
+        used = max(1, int(min(count.max(initial=0), self.width)))
+        # The rows past a particle's count are left from earlier evaluations and never read: zeros.
+        live = np.arange(used)[None, :] < np.minimum(count, self.width)[:, None]
+        columns = (h.partner, h.spring, h.normal, h.rolling, h.twist)
+        rows = {key: array.numpy()[:, :used] for key, array in zip(HISTORY_ARRAYS[1:], columns)}
+        return {"contact_count": count, **{key: np.where(live.reshape(live.shape + (1,) * (values.ndim - 2)), values, 0).astype(values.dtype)
+                                           for key, values in rows.items()}}  # fmt: skip
+
+    def load(self, arrays: dict[str, np.ndarray]) -> None:
+        """Rows from :meth:`arrays` (InputError for a snapshot without them, or of other shapes)."""
+        if not self.kept:
+            return
+        missing = [key for key in HISTORY_ARRAYS if key not in arrays]
+        if missing:
+            raise InputError(f"snapshot holds no contact history ({', '.join(missing)}): a law with springs per pair needs it to go on")
+        n = self.count
+        count = np.asarray(arrays["contact_count"], dtype=np.int32)
+        used = np.asarray(arrays["contact_partner"]).shape[1] if np.ndim(arrays["contact_partner"]) == 2 else -1
+        if count.shape != (n,) or not 0 < used <= self.width:
+            raise InputError(f"snapshot contact history has shapes {count.shape}, {np.shape(arrays['contact_partner'])}; "
+                             f"expected ({n},), ({n}, <= {self.width})")  # fmt: skip
+        h = self.current
+        h.count.assign(wp.array(count, dtype=wp.int32, device=self.device))
+        for key, target, dtype, tail in zip(
+            HISTORY_ARRAYS[1:], (h.partner, h.spring, h.normal, h.rolling, h.twist),
+            (np.int32, np.float64, np.float64, np.float64, np.float64), ((), (3,), (3,), (3,), ()),
+        ):  # fmt: skip
+            values = np.asarray(arrays[key], dtype=dtype)
+            if values.shape != (n, used, *tail):
+                raise InputError(f"snapshot {key} has shape {values.shape}; expected {(n, used, *tail)}")
+            rows = np.zeros((n, self.width, *tail), dtype=dtype)
+            rows[:, :used] = values
+            target.assign(wp.array(rows, dtype=target.dtype, device=self.device))
+
+    def spring_energies(self, radii: np.ndarray, params: Params) -> tuple[np.ndarray, np.ndarray]:
+        """Per particle, half the energy held in its contacts' springs [erg]: the tangential spring's
+        (k_t |S|^2 / 2 a pair), and the rolling and twisting springs' (k_r |theta_r|^2 / 2 +
+        k_q theta_t^2 / 2, k_r = k_n R_r^2, k_q = 2 k_t R_r^2); zeros where none are kept."""
+        if not self.kept:
+            return np.zeros(self.count), np.zeros(self.count)
+        h = self.current
+        count = h.count.numpy()
+        used = np.arange(self.width)[None, :] < np.minimum(count, self.width)[:, None]
+        partner = np.where(used, h.partner.numpy(), 0)
+        spring, rolling, twist = h.spring.numpy(), h.rolling.numpy(), h.twist.numpy()
+        other = radii[partner]
+        radius_r = params.beta * radii[:, None] * other / (radii[:, None] + other)
+        tangential = 0.25 * params.k_t * np.einsum("ijk,ijk->ij", spring, spring)
+        turning = 0.25 * radius_r**2 * (params.k_n * np.einsum("ijk,ijk->ij", rolling, rolling) + 2.0 * params.k_t * twist**2)
+        return np.where(used, tangential, 0.0).sum(axis=1), np.where(used, turning, 0.0).sum(axis=1)
 
 
 class ModelArrays:
@@ -92,7 +219,7 @@ class StateArrays:
     """What changes as a system steps, on its device: positions, velocities and spins, the forces of
     the last evaluation and, with the ledger, their channels and work."""
 
-    def __init__(self, state: State, device: str, ledger: bool):
+    def __init__(self, state: State, device: str, ledger: bool, history_width: int = 0):
         count = state.n
         self.ledger = ledger
         self.position = wp.array(state.positions, dtype=wp.vec3d, device=device)
@@ -109,11 +236,14 @@ class StateArrays:
         # Each particle's deepest contact met by any force evaluation since the host last took it
         # (kernels/contacts.py note_depth): frames report the peak between them, not a sample.
         self.deepest_contact = wp.zeros(count, dtype=wp.int64, device=device)
+        self.history = ContactHistory(count, history_width, device)
+        """Each particle's contacts and their springs, for a law that keeps springs per pair (else empty)."""
 
     def contact_outputs(self) -> list:
-        """What a contact evaluation writes: force, torque, channels, deepest contact."""
-        return [self.force, self.torque, self.channels, self.deepest_contact]
+        """What a contact evaluation writes: force, torque, channels, deepest contact, the contacts' springs."""
+        return [self.force, self.torque, self.channels, self.deepest_contact, self.history.next]
 
     def contact_inputs(self) -> list:
-        """What a contact pass reads of the particles beside their radii: position, velocity, spin."""
-        return [self.position, self.velocity, self.omega]
+        """What a contact evaluation reads of the particles beside their radii and masses: position,
+        velocity, spin and the contacts' springs at the evaluation before."""
+        return [self.position, self.velocity, self.omega, self.history.current]

@@ -79,6 +79,11 @@ class BenchRow:
     """Threads a block of the kernels of one thread a particle, where a row sets it (layouts.PARTICLE_BLOCK otherwise)."""
     versus_default_block: float | None = None
     """The step time at the default PARTICLE_BLOCK over this row's, same N, K and call."""
+    contact_law: str = "paper"
+    """The contact law stepped (params.CONTACT_LAWS, its default constants)."""
+    versus_first_law: float | None = None
+    """The step time of the first law asked for (``--contact-law``'s first) over this row's, the same
+    row otherwise, in the same call (rows of the other laws)."""
 
 
 #: The test systems of :func:`bench_size`.
@@ -195,6 +200,7 @@ def bench_size(
     system: str = "lattice",
     gravity_every: int = 1,
     particle_block: int | None = None,
+    law: str = "paper",
 ) -> BenchRow:
     """One row: the force evaluation and the full step at ``n`` (pairs/s counts N^2 pairs a step, what
     an every-step all-pairs code needs, also at K > 1; the fraction of the device's limit counts the
@@ -205,21 +211,22 @@ def bench_size(
     whole outer steps of K), as a run steps: steps left over are launched one by one, and at K > 1
     each of those reads the list's stale flag on the host.  With ``gravity_every`` K > 1 the row
     counts the neighbour list's builds per step.  ``particle_block``: the threads a block of the
-    kernels of one thread a particle, in place of layouts.PARTICLE_BLOCK for this row."""
+    kernels of one thread a particle, in place of layouts.PARTICLE_BLOCK for this row.  ``law``: the
+    contact law (its default constants)."""
     default = thread_layouts.PARTICLE_BLOCK
     thread_layouts.PARTICLE_BLOCK = particle_block or default
     try:
-        row = _bench_size(n, device, precision, layout, budget, steps, baseline, gravity, systems, system, gravity_every)
+        row = _bench_size(n, device, precision, layout, budget, steps, baseline, gravity, systems, system, gravity_every, law)
     finally:
         thread_layouts.PARTICLE_BLOCK = default
     row.particle_block = particle_block
     return row
 
 
-def _bench_size(n, device, precision, layout, budget, steps, baseline, gravity, systems, system, gravity_every) -> BenchRow:
+def _bench_size(n, device, precision, layout, budget, steps, baseline, gravity, systems, system, gravity_every, law) -> BenchRow:
     state = bench_system(system, n, systems)
     sizes = [n] * systems
-    params = Params()
+    params = Params(contact_law=law)
     layout = layout or choose_layout(n, device)
     scheme = Scheme(precision=precision, gravity=gravity, gravity_every=gravity_every, layout=layout)
     tiled = Engine(state, params, device, systems=sizes, scheme=scheme)
@@ -232,7 +239,7 @@ def _bench_size(n, device, precision, layout, budget, steps, baseline, gravity, 
     step_seconds = _seconds_per_call(lambda: sim.step(steps), device, budget) / steps
     builds = None if first_builds is None else (sim.neighbour_list_builds() - first_builds) / (sim.step_count - first_step)
     if baseline:
-        reference = Engine(state, Params(), device, precision, "reference")
+        reference = Engine(state, params, device, precision, "reference")
         baseline_seconds = _seconds_per_call(reference.eval_forces, device, budget)
     else:
         baseline_seconds = math.nan
@@ -261,14 +268,30 @@ def _bench_size(n, device, precision, layout, budget, steps, baseline, gravity, 
         fuse_kicks=layout.fuse_kicks,
         gravity_every=gravity_every,
         list_builds_per_step=builds,
+        contact_law=law,
     )
 
 
 def bench_rows(
     sizes, kinds, device: str, precision: str = "mixed", budget: float = 1.0, steps: int = 100, solvers=("all-pairs",),
-    layouts=(), ensembles=(), clocks=(), particle_blocks=(),
+    layouts=(), ensembles=(), clocks=(), particle_blocks=(), laws=("paper",),
 ):  # fmt: skip
-    """Every row of ``decco-warp bench``, in order, as each is measured: per size and test system, the
+    """Every row of ``decco-warp bench``, in order, as each is measured: per contact law of ``laws``
+    (each row of a law after the first against the first law's same row), :func:`law_rows`."""
+    first: list[BenchRow] = []  # each law's rows come in the same order
+    for k, law in enumerate(laws):
+        rows = law_rows(sizes, kinds, device, precision, budget, steps, solvers, layouts, ensembles, clocks, particle_blocks, law)
+        for index, row in enumerate(rows):
+            if k == 0:
+                first.append(row)
+            else:
+                row.versus_first_law = first[index].step_seconds / row.step_seconds
+                row.layout += f", contact law {law}: {row.versus_first_law:.2f}x the {laws[0]} law's step"
+            yield row
+
+
+def law_rows(sizes, kinds, device, precision, budget, steps, solvers, layouts, ensembles, clocks, particle_blocks, law):
+    """The rows of one contact law, in order, as each is measured: per size and test system, the
     default all-pairs layout (beside the one-thread-per-particle baseline) and ``layouts``, the tree,
     ensembles of ``ensembles`` systems (against one at a time), and gravity every K of ``clocks``
     (against K = 1 with the same solver), and the default layout at K = 1 and each K of ``clocks``
@@ -286,7 +309,7 @@ def bench_rows(
             first = (solver, layout, systems, every, block) == runs[0]
             row = bench_size(
                 size, device, precision, layout, budget, steps, baseline=first, gravity=solver, systems=systems, system=kind,
-                gravity_every=every, particle_block=block,
+                gravity_every=every, particle_block=block, law=law,
             )  # fmt: skip
             if len(kinds) > 1:
                 row.layout += f", {kind}"

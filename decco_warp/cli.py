@@ -551,8 +551,14 @@ def simulate(
         None, "--gravity-every", help="K: gravity evaluated every K steps, the contacts every step (docs/model.md, \"Gravity on its own clock\"); 1 is the paper's scheme, auto is 10. Step counts must then be multiples of K."
     ),
     contact_law: Optional[str] = typer.Option(
-        None, "--contact-law", help="paper (the paper's law as docs/model.md states it) or decco-code (DECCO's pair forces as its code computes them)."
+        None, "--contact-law", help="paper (the paper's law as docs/model.md states it), decco-code (DECCO's pair forces as its code computes them) or ssdem (pkdgrav's soft-sphere law: a tangential spring per contact, static friction, rolling and twisting springs)."
     ),
+    mu_s: Optional[float] = typer.Option(None, "--mu-s", help="ssdem: static friction coefficient (the tangential spring's cap), >= 0."),
+    mu_t: Optional[float] = typer.Option(None, "--mu-t", help="ssdem: twisting friction coefficient, >= 0."),
+    beta: Optional[float] = typer.Option(None, "--beta", help="ssdem: shape parameter, the rolling and twisting radius over R*, >= 0."),
+    eps_t: Optional[float] = typer.Option(None, "--eps-t", help="ssdem: tangential damping as a restitution, in (0, 1] (1: none)."),
+    k_t_ratio: Optional[float] = typer.Option(None, "--k-t-ratio", help="ssdem: k_t / k_n, >= 0 (default 2/7)."),
+    cohesion: Optional[float] = typer.Option(None, "--cohesion", help="ssdem: cohesive strength, a tensile stress [dyne/cm^2], >= 0 (0: none)."),
     check: bool = typer.Option(False, "--check", help="Set up the collision, print its margins and predicted deepest overlap, run nothing."),
     output_every: Optional[int] = typer.Option(None, "--output-every", help="Steps between trajectory frames."),
     checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Steps between checkpoints."),
@@ -592,7 +598,8 @@ def simulate(
             "collision": collision,
             "params": {"dt": _number_or_auto(dt, "--dt"), "k_in": _number_or_auto(k_in, "--k-in"), "gravity": gravity,
                        "gravity_every": _integer_or_auto(gravity_every, "--gravity-every"), "contact_law": contact_law,
-                       "restitution": restitution, "mu_k": mu_k, "mu_r": mu_r},
+                       "restitution": restitution, "mu_k": mu_k, "mu_r": mu_r, "mu_s": mu_s, "mu_t": mu_t, "beta": beta,
+                       "eps_t": eps_t, "k_t_ratio": k_t_ratio, "cohesion": cohesion},
         }
         spec = specs.resolve_spec(raw, overrides)
     except specs.SpecError as error:
@@ -729,6 +736,9 @@ def bench(
     particle_blocks: str = typer.Option(
         "", "--particle-blocks", help="Also time the step with these threads a block for the kernels of one thread a particle (kicks, drift, gather, list build), e.g. 32,64, at K = 1 and each --gravity-every K, against the default (decco_warp.layouts.PARTICLE_BLOCK); the motion is the same at any."
     ),
+    contact_law: str = typer.Option(
+        "paper", "--contact-law", help="Contact laws to time, each with its default constants, e.g. paper,ssdem: every row of each law after the first against the first's."
+    ),
     device: Optional[str] = DeviceOption,
 ) -> None:
     """Pairs/s of the force kernel and of the full step, beside a one-thread-per-particle baseline."""
@@ -741,6 +751,7 @@ def bench(
     from .device import resolve_device
     from .scheme import PRECISIONS
     from .layouts import parse_layout
+    from .params import CONTACT_LAWS
     from .scheme import GRAVITY_SOLVERS
 
     try:
@@ -764,6 +775,9 @@ def bench(
     blocks = _integer_list(particle_blocks)
     if any(b < 1 or b > 1024 for b in blocks):
         fail(f"--particle-blocks must list threads a block from 1 to 1024, e.g. 32,64; got {particle_blocks!r}")
+    laws = list(dict.fromkeys(law.strip() for law in contact_law.split(",") if law.strip()))
+    if not laws or any(law not in CONTACT_LAWS for law in laws):
+        fail(f"--contact-law must list {', '.join(CONTACT_LAWS)}; got {contact_law!r}")
     kinds = [k.strip() for k in system.split(",") if k.strip()]
     if not kinds or any(k not in benchmarks.TEST_SYSTEMS for k in kinds):
         fail(f"--system must list {' and/or '.join(benchmarks.TEST_SYSTEMS)}; got {system!r}")
@@ -783,7 +797,7 @@ def bench(
     header = f"{'N':>8} {'force pairs/s':>14} {'step pairs/s':>13} {'step ms':>9} {'particles/s':>12} {'of limit':>9} {'baseline pairs/s':>17} {'speed-up':>9}  layout"
     typer.echo(header)
     rows = []
-    for row in benchmarks.bench_rows(sizes, kinds, chosen, precision, budget, steps, solvers, extra_layouts, ensembles, clocks, blocks):
+    for row in benchmarks.bench_rows(sizes, kinds, chosen, precision, budget, steps, solvers, extra_layouts, ensembles, clocks, blocks, laws):
         rows.append(row)
         baseline = not math.isnan(row.baseline_seconds)
         fraction = f"{100 * row.fraction_of_limit:8.1f}%" if row.fraction_of_limit is not None else f"{'n/a':>9}"
@@ -972,7 +986,7 @@ def compare(
         help="Keep only the runs with one of these values in COLUMN (repeatable, every column must match; numbers within 1 %), e.g. --where mass_ratio=1 --where eta=3,6."
     ),
     allow_mixed: bool = typer.Option(
-        False, "--allow-mixed", help="Compare runs at one point that differ in a set-up column (mass_ratio, theta_deg, k_in, dt, gravity_every, eta_potential, n_particles, restitution, mu_k, mu_r, G, rolling_friction) other than --by and --at."
+        False, "--allow-mixed", help="Compare runs at one point that differ in a set-up column (mass_ratio, theta_deg, k_in, dt, gravity_every, eta_potential, n_particles, restitution, mu_k, mu_r, G, rolling_friction, contact_law, k_t_ratio, eps_t, mu_s, mu_t, beta, cohesion) other than --by and --at."
     ),
     allow_single: bool = typer.Option(
         False, "--allow-single", help="Accept groups of one run: shown without spread or interval (without it, the table is printed and the command exits 2 naming them)."

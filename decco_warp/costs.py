@@ -128,11 +128,15 @@ CPU_SECONDS_PER_PAIR = 5e-9
 CPU_TREE_SECONDS_PER_PARTICLE = 7.5e-6
 
 
-def memory_estimate(n: int, scheme: Scheme, device: str = "cpu", ledger: bool = True, *, candidate_width: int = CANDIDATES) -> int:
+def memory_estimate(
+    n: int, scheme: Scheme, device: str = "cpu", ledger: bool = True, *, candidate_width: int = CANDIDATES, contact_history: bool = False,
+) -> int:
     """Bytes a job of ``n`` particles by ``scheme`` needs on its device (and on the host), an upper
-    estimate: the arrays Engine and GravityTree allocate, taken as for the largest layout, and the
+    estimate: the arrays Engine and GravityTree allocate, taken as for the largest layout, the
     Newton sweep's rows where all-pairs gravity takes it (Scheme.newton_sweep: a Newton layout, as
-    CUDA's default is up to NEWTON_MAX particles, or gravity on its own clock on any device)."""
+    CUDA's default is up to NEWTON_MAX particles, or gravity on its own clock on any device), and with
+    ``contact_history`` the contact history of a law with springs per pair (arrays.ContactHistory:
+    ``candidate_width`` rows a particle, current and next)."""
     gravity = scheme.gravity
     vec3d, f64, i32 = 24, 8, 4
     per = 3 * f64 + 5 * vec3d  # radius, mass, inertia; position, velocity, omega, force, torque
@@ -142,6 +146,8 @@ def memory_estimate(n: int, scheme: Scheme, device: str = "cpu", ledger: bool = 
     per += 3 * vec3d + f64 + 5 * i32  # gravity on its own clock: gravity, the list's build positions, the build's sorted
     # positions and radii; system, cell keys and order (2 N)
     per += len(PAIR_OBSERVABLES) * f64  # a frame's pair observables
+    if contact_history:  # count; per row partner, spring, normal, rolling, twist; twice (current and next)
+        per += 2 * (i32 + candidate_width * (i32 + 3 * vec3d + f64)) + 2 * f64  # (and the springs' energies of a frame)
     if gravity == "tree":  # nodes (2n): mass, centre, quadrupole, box, size, offset, links (16), child, first,
         # last, parent, escape; keys, order (2n); leaf positions, grid points; each walk part's field and potential
         per += 2 * (f64 + vec3d + 72 + 2 * vec3d + 2 * f64 + 16 + 5 * i32) + 4 * i32 + vec3d + 12
@@ -163,14 +169,17 @@ def cpu_step_seconds(n: int, gravity: str) -> float:
 LONG_ON_CPU = 3600.0
 
 
-def check_fits(n: int, scheme: Scheme, device: str, steps: int, what: str, *, candidate_width: int = CANDIDATES) -> str | None:
-    """Refuse (InputError) a job by ``scheme`` whose memory estimate passes the device's free memory;
-    for one that fits but would take hours on the CPU, the line that says so (else None)."""
+def check_fits(
+    n: int, scheme: Scheme, device: str, steps: int, what: str, *, candidate_width: int = CANDIDATES, contact_history: bool = False,
+) -> str | None:
+    """Refuse (InputError) a job by ``scheme`` whose memory estimate passes the device's free memory
+    (``contact_history``: its law keeps springs per pair); for one that fits but would take hours on
+    the CPU, the line that says so (else None)."""
     from .checks import InputError
     from .device import free_memory
 
     gravity = scheme.gravity
-    need = memory_estimate(n, scheme, device, candidate_width=candidate_width)
+    need = memory_estimate(n, scheme, device, candidate_width=candidate_width, contact_history=contact_history)
     free = free_memory(device)
     if need > free:
         tree = "" if gravity == "tree" else ", gravity = \"tree\" (its memory grows as N, all-pairs' as N^2 here)"

@@ -62,7 +62,10 @@ class Engine:
         self.scheme = choose_scheme(int(sizes.max()), self.device, scheme, precision=precision, force_kernel=force_kernel, layout=layout)
         self.model = ModelArrays(state, params, self.device, self.scheme.precision, systems,
                                  candidate_width(float(state.radii.min()), float(state.radii.max())))  # fmt: skip
-        self.state = StateArrays(state, self.device, ledger)
+        # A law with springs per pair keeps each particle's contacts: as many rows as its candidate
+        # lists hold, or as it has others in its system.
+        rows = max(1, min(self.model.candidate_width, int(sizes.max()) - 1)) if params.keeps_springs else 0
+        self.state = StateArrays(state, self.device, ledger, rows)
         # The parts, chosen in one place (scheme.force_path; the integrator by the clocks).
         self.path = FORCE_PATHS[force_path(self.scheme)](self.model, self.state, self.scheme)
         self.integrator = integrator_for(self.scheme)(self.model, self.state, self.path, self.scheme, self.pack_bodies)
@@ -150,7 +153,15 @@ class Engine:
         overlap [cm], and its deepest contact as a fraction of the pair's smaller radius with that partner."""
         outputs = {name: wp.zeros(self.count, dtype=dtype, device=self.device) for name, dtype in PAIR_OBSERVABLES.items()}
         self.path.observables(outputs)
-        return {name: array.numpy() for name, array in outputs.items()}
+        pairs = {name: array.numpy() for name, array in outputs.items()}
+        if self.state.history.kept:  # the contacts' springs (a law with springs per pair)
+            pairs["elastic_tangential"], pairs["elastic_rolling"] = self.state.history.spring_energies(self.model.radius.numpy(), self.params)
+        return pairs
+
+    def history_overflows(self, first: int = 0, end: int | None = None) -> int:
+        """Particles (of rows [first, end)) that touched more particles than their contact history holds at
+        the last evaluation (a law with springs per pair): the springs of the others were not kept."""
+        return self.state.history.overflows(first, end)
 
     def take_deepest_contact(self, first: int = 0, end: int | None = None) -> dict:
         """The deepest contact any force evaluation met since the last call (or the start), as
@@ -184,13 +195,14 @@ class Engine:
                        "torque": "torque", "channels": "channels", "work": "work"}  # fmt: skip
 
     def snapshot(self) -> dict[str, np.ndarray]:
-        """Every array the next step depends on: enough to continue bit for bit.  With gravity on its
+        """Every array the next step depends on: enough to continue bit for bit (with a law that keeps
+        springs per pair, its contact history, arrays.ContactHistory.arrays).  With gravity on its
         own clock ``force`` is the contact force; gravity, a function of the positions alone, is
         evaluated anew on :meth:`restore`, and the neighbour lists are kept (contact_finders.py
         ``NeighbourList.arrays``)."""
         s = self.state
         arrays = {key: getattr(s, name).numpy().copy() for key, name in self.SNAPSHOT_ARRAYS.items()}
-        return {**arrays, "deepest_contact": s.deepest_contact.numpy().copy(), **self.path.arrays()}
+        return {**arrays, "deepest_contact": s.deepest_contact.numpy().copy(), **s.history.arrays(), **self.path.arrays()}
 
     def restore(self, snapshot: dict[str, np.ndarray]) -> None:
         """Load a :meth:`snapshot` back (same particle count and ledger setting)."""
@@ -205,6 +217,7 @@ class Engine:
         if records.shape != (self.count,):
             raise InputError(f"snapshot deepest_contact has shape {records.shape}; expected {(self.count,)}")
         self.state.deepest_contact.assign(wp.array(records, dtype=wp.int64, device=self.device))
+        self.state.history.load(snapshot)
         self.path.restored(snapshot, self.pack_bodies)
 
 

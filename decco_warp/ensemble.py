@@ -13,6 +13,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from .arrays import HISTORY_ARRAYS
 from .diagnostics import state_diagnostics
 from .contact_finders import NEIGHBOUR_ARRAYS, neighbour_arrays
 from .simulation import Simulation
@@ -51,6 +52,8 @@ class Ensemble:
         joined["deepest_contact"] = np.concatenate([_partners_moved(snap["deepest_contact"], first) for snap, first in zip(snapshots, starts)])
         if all(key in snap for snap in snapshots for key in NEIGHBOUR_ARRAYS):  # each system's lists as alone
             joined.update(_joined_lists(snapshots, starts))
+        if all(key in snap for snap in snapshots for key in HISTORY_ARRAYS):  # each system's contacts and springs
+            joined.update(_joined_history(snapshots, starts))
         state = State.from_arrays(
             joined["positions"], joined["velocities"], joined["omegas"],
             np.concatenate([s.radii for s in statics]), np.concatenate([s.masses for s in statics]),
@@ -122,6 +125,29 @@ def _joined_lists(snapshots: list[dict], starts: np.ndarray) -> dict[str, np.nda
     }
 
 
+def _history_moved(history: dict[str, np.ndarray], offset: int, width: int | None = None) -> dict[str, np.ndarray]:
+    """A contact history (arrays.ContactHistory.arrays) with each partner's index moved by ``offset``,
+    its rows padded to ``width`` columns (None: as they are)."""
+    count, partner = history["contact_count"], history["contact_partner"]
+    width = partner.shape[1] if width is None else width
+    moved = {"contact_count": count.copy()}
+    for key in HISTORY_ARRAYS[1:]:
+        values = history[key]
+        padded = np.zeros((values.shape[0], width, *values.shape[2:]), dtype=values.dtype)
+        padded[:, : values.shape[1]] = values
+        moved[key] = padded
+    used = np.arange(width)[None, :] < np.minimum(count, partner.shape[1])[:, None]  # (rows past the count are zeros)
+    moved["contact_partner"] = np.where(used, moved["contact_partner"] + offset, 0).astype(np.int32)
+    return moved
+
+
+def _joined_history(snapshots: list[dict], starts: np.ndarray) -> dict[str, np.ndarray]:
+    """The members' contact histories in the ensemble's numbering, as wide as the widest."""
+    width = max(snap["contact_partner"].shape[1] for snap in snapshots)
+    parts = [_history_moved({key: snap[key] for key in HISTORY_ARRAYS}, int(first), width) for snap, first in zip(snapshots, starts)]
+    return {key: np.concatenate([part[key] for part in parts]) for key in HISTORY_ARRAYS}
+
+
 class SystemView:
     """One system of an :class:`Ensemble`, with the reading side of a :class:`Simulation`."""
 
@@ -182,6 +208,9 @@ class SystemView:
     def candidate_overflows(self) -> int:
         return self._ensemble.sim.engine.candidate_overflows(self.first, self.end)
 
+    def history_overflows(self) -> int:
+        return self._ensemble.sim.engine.history_overflows(self.first, self.end)
+
     def neighbour_list_builds(self) -> int | None:
         """This system's (each system's lists are rebuilt when its own particles have moved)."""
         return self._ensemble.sim.neighbour_list_builds(self.system)
@@ -194,5 +223,9 @@ class SystemView:
         if all(key in whole for key in NEIGHBOUR_ARRAYS):
             reference, count, listed = (whole[key][self.first : self.end] for key in NEIGHBOUR_ARRAYS)
             snap.update(neighbour_arrays(reference, count, _lists_moved(count, listed, -self.first)))
+        if all(key in whole for key in HISTORY_ARRAYS):
+            mine = _history_moved({key: whole[key][self.first : self.end] for key in HISTORY_ARRAYS}, -self.first)
+            used = max(1, int(min(mine["contact_count"].max(initial=0), mine["contact_partner"].shape[1])))
+            snap.update({key: values[:, :used].copy() if key != "contact_count" else values for key, values in mine.items()})
         snap.update(step=self.step_count, time_origin=self._time_origin, ledger=True, energy_start=dict(self.energy_start))
         return snap

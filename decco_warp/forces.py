@@ -73,6 +73,8 @@ class ContactPass:
         self.model = model
         blocks = _on_cuda(model.device) or wp.config.enable_cpu_blocks
         self.lanes, self.particles = (CONTACT_LANES, CONTACT_PARTICLES) if blocks else (1, 1)
+        if model.params.keeps_springs:  # one lane a particle writes its contacts' springs in order
+            self.lanes, self.particles = 1, self.lanes * self.particles
         self.kernel = contact_pass(model.params.law, self.lanes, self.particles, accumulate)
 
     def launch(self, state: StateArrays, finder: ContactFinder) -> None:
@@ -81,10 +83,11 @@ class ContactPass:
             self.kernel,
             dim=[-(-m.count // self.particles)],
             block_dim=self.lanes * self.particles,
-            inputs=[m.contact, m.ranges, m.radius, *state.contact_inputs(), finder.candidate_count, finder.candidates],
+            inputs=[m.contact, m.ranges, m.radius, m.mass, *state.contact_inputs(), finder.candidate_count, finder.candidates],
             outputs=state.contact_outputs(),
             device=m.device,
         )
+        state.history.commit()
 
 
 class ForcePath:
@@ -152,7 +155,8 @@ class ForcePath:
         return None if self.finder is None else self.finder.builds(system)
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """Per-particle arrays beside the state's that a snapshot must hold for the path to go on bit for bit."""
+        """Per-particle arrays beside the state's that a snapshot must hold for the path to go on bit for bit
+        (its finder's lists; the contacts' springs are the state's own, arrays.ContactHistory)."""
         return {} if self.finder is None else self.finder.arrays()
 
     def restored(self, snapshot: dict, pack) -> None:
@@ -178,8 +182,9 @@ class ReferenceForces(ForcePath):
 
     def evaluate(self) -> None:
         m, s = self.model, self.state
-        wp.launch(self.kernel, dim=m.count, inputs=[m.contact, m.ranges, m.radius, m.mass, s.position, s.velocity, s.omega],
+        wp.launch(self.kernel, dim=m.count, inputs=[m.contact, m.ranges, m.radius, m.mass, *s.contact_inputs()],
                   outputs=s.contact_outputs(), device=m.device)  # fmt: skip
+        s.history.commit()
 
 
 class FusedForces(ForcePath):
@@ -205,10 +210,12 @@ class FusedForces(ForcePath):
             self.kernel,
             dim=[self.blocks.shape[0]],
             block_dim=self.scheme.layout.block_dim,
-            inputs=[m.contact, self.blocks, m.radius, m.mass, m.sweep_max_radius, s.position, s.velocity, s.omega, self.body],
+            inputs=[m.contact, self.blocks, m.radius, m.mass, m.sweep_max_radius, s.position, s.velocity, s.omega, self.body,
+                    s.history.current],
             outputs=s.contact_outputs(),
             device=m.device,
-        )
+        )  # fmt: skip
+        s.history.commit()
 
 
 class NewtonForces(ForcePath):

@@ -194,6 +194,8 @@ OBSERVABLE_UNITS = {
     "kinetic_rotational": "erg",
     "potential": "erg",
     "elastic": "erg",
+    "elastic_tangential": "erg",
+    "elastic_rolling": "erg",
     "total_energy": "erg",
     "dissipated_sliding": "erg",
     "dissipated_rolling": "erg",

@@ -19,8 +19,13 @@ ROLLING_FRICTION_FORMS = ("couple", "paper")
 
 #: Contact laws (docs/model.md, "Contact laws"): "paper", the paper's law as docs/model.md states it
 #: (rolling friction by ``rolling_friction``); "decco-code", DECCO's pair forces as its code computes
-#: them (LucasKolanz/DECCO at fae89d3).
-CONTACT_LAWS = ("paper", "decco-code")
+#: them (LucasKolanz/DECCO at fae89d3); "ssdem", pkdgrav's soft-sphere law (Schwartz, Richardson &
+#: Michel 2012), with a tangential spring per pair (static friction) and rolling and twisting springs.
+CONTACT_LAWS = ("paper", "decco-code", "ssdem")
+
+#: The constants of the soft-sphere law alone (contact_law = "ssdem"): the other laws read none of them.
+SSDEM_CONSTANTS = ("k_t_ratio", "eps_t", "mu_s", "mu_t", "beta", "cohesion")
+
 
 @dataclass(frozen=True)
 class Range:
@@ -43,6 +48,12 @@ PHYSICS_RANGES = {
     "restitution": Range(lambda v: 0 < v <= 1, "in (0, 1]"),
     "mu_k": Range(lambda v: v >= 0, ">= 0"),
     "mu_r": Range(lambda v: v >= 0, ">= 0"),
+    "k_t_ratio": Range(lambda v: v >= 0, ">= 0", "k_t / k_n"),
+    "eps_t": Range(lambda v: 0 < v <= 1, "in (0, 1]"),
+    "mu_s": Range(lambda v: v >= 0, ">= 0"),
+    "mu_t": Range(lambda v: v >= 0, ">= 0"),
+    "beta": Range(lambda v: v >= 0, ">= 0", "R_r / R*"),
+    "cohesion": Range(lambda v: v >= 0, ">= 0", "dyne/cm^2"),
     "dt": Range(lambda v: v > 0, "> 0", "s"),
     "G": Range(lambda v: v >= 0, ">= 0", "cm^3 g^-1 s^-2"),
 }
@@ -73,6 +84,24 @@ class Params:
     """Form of rolling friction of the paper's law, one of ROLLING_FRICTION_FORMS."""
     contact_law: str = "paper"
     """The contact law, one of CONTACT_LAWS."""
+    # The soft-sphere law ("ssdem", docs/model.md): its normal spring is k_n = k_in / 2 (the pair of
+    # the paper's springs in series), its normal restitution eps_n = restitution, and:
+    k_t_ratio: float = 2.0 / 7.0
+    """ssdem: k_t / k_n, the tangential spring's stiffness over the normal's (pkdgrav's default 2/7:
+    the tangential contact frequency equals the normal one)."""
+    eps_t: float = 1.0
+    """ssdem: sets the tangential dashpot C_t as restitution sets C_n (pkdgrav's dEpsT; 1: none). Not
+    the tangential restitution that results (docs/model.md)."""
+    mu_s: float = 0.3
+    """ssdem: static friction coefficient, the cap of the tangential spring: |F_T| <= mu_s |F_N|."""
+    mu_t: float = 0.0
+    """ssdem: twisting friction coefficient: the twisting couple slides at mu_t mu_s R_r |F_N|."""
+    beta: float = 0.5
+    """ssdem: shape parameter: rolling and twisting act at R_r = beta R_i R_j / (R_i + R_j); the
+    rolling couple slides at mu_r R_r |F_N|."""
+    cohesion: float = 0.0
+    """ssdem: cohesive strength c, a tensile stress [dyne/cm^2] (pkdgrav's dCohesiveCoeff, model 0): a
+    touching pair attracts with c 4 R_r^2, outside the friction caps."""
 
     def __post_init__(self):
         for name, allowed in PHYSICS_RANGES.items():
@@ -93,6 +122,21 @@ class Params:
         if self.contact_law == "paper":
             return "paper" if self.rolling_friction == "couple" else "paper-printed-rolling"
         return self.contact_law
+
+    @property
+    def keeps_springs(self) -> bool:
+        """Whether the contact law keeps springs per pair (a contact history, saved in snapshots)."""
+        return self.contact_law == "ssdem"
+
+    @property
+    def k_n(self) -> float:
+        """ssdem's normal spring, k_in / 2 [dyne/cm]: the paper's two springs in series (F = k_n x)."""
+        return 0.5 * self.k_in
+
+    @property
+    def k_t(self) -> float:
+        """ssdem's tangential spring, k_t_ratio k_n [dyne/cm]."""
+        return self.k_t_ratio * self.k_n
 
     @property
     def k_out(self) -> float:

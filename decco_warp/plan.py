@@ -91,6 +91,14 @@ class Outputs:
     """Steps between two checkpoints."""
 
 
+def _contact_words(p: Params) -> str:
+    """The contact law's constants in words, for ``--check``."""
+    if p.contact_law == "ssdem":
+        return (f"contact law ssdem (k_n {p.k_n:.6g} dyne/cm, k_t {p.k_t:.6g} dyne/cm, eps_n {p.restitution:g}, eps_t {p.eps_t:g}, "
+                f"mu_s {p.mu_s:g}, mu_r {p.mu_r:g}, mu_t {p.mu_t:g}, beta {p.beta:g}, cohesion {p.cohesion:g} dyne/cm^2)")  # fmt: skip
+    return f"restitution {p.restitution:g}, mu_k {p.mu_k:g}, mu_r {p.mu_r:g} ({p.rolling_friction})"
+
+
 @dataclass(frozen=True)
 class Plan:
     """A run resolved from its specification, nothing compiled or written: what a run executes
@@ -181,7 +189,7 @@ class Plan:
         p, s = self.params, self.scheme
         return [
             f"piles: {', '.join(f'{pile.which} {pile.file} (sha256 {pile.sha256[:12]})' for pile in self.piles)}",
-            f"physics: restitution {p.restitution:g}, mu_k {p.mu_k:g}, mu_r {p.mu_r:g} ({p.rolling_friction}), "
+            f"physics: {_contact_words(p)}, "
             f"G {p.G:.6g}, gravity {s.gravity}" + (f" (theta_open {s.theta_open:g})" if s.gravity == "tree" else ""),
             f"device: {self.device}, precision {self.precision}, force layout {self.layout.describe()}"
             + (f"; {s.clock_text(solver=True)}, contacts every step from a neighbour list" if s.clock_text() else ""),

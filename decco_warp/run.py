@@ -119,6 +119,8 @@ def record(sim: Simulation, size_classes: int) -> tuple[dict, dict]:
         "kinetic_rotational": d["kinetic_rotational"],
         "potential": d["potential"],
         "elastic": d["elastic"],
+        # The energy held in the contacts' springs (a law with springs per pair: "ssdem").
+        **({key: d[key] for key in ("elastic_tangential", "elastic_rolling")} if sim.params.keeps_springs else {}),
         "total_energy": d["total_energy"],
         **ledger,
         "momentum": d["momentum"],
@@ -194,7 +196,9 @@ def plan_fits(plan: Plan, n: int, steps: int) -> str | None:
     from .costs import check_fits
 
     try:
-        return check_fits(n, plan.scheme, plan.device, steps, "a run", candidate_width=_candidate_width(plan))
+        return check_fits(
+            n, plan.scheme, plan.device, steps, "a run", candidate_width=_candidate_width(plan), contact_history=plan.params.keeps_springs
+        )  # fmt: skip
     except InputError as error:
         raise RunError(str(error)) from None
 
@@ -203,7 +207,7 @@ def plan_memory(plan: Plan) -> int:
     """Bytes a run's plan needs on its device (costs.memory_estimate of its force path)."""
     from .costs import memory_estimate
 
-    return memory_estimate(plan.state.n, plan.scheme, plan.device, candidate_width=_candidate_width(plan))
+    return memory_estimate(plan.state.n, plan.scheme, plan.device, candidate_width=_candidate_width(plan), contact_history=plan.params.keeps_springs)
 
 
 def _candidate_width(plan: Plan) -> int:
@@ -548,6 +552,7 @@ class RunDriver:
         # have written before it stopped (checkpoints of decco-warp 0.2 do not say: then its start).
         self.last_frame = self.first_step if run_record.last_frame_step is None else run_record.last_frame_step
         self.overflow_noted = False
+        self.history_overflow_noted = False
 
     @property
     def done(self) -> bool:
@@ -624,7 +629,18 @@ class RunDriver:
 
     def note_candidate_overflows(self, step: int) -> None:
         """Say once, at a frame, that some particles met more contact candidates than their list
-        holds: right, but each walks its whole system every step, so a run slows down."""
+        holds: right, but each walks its whole system every step, so a run slows down; and once
+        that some touched more particles than their contact history holds (a law with springs per
+        pair): the springs of those contacts were not kept."""
+        if self.sim.params.keeps_springs and not self.history_overflow_noted:
+            overflows = self.sim.history_overflows()
+            if overflows:
+                self.history_overflow_noted = True
+                self.log(
+                    f"warning: at step {step}, {overflows} of the particles touched more particles than their contact "
+                    "history holds; the springs of the contacts past it start afresh at every step (static friction "
+                    "and the rolling and twisting springs are lost there)"
+                )
         if self.overflow_noted:
             return  # said once: no more copies of the counts from the device
         overflows = self.sim.candidate_overflows()

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import warp as wp
 
-from .diagnostics import state_diagnostics
+from .diagnostics import ENERGY_START_KEYS, state_diagnostics
 from .engine import Engine
 from .layouts import Layout
 from .params import Params
@@ -109,7 +109,7 @@ class Simulation:
         snap = self.engine.snapshot()
         snap.update(step=self._step, time_origin=self._time_origin, ledger=self.engine.ledger)
         if self.energy_start is not None:
-            snap["energy_start"] = {key: self.energy_start[key] for key in ("potential", "elastic", "total_energy")}
+            snap["energy_start"] = {key: self.energy_start.get(key, 0.0) for key in ENERGY_START_KEYS}
         return snap
 
     @property
@@ -216,6 +216,11 @@ class Simulation:
     def candidate_overflows(self) -> int:
         """Particles whose contact candidates overflowed their list at the last force evaluation."""
         return self.engine.candidate_overflows()
+
+    def history_overflows(self) -> int:
+        """Particles that touched more particles than their contact history holds at the last force
+        evaluation (a law with springs per pair; 0 otherwise): the springs of the others were not kept."""
+        return self.engine.history_overflows()
 
     def take_deepest_contact(self) -> dict:
         """The deepest contact any step met since the last call (or since this simulation was made or

@@ -7,7 +7,8 @@ A specification has four tables, every key optional (defaults below):
     [piles]      target, projectile          (pile files, or builtin:target / builtin:projectile)
     [collision]  eta | speed, eta_potential, theta_deg, gap, target_spin, target_spin_axis, projectile_spin,
                  projectile_spin_axis, orientation_seed
-    [params]     k_in, restitution, mu_k, mu_r, dt, G, rolling_friction, contact_law, gravity, theta_open, gravity_every,
+    [params]     k_in, restitution, mu_k, mu_r, dt, G, rolling_friction, contact_law, k_t_ratio, eps_t, mu_s, mu_t, beta, cohesion,
+                 gravity, theta_open, gravity_every,
                  max_compression
 
 Every problem is a :class:`SpecError` naming the table, the key and what is allowed.
@@ -33,7 +34,7 @@ from typing import Any, Callable
 from .collision import DEFAULT_THETA_DEG, ETA_POTENTIALS, SPIN_AXES, spin_axis
 from .scheme import GRAVITY_CHOICES, PRECISIONS, SCHEME_KEYS, SCHEME_RANGES, Scheme, auto_gravity_every, choose_gravity
 from .layouts import LAYOUT_CHOICES
-from .params import CONTACT_LAWS, PHYSICS_RANGES, ROLLING_FRICTION_FORMS, Params, Range
+from .params import CONTACT_LAWS, PHYSICS_RANGES, ROLLING_FRICTION_FORMS, SSDEM_CONSTANTS, Params, Range
 from .stability import DEFAULT_MAX_COMPRESSION, choose_stiffness, choose_time_step
 from .errors import SpecError  # noqa: F401 (re-exported: the error lives in errors.py)
 
@@ -138,6 +139,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "G": _ranged(_PARAMS_DEFAULT.G, PHYSICS_RANGES["G"]),
         "rolling_friction": Key(str, "couple", lambda v: v in ROLLING_FRICTION_FORMS, " or ".join(ROLLING_FRICTION_FORMS)),
         "contact_law": Key(str, _PARAMS_DEFAULT.contact_law, lambda v: v in CONTACT_LAWS, " or ".join(CONTACT_LAWS)),
+        # The soft-sphere law's own constants (contact_law = "ssdem"; params.py, docs/model.md).
+        **{name: _ranged(getattr(_PARAMS_DEFAULT, name), PHYSICS_RANGES[name]) for name in SSDEM_CONSTANTS},
         # The scheme's keys (scheme.py): how the model is evaluated, beside it in [params].
         "gravity": Key(str, _SCHEME_DEFAULT.gravity, lambda v: v in GRAVITY_CHOICES, " or ".join(GRAVITY_CHOICES)),
         "theta_open": _ranged(_SCHEME_DEFAULT.theta_open, SCHEME_RANGES["theta_open"]),

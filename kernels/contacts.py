@@ -22,7 +22,7 @@ import functools
 
 import warp as wp
 
-from .pair import CONTACT_LAWS, ContactModel, in_contact, overlap
+from .pair import CONTACT_LAWS, LAWS_WITH_SPRINGS, ContactModel, PairSprings, in_contact, overlap
 
 wp.set_module_options({"enable_backward": False})
 
@@ -54,16 +54,105 @@ def unpack_depth(record: int) -> tuple[float, int]:
     return (record >> PARTNER_BITS) / DEPTH_UNIT, record & ((1 << PARTNER_BITS) - 1)
 
 
+# --- A contact history: each particle's contacts by partner, with the pair's springs --------------
+#
+# A law with springs per pair (kernels/pair.py LAWS_WITH_SPRINGS) reads, for each pair it meets, the
+# springs of the step before from the particle's own rows (found by the partner's index: carried
+# whatever the candidate lists were rebuilt to, as long as the pair touched then), and writes the
+# springs now into the next rows, contact after contact; a pair that no longer touches is not
+# written, so that its springs are dropped.  Both particles of a pair keep a copy: each evaluates
+# the pair from its lower index with the same arguments (kernels/pair.py ssdem_contact), so the two
+# copies stay the same bits, and no thread writes another particle's rows.  ``commit_springs``
+# then makes the next rows the current ones (decco_warp/arrays.py ContactHistory).
+
+
+@wp.struct
+class PairHistory:
+    """Each particle's contacts at a contact evaluation, one row each, and their springs (the frame of
+    the pair's lower index, kernels/pair.py PairSprings); arrays without rows for a law without springs."""
+
+    count: wp.array(dtype=wp.int32)  # per particle: its contacts (past the rows' width: an overflow, the rest not kept)
+    partner: wp.array2d(dtype=wp.int32)  # per particle and row: the other particle
+    spring: wp.array2d(dtype=wp.vec3d)  # S [cm]
+    normal: wp.array2d(dtype=wp.vec3d)  # n from the lower index to the higher
+    rolling: wp.array2d(dtype=wp.vec3d)  # theta_r [rad]
+    twist: wp.array2d(dtype=wp.float64)  # theta_t [rad]
+
+
+@wp.func
+def springs_before(history: PairHistory, i: int, j: int):
+    """(found, springs) of the pair (i, j) in i's rows: found when they touched at the evaluation before."""
+    rows = wp.min(int(history.count[i]), history.partner.shape[1])
+    for row in range(rows):
+        if int(history.partner[i, row]) == j:
+            springs = PairSprings()
+            springs.spring = history.spring[i, row]
+            springs.normal = history.normal[i, row]
+            springs.rolling = history.rolling[i, row]
+            springs.twist = history.twist[i, row]
+            return True, springs
+    return False, PairSprings()
+
+
+@wp.func
+def keep_springs(history: PairHistory, i: int, row: int, j: int, springs: PairSprings):
+    """Write the pair (i, j)'s springs as i's row ``row`` (past the rows' width: not kept, counted)."""
+    if row < history.partner.shape[1]:
+        history.partner[i, row] = wp.int32(j)
+        history.spring[i, row] = springs.spring
+        history.normal[i, row] = springs.normal
+        history.rolling[i, row] = springs.rolling
+        history.twist[i, row] = springs.twist
+
+
+@wp.func
+def close_rows(history: PairHistory, i: int, rows: int):
+    """Note i's count of contacts (no-op for a law without springs)."""
+    if history.count.shape[0] > 0:
+        history.count[i] = wp.int32(rows)
+
+
+@wp.func
+def touches(i: int, j: int, radius_in: wp.array(dtype=wp.float64), position_in: wp.array(dtype=wp.vec3d)) -> bool:
+    """Whether i and j (not the same) touch, in float64: the test every contact evaluation makes."""
+    r_ij = position_in[i] - position_in[j]
+    d2 = wp.dot(r_ij, r_ij)
+    return d2 > wp.float64(0.0) and in_contact(d2, radius_in[i], radius_in[j])
+
+
+@wp.kernel
+def commit_springs(
+    # In:
+    next_in: PairHistory,
+    # Out:
+    history_out: PairHistory,
+):
+    """The rows of the last contact evaluation become the current ones (one thread a particle)."""
+    i = wp.tid()
+    count = next_in.count[i]
+    history_out.count[i] = count
+    for row in range(wp.min(int(count), next_in.partner.shape[1])):
+        history_out.partner[i, row] = next_in.partner[i, row]
+        history_out.spring[i, row] = next_in.spring[i, row]
+        history_out.normal[i, row] = next_in.normal[i, row]
+        history_out.rolling[i, row] = next_in.rolling[i, row]
+        history_out.twist[i, row] = next_in.twist[i, row]
+
+
 @functools.cache
 def contact_function(law: str):
     """The Warp function giving the contact channels on i from j if they touch, by ``law``
     (kernels/pair.py CONTACT_LAWS), in float64 from the state arrays.
 
-    Returns (spring force, sliding force, sliding torque, rolling force, rolling
-    torque), all zero for a pair that does not touch; notes the contact's depth in
-    ``deepest_out`` (see :func:`note_depth`).
+    Returns (spring force, sliding force, sliding torque, rolling force, rolling torque, touching:
+    1 or 0), the channels all zero for a pair that does not touch; notes the contact's depth in
+    ``deepest_out`` (see :func:`note_depth`).  A law with springs reads the pair's springs of the
+    step before in ``history_in`` and writes them now as i's row ``row`` of ``history_out``; its
+    spring channel is the normal force (spring and dashpot), its sliding channel the tangential force,
+    its rolling channel the rolling and twisting couple (no force).
     """
     contact = CONTACT_LAWS[law]
+    springs = law in LAWS_WITH_SPRINGS
 
     @wp.func
     def contact_channels(
@@ -71,9 +160,13 @@ def contact_function(law: str):
         i: int,
         j: int,
         radius_in: wp.array(dtype=wp.float64),
+        mass_in: wp.array(dtype=wp.float64),
         position_in: wp.array(dtype=wp.vec3d),
         velocity_in: wp.array(dtype=wp.vec3d),
         omega_in: wp.array(dtype=wp.vec3d),
+        history_in: PairHistory,
+        row: int,
+        history_out: PairHistory,
         deepest_out: wp.array(dtype=wp.int64),
     ):
         # The separation is taken in float64: positions are ~1e7 cm, overlaps ~1e2 cm.
@@ -82,19 +175,34 @@ def contact_function(law: str):
         # d2 == 0: the particle itself, or a coincident one, which has no direction.
         if d2 > wp.float64(0.0) and in_contact(d2, radius_in[i], radius_in[j]):
             note_depth(deepest_out, i, j, d2, radius_in[i], radius_in[j])
-            return wp.static(contact)(
-                model,
-                r_ij,
-                d2,
-                radius_in[i],
-                velocity_in[i],
-                omega_in[i],
-                radius_in[j],
-                velocity_in[j],
-                omega_in[j],
-                i < j,
-            )
-        return wp.vec3d(), wp.vec3d(), wp.vec3d(), wp.vec3d(), wp.vec3d()
+            if wp.static(springs):
+                found, before = springs_before(history_in, i, j)
+                # The pair from its lower index p, one call with the same arguments on either side.
+                p = wp.min(i, j)
+                q = wp.max(i, j)
+                normal, tangential, torque_p, torque_q, couple, now = wp.static(contact)(
+                    model, position_in[p], velocity_in[p], omega_in[p], radius_in[p], mass_in[p],
+                    position_in[q], velocity_in[q], omega_in[q], radius_in[q], mass_in[q], before, found,
+                )  # fmt: skip
+                keep_springs(history_out, i, row, j, now)
+                if i == p:
+                    return normal, tangential, torque_p, wp.vec3d(), couple, 1
+                return -normal, -tangential, torque_q, wp.vec3d(), -couple, 1
+            else:
+                spring, sliding, sliding_torque, rolling_force, rolling_torque = wp.static(contact)(
+                    model,
+                    r_ij,
+                    d2,
+                    radius_in[i],
+                    velocity_in[i],
+                    omega_in[i],
+                    radius_in[j],
+                    velocity_in[j],
+                    omega_in[j],
+                    i < j,
+                )
+                return spring, sliding, sliding_torque, rolling_force, rolling_torque, 1
+        return wp.vec3d(), wp.vec3d(), wp.vec3d(), wp.vec3d(), wp.vec3d(), 0
 
     return contact_channels
 
@@ -112,7 +220,9 @@ class ContactSum:
 
 @functools.cache
 def contact_sum_function(law: str):
-    """The Warp function adding the contact channels on i from j (zero unless they touch) to a ContactSum."""
+    """The Warp function adding the contact channels on i from j (zero unless they touch) to a
+    ContactSum; returns it and the count of i's contacts met (``rows`` before: the row j's springs
+    are kept in, for a law with springs)."""
     contact_channels = contact_function(law)
 
     @wp.func
@@ -121,14 +231,18 @@ def contact_sum_function(law: str):
         i: int,
         j: int,
         radius_in: wp.array(dtype=wp.float64),
+        mass_in: wp.array(dtype=wp.float64),
         position_in: wp.array(dtype=wp.vec3d),
         velocity_in: wp.array(dtype=wp.vec3d),
         omega_in: wp.array(dtype=wp.vec3d),
+        history_in: PairHistory,
+        rows: int,
+        history_out: PairHistory,
         deepest_out: wp.array(dtype=wp.int64),
         total: ContactSum,
-    ) -> ContactSum:
-        spring, sliding, sliding_torque, rolling_force, rolling_torque = contact_channels(
-            model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_out
+    ):
+        spring, sliding, sliding_torque, rolling_force, rolling_torque, touching = contact_channels(
+            model, i, j, radius_in, mass_in, position_in, velocity_in, omega_in, history_in, rows, history_out, deepest_out
         )
         out = ContactSum()
         out.spring = total.spring + spring
@@ -136,7 +250,7 @@ def contact_sum_function(law: str):
         out.sliding_torque = total.sliding_torque + sliding_torque
         out.rolling = total.rolling + rolling_force
         out.rolling_torque = total.rolling_torque + rolling_torque
-        return out
+        return out, rows + touching
 
     return add_contact
 
@@ -239,11 +353,14 @@ def contact_pass(law: str = "paper", lanes: int = 1, particles: int = 1, accumul
     sum does not depend on scheduling (one lane: in increasing j).  After an overflow of the list,
     lane 0 looks at every j of the system in turn.  Writes ``torque_out`` and the ledger's
     ``channels_out`` (when it has rows) whole; with ``accumulate`` adds the contact force to
-    ``force_inout`` (gravity's), without (gravity on its own clock) writes it there alone.
+    ``force_inout`` (gravity's), without (gravity on its own clock) writes it there alone.  A law
+    with springs takes one lane a particle, which writes its contacts' rows in order (``history_out``).
 
     Why groups of lanes: a particle lists ~8 candidates (~30 in a squeezed pile), so a warp of 32
     lanes a particle leaves most lanes idle and spends its time in a 32-lane reduction of 15
     float64 values; 8 lanes keep each lane busy and a warp serves four particles."""
+    if law in LAWS_WITH_SPRINGS and lanes != 1:
+        raise ValueError(f"the contact pass of a law with springs ({law}) takes one lane a particle; got {lanes}")
     contact_channels = contact_function(law)
     add_contact = contact_sum_function(law)
 
@@ -253,10 +370,12 @@ def contact_pass(law: str = "paper", lanes: int = 1, particles: int = 1, accumul
         model: ContactModel,
         ranges_in: wp.array(dtype=wp.vec2i),  # per particle: its system's particles, [first, end)
         radius_in: wp.array(dtype=wp.float64),
+        mass_in: wp.array(dtype=wp.float64),
         # In:
         position_in: wp.array(dtype=wp.vec3d),
         velocity_in: wp.array(dtype=wp.vec3d),
         omega_in: wp.array(dtype=wp.vec3d),
+        history_in: PairHistory,  # the contacts' springs at the evaluation before (a law with springs)
         candidate_count_in: wp.array(dtype=wp.int32),  # per particle: candidates noted (past the list's width: an overflow)
         candidates_in: wp.array2d(dtype=wp.int32),  # per particle: its candidates, in increasing j
         # Out:
@@ -264,6 +383,7 @@ def contact_pass(law: str = "paper", lanes: int = 1, particles: int = 1, accumul
         torque_out: wp.array(dtype=wp.vec3d),
         channels_out: wp.array2d(dtype=wp.vec3d),
         deepest_inout: wp.array(dtype=wp.int64),  # raised to each contact's depth (note_depth), or empty
+        history_out: PairHistory,  # the contacts' springs now (a law with springs)
     ):
         block, thread = wp.tid()
         group = thread // wp.static(lanes)
@@ -276,18 +396,24 @@ def contact_pass(law: str = "paper", lanes: int = 1, particles: int = 1, accumul
             noted = int(candidate_count_in[i])
             listed = noted <= candidates_in.shape[1]
         mine = ContactRows()
+        rows = int(0)  # i's contacts met (one lane a particle where rows are kept)
         for slot in range(lane, wp.where(listed, noted, 0), wp.static(lanes)):
-            spring, sliding, sliding_torque, rolling_force, rolling_torque = contact_channels(
-                model, i, candidates_in[i, slot], radius_in, position_in, velocity_in, omega_in, deepest_inout
-            )
+            spring, sliding, sliding_torque, rolling_force, rolling_torque, touching = contact_channels(
+                model, i, candidates_in[i, slot], radius_in, mass_in, position_in, velocity_in, omega_in, history_in, rows,
+                history_out, deepest_inout,
+            )  # fmt: skip
             mine += wp.matrix_from_rows(spring, sliding, sliding_torque, rolling_force, rolling_torque)
+            rows += touching
         per_lane = wp.tile_reshape(wp.tile(mine, preserve_type=True), shape=(wp.static(particles), wp.static(lanes)))
         sums = wp.tile_sum(per_lane, axis=1)
         if lane == 0 and i < candidate_count_in.shape[0]:
             total = contact_sum_of(sums[group])
             if not listed:  # every j of the system, each checked in float64
                 for j in range(ranges_in[i][0], ranges_in[i][1]):
-                    total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_inout, total)
+                    total, rows = add_contact(
+                        model, i, j, radius_in, mass_in, position_in, velocity_in, omega_in, history_in, rows, history_out, deepest_inout, total
+                    )
+            close_rows(history_out, i, rows)
             contacts = write_contacts(total, i, torque_out, channels_out)
             if wp.static(accumulate):
                 force_inout[i] = force_inout[i] + contacts

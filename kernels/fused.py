@@ -20,8 +20,8 @@ import functools
 import warp as wp
 
 from .bodies import is_candidate, near_bound, separation, sweep_of, unpack_block
-from .contacts import LedgerRows, contact_function, write_channels
-from .pair import ContactModel
+from .contacts import LedgerRows, PairHistory, close_rows, contact_function, touches, write_channels
+from .pair import LAWS_WITH_SPRINGS, ContactModel
 
 wp.set_module_options({"enable_backward": False})
 
@@ -48,6 +48,7 @@ def pair_forces_tiled(
     """
     real, _, Body, inverse_sqrt, radius_at, g_mass_at, candidate = sweep_of(precision)
     contact_channels = contact_function(law)
+    springs = law in LAWS_WITH_SPRINGS
     T, P, K = block_dim, particles_per_block, contact_slots
     Bodies = wp.types.matrix(shape=(P, Body._length_), dtype=real)
     Near = wp.types.vector(length=P, dtype=real)
@@ -77,11 +78,13 @@ def pair_forces_tiled(
         velocity_in: wp.array(dtype=wp.vec3d),
         omega_in: wp.array(dtype=wp.vec3d),
         body_in: wp.array(dtype=Body),
+        history_in: PairHistory,  # the contacts' springs at the evaluation before (a law with springs)
         # Out:
         force_out: wp.array(dtype=wp.vec3d),
         torque_out: wp.array(dtype=wp.vec3d),
         channels_out: wp.array2d(dtype=wp.vec3d),  # (N, 4) with the ledger (written whole), else empty
         deepest_inout: wp.array(dtype=wp.int64),  # raised to each contact's depth (note_depth), or empty
+        history_out: PairHistory,  # the contacts' springs now (a law with springs)
     ):
         block, lane = wp.tid()
         first, end, j_first, j_end = unpack_block(blocks_in[block])
@@ -134,6 +137,28 @@ def pair_forces_tiled(
                 walk = (j_end - j_first - lane + wp.static(T) - 1) // wp.static(T)
             if wp.static(ledger):
                 channels = LedgerRows()
+            rows = int(0)
+            if wp.static(springs):
+                # Where this lane's rows of i's contacts begin: after the lanes before it (a scan of
+                # their counts), so that the lanes write them side by side in a fixed order.
+                mine = int(0)
+                for s in range(walk):
+                    j = 0
+                    if overflow:  # (the walk's own test first, as below)
+                        j = j_first + lane + s * wp.static(T)
+                        body_j = body_in[j]
+                        r = separation(body_i, body_j)
+                        reach = body_i[radius_at] + body_j[radius_at]
+                        if wp.dot(r, r) >= reach * reach * candidate:
+                            continue
+                    else:
+                        j = slots[p, s]
+                    if touches(i, j, radius_in, position_in):
+                        mine += 1
+                rows = wp.untile(wp.tile_scan_exclusive(wp.tile(mine)))
+                contacts_of_i = wp.tile_sum(wp.tile(mine))
+                if lane == 0:
+                    close_rows(history_out, i, contacts_of_i[0])
             for s in range(walk):
                 j = 0
                 if overflow:
@@ -145,9 +170,10 @@ def pair_forces_tiled(
                         continue
                 else:
                     j = slots[p, s]
-                spring, sliding, sliding_torque, rolling, rolling_torque = contact_channels(
-                    model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_inout
+                spring, sliding, sliding_torque, rolling, rolling_torque, touching = contact_channels(
+                    model, i, j, radius_in, mass_in, position_in, velocity_in, omega_in, history_in, rows, history_out, deepest_inout
                 )
+                rows += touching
                 force = spring + sliding + rolling
                 torque = sliding_torque + rolling_torque
                 for k in range(3):

@@ -12,7 +12,7 @@ import functools
 import warp as wp
 
 from .contacts import candidate_at, candidates_walk
-from .pair import ContactModel, in_contact, normal_force_magnitude, overlap, spring_constant
+from .pair import ContactModel, cohesive_force, in_contact, normal_force_magnitude, overlap, spring_constant
 
 wp.set_module_options({"enable_backward": False})
 
@@ -43,6 +43,10 @@ def add_contact_observables(
         k = spring_constant(wp.dot(velocity_in[i] - velocity_in[j], r_ij / d), model.k_in, model.k_out)
         # Energy of the spring pair, (k/4) delta^2 for the force (k/2) delta, halved per side.
         out.elastic = total.elastic + wp.float64(0.5) * wp.float64(0.5) * normal_force_magnitude(delta, k) * delta
+        # ssdem's cohesion, a force F_c towards the other while touching: its potential -F_c delta, halved
+        # per side (zero for the other laws: their cohesion and beta are 0).
+        radius_r = model.beta * radius_i * radius_j / (radius_i + radius_j)
+        out.elastic = out.elastic - wp.float64(0.5) * cohesive_force(model.cohesion, radius_r) * delta
         out.contacts = total.contacts + 1
         out.max_overlap = wp.max(total.max_overlap, delta)
         # Depth relative to the smaller sphere: past 1 a centre lies inside the other sphere.

@@ -34,6 +34,16 @@ class ContactModel:
     k_out: wp.float64  # spring constant while receding, restitution^2 * k_in [dyne/cm]
     mu_k: wp.float64  # sliding (kinetic) friction coefficient
     mu_r: wp.float64  # rolling friction coefficient
+    # The soft-sphere law of pkdgrav ("ssdem", docs/model.md), zero for the other laws:
+    k_n: wp.float64  # normal spring [dyne/cm]
+    k_t: wp.float64  # tangential spring [dyne/cm]
+    damping_n: wp.float64  # C_n / sqrt(reduced mass) [g^1/2 s^-1]: -2 ln(eps_n) sqrt(k_n / (pi^2 + ln^2 eps_n))
+    damping_t: wp.float64  # C_t / sqrt(reduced mass), the same of k_t and eps_t
+    mu_s: wp.float64  # static friction coefficient: |F_T| <= mu_s |F_N|
+    mu_t: wp.float64  # twisting friction coefficient: |M_t| <= mu_t mu_s R_r |F_N|
+    beta: wp.float64  # shape parameter: the rolling and twisting radius R_r = beta R_i R_j / (R_i + R_j)
+    cohesion: wp.float64  # c, the cohesive tensile strength [dyne/cm^2]: a touching pair attracts with 4 c R_r^2
+    dt: wp.float64  # the step over which a contact's springs are carried and stretched [s]
 
 
 # --- gravity (paper eq. 2) ---------------------------------------------------
@@ -369,13 +379,157 @@ def contact_as_decco_code(
     return normal_magnitude * n, sliding, wp.cross(arm_i, sliding), vec3d(), wp.cross(arm_i, rolling)
 
 
+# --- the soft-sphere law of pkdgrav (Schwartz, Richardson & Michel 2012; docs/model.md "ssdem") -------
+#
+# pkdgrav (WH-Zhou/pkdgrav_current fe25b05, smoothfcn.c DoDEM; docs/ssdem-design.md) meets each pair
+# once, from its lower index p, with n the unit vector from p to the other, q.  So do these functions:
+# a contact's springs live in that frame, and both particles evaluate the pair from p's side with the
+# same arguments in the same order, so that the two get the same bits (exact action and reaction)
+# and keep the same copy of the pair's springs (kernels/contacts.py).
+
+
+@wp.struct
+class PairSprings:
+    """A contact's springs, in the frame of its lower index p (docs/model.md "ssdem")."""
+
+    spring: wp.vec3d  # S, the tangential spring's stretch [cm], in the tangent plane
+    normal: wp.vec3d  # n at the step before, from p to q (zero: no step before, a new contact)
+    rolling: wp.vec3d  # theta_r, the rolling spring's angle [rad], in the tangent plane
+    twist: wp.float64  # theta_t, the twisting spring's angle about n [rad]
+
+
+@wp.func
+def rotated(v: wp.vec3d, axis: wp.vec3d, sine: wp.float64, cosine: wp.float64) -> wp.vec3d:
+    """v turned right-handedly about the unit ``axis`` by the angle of that sine and cosine (Rodrigues)."""
+    return cosine * v + sine * wp.cross(axis, v) + ((f64(1.0) - cosine) * wp.dot(axis, v)) * axis
+
+
+@wp.func
+def carried(v: wp.vec3d, normal_before: wp.vec3d, n: wp.vec3d, spin_sum: wp.vec3d, dt: wp.float64) -> wp.vec3d:
+    """A tangential spring of the step before carried into the current tangent plane, in pkdgrav's
+    two stages (smoothfcn.c 4753-4846; [S12] sect. 2.2): turned about the mean normal by the pair's
+    mean spin about it over the step, 1/2 dt (w_p + w_q).n_mean, then with the normal from
+    ``normal_before`` onto ``n``; then projected onto the plane (pkdgrav does not project: the
+    stages leave it off the plane by round-off and by the second order of the turns)."""
+    mean = normal_before + n
+    mean = mean / wp.length(mean)  # the normal turns by far less than 90 degrees in a step
+    angle = f64(0.5) * dt * wp.dot(spin_sum, mean)
+    v = rotated(v, mean, wp.sin(angle), wp.cos(angle))
+    axis = wp.cross(normal_before, n)
+    sine = wp.length(axis)
+    if sine > f64(0.0):
+        v = rotated(v, axis / sine, sine, wp.dot(n, normal_before))
+    return v - wp.dot(v, n) * n
+
+
+@wp.func
+def cohesive_force(cohesion: wp.float64, radius_r: wp.float64) -> wp.float64:
+    """|F_c| = c 4 R_r^2 [dyne]: a tensile strength c over the area (2 R_r)^2, R_r = beta R* (pkdgrav's model 0)."""
+    return f64(4.0) * cohesion * radius_r * radius_r
+
+
+@wp.func
+def ssdem_contact(
+    model: ContactModel,
+    position_p: wp.vec3d,
+    velocity_p: wp.vec3d,
+    omega_p: wp.vec3d,
+    radius_p: wp.float64,
+    mass_p: wp.float64,
+    position_q: wp.vec3d,
+    velocity_q: wp.vec3d,
+    omega_q: wp.vec3d,
+    radius_q: wp.float64,
+    mass_q: wp.float64,
+    before: PairSprings,
+    found: bool,
+):
+    """One contact of the soft-sphere law, from its lower index p (docs/model.md "ssdem"), given its
+    springs of the step before (``found``: the pair touched then).
+
+    Returns (F_N on p, F_T on p, F_T's torque on p, F_T's torque on q, the rolling and twisting couple
+    on p (q gets minus it), the springs now).  Forces [dyne], torques [dyne cm]."""
+    r = position_q - position_p
+    d = wp.sqrt(wp.dot(r, r))
+    n = r / d  # from p to q
+    x = radius_p + radius_q - d  # overlap
+    lever_p = (radius_p * radius_p - radius_q * radius_q + d * d) / (f64(2.0) * d)  # centre to contact plane [S12] eq. 9
+    lever_q = d - lever_p
+    # Velocity of q's material relative to p's at the contact, and its parts.
+    u = (velocity_q - velocity_p) + lever_q * wp.cross(n, omega_q) + lever_p * wp.cross(n, omega_p)
+    u_n = wp.dot(u, n) * n
+    u_t = u - u_n
+    root_mass = wp.sqrt(mass_p * mass_q / (mass_p + mass_q))
+    damping_n = model.damping_n * root_mass  # C_n [S12] eq. 15
+    damping_t = model.damping_t * root_mass  # C_t
+    radius_r = model.beta * radius_p * radius_q / (radius_p + radius_q)  # R_r
+    area = radius_r * radius_r
+    # Rolling and twisting rates (pkdgrav's spring-dashpot-slider; smoothfcn.c 4716-4738).
+    spin = omega_q - omega_p
+    twist_rate = wp.dot(n, spin)
+    rolling_rate = spin - twist_rate * n
+    levers = lever_p * lever_q
+    if levers > f64(0.0):  # (a centre inside the other sphere has no contact plane between them)
+        rolling_rate = rolling_rate + ((lever_q - lever_p) / (f64(2.0) * levers)) * wp.cross(n, u)
+    now = PairSprings()
+    if found:
+        spin_sum = omega_p + omega_q
+        now.spring = carried(before.spring, before.normal, n, spin_sum, model.dt)
+        now.rolling = carried(before.rolling, before.normal, n, spin_sum, model.dt)
+        now.twist = before.twist
+    now.normal = n
+    now.spring = now.spring + model.dt * u_t  # [S12] eq. 7: this step's stretch first
+    now.rolling = now.rolling + model.dt * rolling_rate
+    now.twist = now.twist + model.dt * twist_rate
+    normal = (-model.k_n * x) * n + damping_n * u_n  # [S12] eqs. 3, 13, 16: never clamped
+    normal_magnitude = wp.length(normal)  # N: the caps' normal force, damping included
+    tangential = model.k_t * now.spring + damping_t * u_t  # [S12] eqs. 6, 14, 17
+    # Static friction: past mu_s N the force is mu_s N along the trial force and the spring is set to
+    # what gives it (Coulomb sliding; pkdgrav zeroes the spring instead, docs/model.md).
+    cap = model.mu_s * normal_magnitude
+    size = wp.length(tangential)
+    if size > cap:
+        tangential = (cap / size) * tangential
+        now.spring = vec3d()
+        if model.k_t > f64(0.0):
+            now.spring = (tangential - damping_t * u_t) / model.k_t
+    # Rolling: a spring k_r = k_n R_r^2 with its dashpot, slid at mu_r R_r N (the spring then kept).
+    rolling = (model.k_n * area) * now.rolling
+    rolling_cap = model.mu_r * radius_r * normal_magnitude
+    rolling_size = wp.length(rolling)
+    if rolling_size > rolling_cap:
+        rolling = (rolling_cap / rolling_size) * rolling
+        now.rolling = now.rolling - model.dt * rolling_rate
+    else:
+        rolling = rolling + (damping_n * area) * rolling_rate
+    # Twisting: a spring k_q = 2 k_t R_r^2 with its dashpot, slid at mu_t mu_s R_r N (pkdgrav's cap).
+    twisting = f64(2.0) * model.k_t * area * now.twist
+    twist_cap = model.mu_t * model.mu_s * radius_r * normal_magnitude
+    if wp.abs(twisting) > twist_cap:
+        twisting = wp.sign(twisting) * twist_cap
+        now.twist = now.twist - model.dt * twist_rate
+    else:
+        twisting = twisting + f64(2.0) * damping_t * area * twist_rate
+    # Cohesion (pkdgrav's model 0, Zhang & Richardson's note eqs. 2-3): c over the area (2 R_r)^2, towards
+    # q while touching; added after the caps, which it does not raise.
+    normal = normal + cohesive_force(model.cohesion, radius_r) * n
+    lever_torque = wp.cross(n, tangential)
+    return normal, tangential, lever_p * lever_torque, lever_q * lever_torque, rolling + twisting * n, now
+
+
 #: The contact laws, by name (params.py ``Params.law``): each gives the channels of a touching j's
 #: action on i.  "paper": the paper's law, rolling friction as a couple (docs/model.md);
 #: "paper-printed-rolling": the same, rolling friction as the force printed as the paper's eq. 9;
 #: "decco-code": DECCO's pair forces as its code computes them.  A new law is one function of that
-#: signature and its line here.
+#: signature and its line here.  "ssdem", pkdgrav's soft-sphere law, keeps springs per pair: its
+#: function (:func:`ssdem_contact`) takes the pair from its lower index with the springs of the step
+#: before, and kernels/contacts.py keeps them (:data:`LAWS_WITH_SPRINGS`).
 CONTACT_LAWS = {
     "paper": contact_with_rolling_couple,
     "paper-printed-rolling": contact_with_printed_rolling,
     "decco-code": contact_as_decco_code,
+    "ssdem": ssdem_contact,
 }
+
+#: The laws that keep springs per pair (a contact history, kernels/contacts.py PairHistory).
+LAWS_WITH_SPRINGS = ("ssdem",)

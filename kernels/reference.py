@@ -11,7 +11,7 @@ import functools
 import warp as wp
 
 from .bodies import real_types
-from .contacts import ContactSum, contact_sum_function, write_contacts
+from .contacts import ContactSum, PairHistory, close_rows, contact_sum_function, write_contacts
 from .pair import ContactModel, gravity, in_contact
 
 wp.set_module_options({"enable_backward": False})
@@ -35,24 +35,30 @@ def pair_forces_reference(precision: str = "mixed", law: str = "paper"):
         position_in: wp.array(dtype=wp.vec3d),
         velocity_in: wp.array(dtype=wp.vec3d),
         omega_in: wp.array(dtype=wp.vec3d),
+        history_in: PairHistory,  # the contacts' springs at the evaluation before (a law with springs)
         # Out:
         force_out: wp.array(dtype=wp.vec3d),
         torque_out: wp.array(dtype=wp.vec3d),
         channels_out: wp.array2d(dtype=wp.vec3d),
         deepest_inout: wp.array(dtype=wp.int64),  # raised to each contact's depth (note_depth), or empty
+        history_out: PairHistory,  # the contacts' springs now, in increasing j (a law with springs)
     ):
         i = wp.tid()
         position_i = position_in[i]
         g_mass_i = model.G * mass_in[i]
         gravity_sum = vec_real()
         total = ContactSum()
+        rows = int(0)
         for j in range(ranges_in[i][0], ranges_in[i][1]):
             r_ij = position_i - position_in[j]
             d2 = wp.dot(r_ij, r_ij)
             if d2 > wp.float64(0.0):
                 gravity_sum += gravity(vec_real(r_ij), real(g_mass_i * mass_in[j]))
                 if in_contact(d2, radius_in[i], radius_in[j]):
-                    total = add_contact(model, i, j, radius_in, position_in, velocity_in, omega_in, deepest_inout, total)
+                    total, rows = add_contact(
+                        model, i, j, radius_in, mass_in, position_in, velocity_in, omega_in, history_in, rows, history_out, deepest_inout, total
+                    )
+        close_rows(history_out, i, rows)
         contact_force = write_contacts(total, i, torque_out, channels_out)
         force_out[i] = wp.vec3d(gravity_sum) + contact_force
 

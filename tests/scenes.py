@@ -96,3 +96,23 @@ def oracle_args(state, params):
         params.mu_r,
         params.G,
     )
+
+
+def approaching_clumps(n=15, gap=10.0, approach=300.0, seed=3):
+    """Two :func:`contact_cluster` clumps of ``n`` (internal speeds ~20 cm/s), the second beside the
+    first along x with their nearest spheres ``gap`` cm apart, approaching at ``approach`` cm/s each:
+    contacts inside each clump break as it flies apart, and contacts between them form."""
+    from scipy.optimize import brentq
+
+    a = contact_cluster(n, seed=seed, speed=20.0)
+    b = contact_cluster(n, seed=seed + 1, speed=20.0)
+    centred = b.positions - b.positions.mean(axis=0) + a.positions.mean(axis=0)
+
+    def nearest_gap(shift):
+        moved = centred + [shift, 0.0, 0.0]
+        return (np.linalg.norm(a.positions[:, None] - moved[None], axis=2) - (a.radii[:, None] + b.radii[None])).min()
+
+    shift = brentq(lambda s: nearest_gap(s) - gap, 0.0, 1e9)
+    x = np.vstack([a.positions, centred + [shift, 0.0, 0.0]])
+    v = np.vstack([a.velocities + [approach, 0.0, 0.0], b.velocities - [approach, 0.0, 0.0]])
+    return dw.State.from_arrays(x, v, np.vstack([a.omegas, b.omegas]), np.concatenate([a.radii, b.radii]), np.concatenate([a.masses, b.masses]))

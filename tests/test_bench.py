@@ -189,3 +189,21 @@ def test_the_fraction_of_the_limit_counts_the_pairs_a_step_evaluates(monkeypatch
         row = benchmarks.bench_size(120, "cpu", budget=0.01, steps=5, baseline=False, gravity_every=every)
         assert row.step_pairs_per_s == pytest.approx(120 * 120 / row.step_seconds, rel=1e-12)
         assert row.fraction_of_limit == pytest.approx(120 * 120 / every / row.step_seconds / 1e9, rel=1e-12)
+
+
+def test_bench_times_each_contact_law_beside_the_first(tmp_path):
+    """``--contact-law paper,ssdem``: each row again with the soft-sphere law (its contact history
+    kept), with its ratio to the paper law's same row; an unknown law is refused with one line."""
+    out = tmp_path / "bench.json"
+    result = cli("bench", "--device", "cpu", "--n", "64", "--seconds", "0.02", "--steps", "2", "--contact-law", "paper,ssdem",
+                 "--gravity-every", "1,5", "--json", str(out))  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    rows = json.loads(out.read_text())["rows"]
+    assert [(r["contact_law"], r["gravity_every"]) for r in rows] == [("paper", 1), ("paper", 5), ("ssdem", 1), ("ssdem", 5)]
+    for paper, ssdem in zip(rows[:2], rows[2:]):
+        assert paper["versus_first_law"] is None
+        assert np.isclose(ssdem["versus_first_law"], paper["step_seconds"] / ssdem["step_seconds"])
+        assert "contact law ssdem" in ssdem["layout"] and "x the paper law's step" in ssdem["layout"]
+    result = cli("bench", "--device", "cpu", "--contact-law", "paper,hertz")
+    assert result.returncode == 2 and "--contact-law must list paper, decco-code, ssdem" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1

@@ -45,6 +45,18 @@ def test_the_memory_estimate_bounds_the_engines_arrays(gravity):
     assert held <= device_part <= 3 * held, (held, device_part)
 
 
+def test_the_memory_estimate_counts_the_contact_history_of_the_law_with_springs():
+    pile = dw.load_pile(builtin_pile("target"))
+    sim = dw.Simulation(pile, dw.Params(contact_law="ssdem"), device="cpu", ledger=True)
+    held = _array_bytes(sim.engine)
+    width = sim.engine.candidate_width
+    device_part = costs.memory_estimate(pile.n, dw.Scheme(), candidate_width=width, contact_history=True)
+    device_part -= costs.FIXED_BYTES + pile.n * costs.HOST_BYTES_PER_PARTICLE
+    history = _array_bytes(sim.engine.state.history)
+    assert history > 0.5 * held  # the history's rows are most of the engine here
+    assert held <= device_part <= 3 * held, (held, device_part)
+
+
 def test_the_memory_estimate_counts_the_newton_sweeps_rows_where_gravity_takes_it():
     """Gravity on its own clock sums all-pairs gravity with the Newton sweep on every device, whose
     rows grow as N^2 / tile (the CPU's tiles of 4): the estimate bounds what the engine holds, and

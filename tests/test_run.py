@@ -225,6 +225,8 @@ def bad_piles(tmp_path_factory):
         (["--steps", "10", "--duration", "5"], "not both"),
         (["--device", "gpu"], "must be auto, cpu, cuda or cuda:N"),
         (["--dt", "5"], "dt = 5 s is too long"),
+        (["--contact-law", "pkdgrav"], "[params] contact_law = 'pkdgrav': must be paper or decco-code or ssdem"),
+        (["--contact-law", "ssdem", "--mu-s", "-1"], "[params] mu_s = -1.0: must be >= 0"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_code_2(args, message, bad_piles, tmp_path):
@@ -243,6 +245,7 @@ def test_bad_input_is_one_line_and_exit_code_2(args, message, bad_piles, tmp_pat
         ("[runs]\nsteps = 2\n", "unknown table [runs]"),
         ("[run]\nsteps = 'many'\n", "[run] steps = 'many': must be int"),
         ("[params]\nrestitution = 1.5\n", "[params] restitution = 1.5: must be in (0, 1]"),
+        ("[params]\ncontact_law = 'ssdem'\neps_t = 0.0\n", "[params] eps_t = 0.0: must be in (0, 1]"),
         ("[collision]\neta_potential = 'both'\n", "[collision] eta_potential = 'both': must be self (U: each pile's own pairs) or all"),
         ("[collision]\ntarget_spin_axis = [0, 0, 0]\n", "[collision] target_spin_axis = [0, 0, 0]: must be +x, -x, +y, -y, +z, -z or a vector"),
         ("[run\nsteps = 1\n", "is not valid TOML"),

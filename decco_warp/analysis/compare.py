@@ -56,7 +56,7 @@ WHERE_TOLERANCE = 0.01
 #: present: summaries older than the physics columns have no restitution, friction, G or law) unless
 #: it is the ``by`` or ``at`` column.
 SETUP_COLUMNS = ("mass_ratio", "theta_deg", "k_in", "dt", "gravity_every", "eta_potential", "n_particles", "restitution", "mu_k", "mu_r",
-                 "G", "rolling_friction", "contact_law")  # fmt: skip
+                 "G", "rolling_friction", "contact_law", "k_t_ratio", "eps_t", "mu_s", "mu_t", "beta", "cohesion")  # fmt: skip
 #: The group that ``spin_kind`` is compared against by default, where present.
 NO_SPIN = "none"
 #: Columns that a sweep's summary.csv gives each run beside its summary.json's (a run folder alone
