@@ -163,6 +163,28 @@ def test_the_table_groups_points_by_rounded_values_and_leaves_out_failed_runs():
     assert (result.read, result.failed, result.missing) == (11, 1, {"largest_mass_ratio": 1})
 
 
+def test_values_a_rounding_apart_are_one_group_and_one_point():
+    """eta as set-up arithmetic writes it (2.9999999999999996, 3.0000000000000004, 3.0) is one point
+    under --at and one group under --by; the committed fig6_statistics table, whose eta column holds
+    all three and their like at 6, 9 and 12, gives four points of five runs a mass ratio."""
+    from pathlib import Path
+
+    rows = fake_rows({"none": [1.0], "parallel": [1.5]}, eta=2.9999999999999996)
+    rows += fake_rows({"none": [1.2], "parallel": [1.7]}, eta=3.0000000000000004)
+    rows += fake_rows({"none": [1.1], "parallel": [1.6]}, eta=3.0)
+    (point,) = cmp.compare(rows, "spin_kind", "largest_mass_ratio", at="eta").points
+    assert point.at == 3.0 and [(g.group, g.n) for g in point.groups] == [("none", 3), ("parallel", 3)]
+    (point,) = cmp.compare(rows, "eta", "largest_mass_ratio", at="spin_kind", where={"spin_kind": ["none"]}).points
+    assert [(g.group, g.n) for g in point.groups] == [(3.0, 3)]
+    assert cmp.value_key(2.9999999999999996) == cmp.value_key(3.0000000000000004) == 3.0
+    table = Path(__file__).parent.parent / "runs" / "results" / "fig6_statistics" / "summary.csv"
+    with table.open(newline="") as f:
+        assert {"2.9999999999999996", "3.0000000000000004", "3.0"} <= {row["eta"] for row in csv.DictReader(f)}
+    committed = cmp.compare(cmp.read_rows([table]), "mass_ratio", "size_change_late", at="eta", against=0.0)
+    assert [p.at for p in committed.points] == [3.0, 6.0, 9.0, 12.0]
+    assert [g.n for p in committed.points for g in p.groups] == [5] * 12
+
+
 def test_rows_of_a_csv_dict_reader_give_the_numbers_of_typed_rows(tmp_path):
     """The Python API takes csv.DictReader's rows (every cell text) as summary.csv is read: the same
     comparison as of the rows as summary.json types them; a value of no summary type is refused."""
