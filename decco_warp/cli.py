@@ -981,8 +981,9 @@ def compare(
 ) -> None:
     """Compare groups of runs: per group (and point), the mean and spread of a metric, and the
     difference to a reference group (or to a value, --against) with its 95 % interval (Welch's t for
-    groups under 30 runs, else a seeded bootstrap), a verdict, and the runs per group a difference
-    needs.  Rows of failed runs are left out."""
+    groups under 30 runs, else a seeded bootstrap), a verdict, the smallest difference the runs at
+    hand resolve (detectable, power 0.8) and the runs per group a difference needs.  Rows of failed
+    runs are left out."""
     from .analysis.compare import SingleRunGroup, compare as compare_runs, parse_where, read_rows
     from .checks import InputError, check_destination
 

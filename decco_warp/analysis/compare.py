@@ -259,6 +259,37 @@ def runs_needed(spread: float, delta: float, confidence: float = CONFIDENCE, pow
     return max(2, math.ceil(samples * z**2 * spread**2 / delta**2))
 
 
+def detectable_difference(error: float, freedom: float | None = None, confidence: float = CONFIDENCE, power: float = POWER,
+                          critical: float | None = None) -> float:  # fmt: skip
+    """The minimum detectable difference: the smallest true difference that an interval whose
+    difference has standard error ``error`` resolves (leaves out 0) with probability ``power``,
+    (critical + q_power) x error.  ``critical`` is the interval's own two-sided quantile at
+    ``confidence``: Student's t at ``freedom`` degrees of freedom (Welch's, or n - 1 for one mean or
+    n pairs), the normal z where ``freedom`` is None (a bootstrap interval), or as given (Dunnett's
+    simultaneous one); q_power is the ``power`` quantile of the same t (z).  With the normal
+    quantiles it is :func:`runs_needed` inverted: two groups of n runs and mean variance s^2 have
+    error s sqrt(2 / n), and (z_(1-a/2) + z_power) s sqrt(2 / n) is the delta for which runs_needed
+    gives n.  With few runs the t quantiles are the larger (at n = 3 and 3, 3.7 errors against the
+    normal 2.8): the normal figure would name differences below the interval's own half-width, which
+    those runs never resolve.  ``error`` comes from the groups' spreads and sizes, never from the
+    difference seen: post-hoc power from the observed difference says nothing the interval does not."""
+    if freedom is not None and not freedom > 0:
+        raise ValueError(f"degrees of freedom must be > 0; got {freedom}")
+    quantile = stats.norm if freedom is None else stats.t(freedom)
+    if critical is None:
+        critical = quantile.ppf(0.5 + confidence / 2)
+    return float((critical + quantile.ppf(power)) * error)
+
+
+def welch_freedom(a: np.ndarray, b: np.ndarray) -> float:
+    """The Welch-Satterthwaite degrees of freedom of mean(a) - mean(b) (infinite for two groups
+    without any scatter, where the interval is the difference itself)."""
+    va, vb = a.var(ddof=1) / a.size, b.var(ddof=1) / b.size
+    if va + vb == 0:
+        return math.inf
+    return float((va + vb) ** 2 / (va**2 / (a.size - 1) + vb**2 / (b.size - 1)))
+
+
 def welch_interval(a: np.ndarray, b: np.ndarray, confidence: float = CONFIDENCE) -> tuple[float, float]:
     """Welch's t interval of mean(a) - mean(b) (unequal variances, Welch-Satterthwaite degrees of
     freedom); two groups without any scatter give the difference itself."""
@@ -266,8 +297,7 @@ def welch_interval(a: np.ndarray, b: np.ndarray, confidence: float = CONFIDENCE)
     difference = a.mean() - b.mean()
     if va + vb == 0:
         return float(difference), float(difference)
-    freedom = (va + vb) ** 2 / (va**2 / (a.size - 1) + vb**2 / (b.size - 1))
-    half = stats.t.ppf(0.5 + confidence / 2, freedom) * math.sqrt(va + vb)
+    half = stats.t.ppf(0.5 + confidence / 2, welch_freedom(a, b)) * math.sqrt(va + vb)
     return float(difference - half), float(difference + half)
 
 
@@ -345,6 +375,10 @@ class Difference:
     runs_needed: int | None  #: per group, for ``delta`` at the two groups' mean variance; None: never
     resolved: bool
     verdict: str
+    #: the minimum detectable difference of the runs at hand [the metric's units]: the smallest one
+    #: they resolve at ``confidence`` with power POWER (:func:`detectable_difference`); None where a
+    #: group has one run
+    detectable: float | None = None
 
 
 @dataclass
@@ -394,33 +428,39 @@ class Comparison:
             intervals = f"difference to {label(self.reference)}: {level} interval by Welch's t where a group has fewer than "
         else:
             intervals = f"each mean minus {self.against:g}: {level} interval by Student's t where a group has fewer than "
+        sided = f"two-sided {100 * (1 - self.confidence):.3g} %, power {POWER:g}"
         text = [
             f"{self.metric} by {self.by}" + (f" at {self.at}" if self.at else "")
             + (f"; reference: {label(self.reference)}" if self.against is None else f"; against: {self.against:g}"),
             f"runs: {self.read} read" + (f", {', '.join(left)} left out" if left else "") + (f", {kept} kept by --where {where}" if where else f", {kept} kept"),
-            intervals + f"{BOOTSTRAP_FROM} runs, else by bootstrap (BCa, {self.resamples} resamples, seed {SEED}); runs to resolve: per group, for "
-            + (f"a difference of {self.resolve:g}" if self.resolve is not None else "the difference seen")
-            + f" (two-sided {100 * (1 - self.confidence):.3g} %, power {POWER:g})",
+            intervals + f"{BOOTSTRAP_FROM} runs, else by bootstrap (BCa, {self.resamples} resamples, seed {SEED})",
+            f"detectable: the smallest true difference that the runs at hand resolve ({sided}): the interval's quantile plus the power's "
+            "(t, or z for a bootstrap) times the difference's standard error, from the spreads, never from the difference seen; "
+            "runs to resolve: per group, for "
+            + (f"a difference of {self.resolve:g}" if self.resolve is not None else "the difference seen") + f" ({sided})",
         ]
-        header = (self.by, "n", "mean", "std", "diff", f"{level} interval", "method", "runs to resolve", "verdict")
+        columns = [self.by, "n", "mean", "std", "diff", f"{level} interval", "method", "detectable", "runs to resolve", "verdict"]
+        left_aligned = {self.by, f"{level} interval", "method", "verdict"}
         for point in self.points:
-            rows = [header]
+            rows = [dict(zip(columns, columns))]
             differences = {d.group: d for d in point.differences}
             for g in point.groups:
                 d = differences.get(g.group)
-                row = [label(g.group), str(g.n), _digits(g.mean, 4), _digits(g.std, 2)]
+                row = dict.fromkeys(columns, "")
+                row.update({self.by: label(g.group), "n": str(g.n), "mean": _digits(g.mean, 4), "std": _digits(g.std, 2)})
                 if d is None:
-                    row += ["", "", "", "", "reference" if g.group == self.reference else ""]
+                    row["verdict"] = "reference" if g.group == self.reference else ""
                 else:
                     interval = f"[{_digits(d.low, 3, '+')}, {_digits(d.high, 3, '+')}]" if d.low is not None else "-"
                     needed = "-" if d.low is None else "never" if d.runs_needed is None else str(d.runs_needed)  # "-": a spread unknown
-                    row += [_digits(d.difference, 3, "+"), interval, d.method or "-", needed, d.verdict]
+                    row.update({"diff": _digits(d.difference, 3, "+"), f"{level} interval": interval, "method": d.method or "-",
+                                "detectable": _digits(d.detectable, 2), "runs to resolve": needed, "verdict": d.verdict})  # fmt: skip
                 rows.append(row)
             if self.against is None and self.reference not in {g.group for g in point.groups}:
-                rows.append(["", "", "", "", f"no {label(self.reference)} here: nothing to compare with", "", "", "", ""])
-            widths = [max(len(r[k]) for r in rows) for k in range(len(header))]
+                rows.append({**dict.fromkeys(columns, ""), f"{level} interval": f"no {label(self.reference)} here: nothing to compare with"})
+            widths = {c: max(len(r[c]) for r in rows) for c in columns}
             text.append(f"{self.at} {label(point.at)}:" if self.at else "all runs:")
-            text += ["  " + "  ".join(c.ljust(w) if k in (0, 5, 6, 8) else c.rjust(w) for k, (c, w) in enumerate(zip(r, widths))).rstrip() for r in rows]
+            text += ["  " + "  ".join(r[c].ljust(widths[c]) if c in left_aligned else r[c].rjust(widths[c]) for c in columns).rstrip() for r in rows]
         return text
 
 
@@ -567,7 +607,11 @@ def _difference(group: Group, reference: Group, resolve: float | None, resamples
         return Difference(group.group, reference.group, difference, None, None, None, delta, None, False, f"spread unknown: 1 run of {label(one)}")
     low, high, method = difference_interval(np.array(group.values), np.array(reference.values), confidence, resamples)
     needed = runs_needed(math.sqrt((group.std**2 + reference.std**2) / 2), delta, confidence)
-    return Difference(group.group, reference.group, difference, low, high, method, delta, needed, *_verdict(low, high, f"n = {group.n} and {reference.n}"))
+    a, b = np.array(group.values), np.array(reference.values)
+    freedom = welch_freedom(a, b) if method == "Welch t" else None
+    detectable = detectable_difference(math.sqrt(group.std**2 / group.n + reference.std**2 / reference.n), freedom, confidence)
+    return Difference(group.group, reference.group, difference, low, high, method, delta, needed,
+                      *_verdict(low, high, f"n = {group.n} and {reference.n}"), detectable=detectable)  # fmt: skip
 
 
 def _against(group: Group, value: float, resolve: float | None, confidence: float) -> Difference:
@@ -578,7 +622,8 @@ def _against(group: Group, value: float, resolve: float | None, confidence: floa
         return Difference(group.group, value, difference, None, None, None, delta, None, False, f"spread unknown: 1 run of {label(group.group)}")
     needed = runs_needed(group.std, delta, confidence, samples=1)
     low, high = group.low - value, group.high - value
-    return Difference(group.group, value, difference, low, high, group.method, delta, needed, *_verdict(low, high, f"n = {group.n}"))
+    detectable = detectable_difference(group.std / math.sqrt(group.n), group.n - 1 if group.method == "t" else None, confidence)
+    return Difference(group.group, value, difference, low, high, group.method, delta, needed, *_verdict(low, high, f"n = {group.n}"), detectable=detectable)
 
 
 def _verdict(low: float, high: float, runs: str) -> tuple[bool, str]:
