@@ -960,8 +960,13 @@ def compare(
         "or the bootstrap from 30 runs), e.g. --against 0: does the size change differ from none?"
     ),
     confidence: float = typer.Option(
-        0.95, "--confidence", metavar="LEVEL", help="Level of every interval and verdict (two-sided): 0.983 (1 - 0.05/3) keeps three "
-        "comparisons with one reference at 95 % together (Bonferroni)."
+        0.95, "--confidence", metavar="LEVEL", help="Level of every interval and verdict (two-sided). Where several groups meet the reference "
+        "at a point, their intervals hold at this level together (Dunnett's test)."
+    ),
+    per_comparison: bool = typer.Option(
+        False, "--per-comparison", help="Give each group's difference to the reference its own interval (Welch's t, or the bootstrap from 30 runs) "
+        "instead of Dunnett's simultaneous ones where several groups meet the reference at a point; --confidence 0.983 (1 - 0.05/3) keeps "
+        "three of them at 95 % together (Bonferroni)."
     ),
     resolve: Optional[float] = typer.Option(
         None, "--resolve", metavar="DELTA", help="Difference to resolve [the metric's units] (default: each difference seen): the runs per group it needs are "
@@ -981,7 +986,8 @@ def compare(
 ) -> None:
     """Compare groups of runs: per group (and point), the mean and spread of a metric, and the
     difference to a reference group (or to a value, --against) with its 95 % interval (Welch's t for
-    groups under 30 runs, else a seeded bootstrap), a verdict, the smallest difference the runs at
+    groups under 30 runs, else a seeded bootstrap; Dunnett's simultaneous intervals where several
+    groups meet the reference at a point), a verdict, the smallest difference the runs at
     hand resolve (detectable, power 0.8) and the runs per group a difference needs.  Rows of failed
     runs are left out."""
     from .analysis.compare import SingleRunGroup, compare as compare_runs, parse_where, read_rows
@@ -991,7 +997,8 @@ def compare(
         if json_out is not None:
             check_destination(json_out, "comparison table")
         result = compare_runs(read_rows(paths), by, metric, at, reference=reference, resolve=resolve, where=parse_where(where or []),
-                              allow_mixed=allow_mixed, allow_single=allow_single, against=against, confidence=confidence)  # fmt: skip
+                              allow_mixed=allow_mixed, allow_single=allow_single, against=against, confidence=confidence,
+                              per_comparison=per_comparison)  # fmt: skip
     except SingleRunGroup as error:  # the rest is shown, so that one sees what the runs there give
         for line in error.comparison.lines():
             typer.echo(line)

@@ -68,19 +68,85 @@ def test_intervals_against_a_value_cover_the_true_mean_95_percent_of_the_time():
 
 
 def test_a_bonferroni_level_keeps_three_comparisons_at_95_percent_together():
-    """Three groups drawn like the reference (no effect at all): at --confidence 1 - 0.05/3 a trial
-    resolves none of its three differences at least 95 % of the time (Bonferroni bounds the family's
-    error by 5 %; the shared reference makes it a little conservative); at 0.95 each alone errs 5 %."""
+    """Three groups drawn like the reference (no effect at all), each compared on its own
+    (per_comparison): at --confidence 1 - 0.05/3 a trial resolves none of its three differences at
+    least 95 % of the time (Bonferroni bounds the family's error by 5 %; the shared reference makes
+    it a little conservative); at 0.95 each alone errs 5 %."""
     level = 1 - 0.05 / 3
     clean = {level: 0, 0.95: 0}
     for trial in range(TRIALS):
         rng = np.random.default_rng(1000 + trial)
         rows = fake_rows({kind: rng.normal(1.39, 0.02, 8) for kind in ("none", "parallel", "anti-parallel", "perpendicular")})
         for confidence in clean:
-            result = cmp.compare(rows, "spin_kind", "largest_mass_ratio", confidence=confidence)
+            result = cmp.compare(rows, "spin_kind", "largest_mass_ratio", confidence=confidence, per_comparison=True)
             clean[confidence] += not any(d.resolved for d in result.points[0].differences)
     assert clean[level] / TRIALS >= 0.95 - COVERAGE_TOLERANCE, clean
     assert clean[0.95] / TRIALS < 0.92, clean  # three comparisons at 95 % each err together ~13 % of the time
+
+
+def test_dunnett_s_intervals_are_scipy_s_and_the_default_where_several_groups_meet_the_reference():
+    """Three kinds against none at one point: compare()'s intervals are scipy.stats.dunnett's on the
+    same values (seeded as compare seeds it), at 95 % and at 90 %; --per-comparison gives Welch's;
+    the header says which. A group of one leaves the family; two groups left is one comparison."""
+    rng = np.random.default_rng(11)
+    values = {"none": rng.normal(1.39, 0.02, 9), "parallel": rng.normal(1.35, 0.03, 10),
+              "anti-parallel": rng.normal(1.38, 0.02, 7), "perpendicular": rng.normal(1.36, 0.01, 10)}  # fmt: skip
+    rows = fake_rows(values)
+    kinds = ["anti-parallel", "parallel", "perpendicular"]  # the order of the table's rows
+    for confidence in (0.95, 0.9):
+        result = cmp.compare(rows, "spin_kind", "largest_mass_ratio", confidence=confidence)
+        differences = result.points[0].differences
+        assert [d.group for d in differences] == kinds and {(d.method, d.family) for d in differences} == {("Dunnett", 3)}
+        scipy_result = stats.dunnett(*(values[k] for k in kinds), control=values["none"], random_state=np.random.default_rng(cmp.SEED))
+        interval = scipy_result.confidence_interval(confidence)
+        assert [d.low for d in differences] == pytest.approx(interval.low, rel=1e-9)
+        assert [d.high for d in differences] == pytest.approx(interval.high, rel=1e-9)
+        assert [d.difference for d in differences] == pytest.approx([values[k].mean() - values["none"].mean() for k in kinds], rel=1e-12)
+        # Wider than each comparison's own t interval at the pooled spread: the price of holding three together.
+        pooled = cmp.pooled_std(list(values.values()))
+        for d, k in zip(differences, kinds):
+            half = stats.t.ppf(0.5 + confidence / 2, 32) * pooled * math.sqrt(1 / values[k].size + 1 / 9)
+            assert (d.high - d.low) / 2 > half
+    assert "95 % simultaneous intervals by Dunnett's test" in cmp.compare(rows, "spin_kind", "largest_mass_ratio").lines()[2]
+    alone = cmp.compare(rows, "spin_kind", "largest_mass_ratio", per_comparison=True)
+    assert "interval of each comparison on its own (--per-comparison) by Welch's t" in alone.lines()[2]
+    for d, k in zip(alone.points[0].differences, kinds):
+        assert (d.method, d.family) == ("Welch t", 1) and (d.low, d.high) == pytest.approx(cmp.welch_interval(values[k], values["none"]), rel=1e-12)
+    lone = fake_rows({"none": values["none"], "parallel": values["parallel"], "anti-parallel": values["anti-parallel"][:1]})
+    parallel = {d.group: d for d in cmp.compare(lone, "spin_kind", "largest_mass_ratio", allow_single=True).points[0].differences}["parallel"]
+    assert (parallel.method, parallel.family) == ("Welch t", 1)
+
+
+def test_dunnett_keeps_the_family_wise_error_near_5_percent_where_per_comparison_intervals_exceed_it():
+    """TRIALS sets of a reference and three groups drawn alike (normal, one spread: no difference at
+    all): Dunnett's intervals resolve some difference in 5.5 % of the sets (its family-wise error,
+    5 % in expectation), the per-comparison ones in 11 %; each of Dunnett's alone errs in 1 %."""
+    wrong = {"Dunnett": 0, "per comparison": 0}
+    single = 0
+    for trial in range(TRIALS):
+        rng = np.random.default_rng(2000 + trial)
+        rows = fake_rows({kind: rng.normal(1.39, 0.02, 6) for kind in ("none", "parallel", "anti-parallel", "perpendicular")})
+        dunnett = cmp.compare(rows, "spin_kind", "largest_mass_ratio").points[0].differences
+        alone = cmp.compare(rows, "spin_kind", "largest_mass_ratio", per_comparison=True).points[0].differences
+        assert {d.method for d in dunnett} == {"Dunnett"} and {d.method for d in alone} == {"Welch t"}
+        wrong["Dunnett"] += any(d.resolved for d in dunnett)
+        wrong["per comparison"] += any(d.resolved for d in alone)
+        single += dunnett[0].resolved
+    assert abs(wrong["Dunnett"] / TRIALS - 0.05) <= COVERAGE_TOLERANCE, wrong
+    assert wrong["per comparison"] / TRIALS > 0.05 + COVERAGE_TOLERANCE, wrong
+    assert single / TRIALS < 0.05, single
+
+
+def test_dunnett_is_used_at_any_group_size_and_the_bootstrap_only_for_a_lone_comparison():
+    """From 30 runs a group a lone comparison gets the bootstrap; several groups there still get
+    Dunnett's (a t method, one pooled spread), and per_comparison the bootstrap for each."""
+    rng = np.random.default_rng(12)
+    big = {kind: rng.normal(0.0, 1.0, cmp.BOOTSTRAP_FROM) for kind in ("none", "parallel", "perpendicular")}
+    methods = lambda result: [d.method for d in result.points[0].differences]  # noqa: E731
+    assert methods(cmp.compare(fake_rows(big), "spin_kind", "largest_mass_ratio")) == ["Dunnett", "Dunnett"]
+    assert methods(cmp.compare(fake_rows(big), "spin_kind", "largest_mass_ratio", per_comparison=True, resamples=500)) == ["bootstrap"] * 2
+    del big["perpendicular"]
+    assert methods(cmp.compare(fake_rows(big), "spin_kind", "largest_mass_ratio", resamples=500)) == ["bootstrap"]
 
 
 def test_the_level_sets_the_t_quantile_and_the_runs_needed():
@@ -352,6 +418,7 @@ def bad_inputs(sweep, tmp_path):
         "unknown reference": ([str(sweep), *base, "--reference", "oblique"], ["--reference oblique", "none, parallel"]),
         "read twice": ([str(sweep), str(sweep / "summary.csv"), *base], ["is read twice"]),
         "group and value": ([str(sweep), *base, "--reference", "none", "--against", "0"], ["--reference and --against", "not both"]),
+        "per comparison against a value": ([str(sweep), *base, "--against", "0", "--per-comparison"], ["--per-comparison and --against"]),
         "bad level": ([str(sweep), *base, "--confidence", "95"], ["--confidence must be a level from 0.5 to 0.9999", "got 95"]),
         "one set-up twice": ([str(twice), *base], ["parallel_eta6_r0 and parallel_eta6_r1 have the same outcome", "give it once"]),
     }

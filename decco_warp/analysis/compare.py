@@ -22,6 +22,7 @@ Pure NumPy and SciPy over dicts: no Warp, no HDF5.
 from __future__ import annotations
 
 import csv
+import functools
 import json
 import math
 from dataclasses import asdict, dataclass, field
@@ -309,7 +310,7 @@ def bootstrap_interval(samples: tuple[np.ndarray, ...], confidence: float = CONF
     value = float(statistic(*samples, axis=-1))
     if all(np.ptp(s) == 0 for s in samples):
         return value, value
-    # random_state, not rng: the keyword of every SciPy from the 1.10 that pyproject admits.
+    # random_state, not rng: the keyword of every SciPy from the 1.11 that pyproject admits.
     result = stats.bootstrap(samples, statistic, n_resamples=resamples, confidence_level=confidence, vectorized=True,
                              random_state=np.random.default_rng(SEED))  # fmt: skip
     return float(result.confidence_interval.low), float(result.confidence_interval.high)
@@ -340,6 +341,48 @@ def difference_interval(a: np.ndarray, b: np.ndarray, confidence: float = CONFID
     if min(a.size, b.size) < BOOTSTRAP_FROM:
         return (*welch_interval(a, b, confidence), "Welch t")
     return (*bootstrap_interval((a, b), confidence, resamples), "bootstrap")
+
+
+@functools.lru_cache(maxsize=256)
+def dunnett_critical(control: int, sizes: tuple[int, ...], confidence: float = CONFIDENCE) -> float:
+    """Dunnett's two-sided critical value for groups of ``sizes`` runs each compared with a control
+    of ``control`` runs at ``confidence`` together: the quantile of max |T_i| for the multivariate t
+    of sum(sizes) + control - len(sizes) - 1 degrees of freedom and correlations
+    1 / sqrt((control / n_i + 1)(control / n_j + 1)), as scipy.stats.dunnett computes it (randomized
+    quasi-Monte Carlo drawn from SEED, so the same each time).  It depends on the sizes and the level
+    only, not on the values: it is computed once a design, from stand-in samples, and equals
+    scipy.stats.dunnett's on the runs themselves with the same seed."""
+    stand_ins = [np.arange(n, dtype=float) for n in sizes]
+    reference = np.arange(control, dtype=float)
+    # random_state, not rng: the keyword of every SciPy from the 1.11 that pyproject admits.
+    result = stats.dunnett(*stand_ins, control=reference, random_state=np.random.default_rng(SEED))
+    interval = result.confidence_interval(confidence)
+    error = pooled_std([*stand_ins, reference]) * math.sqrt(1 / sizes[0] + 1 / control)
+    return float((interval.high[0] - interval.low[0]) / 2 / error)
+
+
+def pooled_std(samples: list[np.ndarray]) -> float:
+    """The pooled standard deviation of ``samples`` (one spread for all, as Dunnett's test assumes):
+    sqrt(sum (n_i - 1) s_i^2 / (sum n_i - k))."""
+    return math.sqrt(sum(float(((s - s.mean()) ** 2).sum()) for s in samples) / (sum(s.size for s in samples) - len(samples)))
+
+
+def dunnett_intervals(samples: list[np.ndarray], control: np.ndarray, confidence: float = CONFIDENCE) -> list[tuple[float, float, dict]]:
+    """Dunnett's many-to-one simultaneous intervals of mean(sample) - mean(control), one per sample
+    (each of at least 2 values, two or more samples): together they hold all their true
+    differences ``confidence`` of the time.  Each is difference -+ c s sqrt(1 / n_i + 1 / n_0), with
+    s the pooled standard deviation of every group and the control (Dunnett assumes one spread) and
+    c :func:`dunnett_critical`'s.  With each: {"critical": c, "freedom": sum n - k, "error": s
+    sqrt(1 / n_i + 1 / n_0)}."""
+    critical = dunnett_critical(control.size, tuple(s.size for s in samples), confidence)
+    spread = pooled_std([*samples, control])
+    freedom = sum(s.size for s in samples) + control.size - len(samples) - 1
+    intervals = []
+    for sample in samples:
+        error = spread * math.sqrt(1 / sample.size + 1 / control.size)
+        difference = float(sample.mean() - control.mean())
+        intervals.append((difference - critical * error, difference + critical * error, {"critical": critical, "freedom": freedom, "error": error}))
+    return intervals
 
 
 # --- the comparison ----------------------------------------------------------------------------
@@ -379,6 +422,9 @@ class Difference:
     #: they resolve at ``confidence`` with power POWER (:func:`detectable_difference`); None where a
     #: group has one run
     detectable: float | None = None
+    #: the comparisons whose intervals hold together at ``confidence`` (Dunnett's, method "Dunnett"),
+    #: this one among them; 1: an interval of its own
+    family: int = 1
 
 
 @dataclass
@@ -408,6 +454,7 @@ class Comparison:
     resamples: int = RESAMPLES  #: of each bootstrap interval
     against: float | None = None  #: each group's mean compared with this value (``reference`` is it)
     confidence: float = CONFIDENCE  #: of every interval and verdict (two-sided)
+    per_comparison: bool = False  #: each difference its own interval, never Dunnett's simultaneous ones
 
     def as_dict(self) -> dict:
         """Plain data (numbers as floats, None where none exists), for JSON."""
@@ -424,8 +471,18 @@ class Comparison:
         left = [f"{self.failed} failed"] if self.failed else []
         left += [f"{n} without {column}" for column, n in self.missing.items()]
         level = f"{100 * self.confidence:.4g} %"
+        methods = {d.method for p in self.points for d in p.differences}
         if self.against is None:
-            intervals = f"difference to {label(self.reference)}: {level} interval by Welch's t where a group has fewer than "
+            intervals = f"difference to {label(self.reference)}: "
+            if "Dunnett" in methods:
+                several = "" if methods <= {"Dunnett", None} else f" where several groups meet {label(self.reference)} at a point"
+                intervals += (f"{level} simultaneous intervals by Dunnett's test{several} (the groups of a point together, one pooled "
+                              "spread; --per-comparison gives each its own)")  # fmt: skip
+                intervals += "" if not several else ", else by Welch's t where a group has fewer than "
+            elif self.per_comparison:
+                intervals += f"{level} interval of each comparison on its own (--per-comparison) by Welch's t where a group has fewer than "
+            else:
+                intervals += f"{level} interval by Welch's t where a group has fewer than "
         else:
             intervals = f"each mean minus {self.against:g}: {level} interval by Student's t where a group has fewer than "
         sided = f"two-sided {100 * (1 - self.confidence):.3g} %, power {POWER:g}"
@@ -433,7 +490,7 @@ class Comparison:
             f"{self.metric} by {self.by}" + (f" at {self.at}" if self.at else "")
             + (f"; reference: {label(self.reference)}" if self.against is None else f"; against: {self.against:g}"),
             f"runs: {self.read} read" + (f", {', '.join(left)} left out" if left else "") + (f", {kept} kept by --where {where}" if where else f", {kept} kept"),
-            intervals + f"{BOOTSTRAP_FROM} runs, else by bootstrap (BCa, {self.resamples} resamples, seed {SEED})",
+            intervals + ("" if intervals.endswith(")") else f"{BOOTSTRAP_FROM} runs, else by bootstrap (BCa, {self.resamples} resamples, seed {SEED})"),
             f"detectable: the smallest true difference that the runs at hand resolve ({sided}): the interval's quantile plus the power's "
             "(t, or z for a bootstrap) times the difference's standard error, from the spreads, never from the difference seen; "
             "runs to resolve: per group, for "
@@ -507,12 +564,18 @@ def _check_setups(point, rows: list[dict], by: str, at: str | None) -> None:
 
 def compare(rows: list[dict], by: str, metric: str, at: str | None = None, reference=None, resolve: float | None = None,
             where: dict | None = None, allow_mixed: bool = False, allow_single: bool = False,
-            resamples: int = RESAMPLES, against: float | None = None, confidence: float = CONFIDENCE) -> Comparison:  # fmt: skip
+            resamples: int = RESAMPLES, against: float | None = None, confidence: float = CONFIDENCE,
+            per_comparison: bool = False) -> Comparison:  # fmt: skip
     """Group ``rows`` (run summaries) by ``by`` and ``at``, and compare each group's ``metric`` with
     the ``reference`` group's at each point (default: "none" for spin_kind where present, else the
     first group in sorted order), or, with ``against``, each group's mean with that value (a
     reference group and ``against`` exclude each other).  Intervals and verdicts are at
-    ``confidence`` (two-sided, 0.5 to 0.9999; 1 - 0.05 / m for m comparisons at a family-wise 95 %).
+    ``confidence`` (two-sided, 0.5 to 0.9999).  Where two or more groups (of 2 runs or more) meet
+    the reference at a point, their intervals are Dunnett's many-to-one simultaneous ones (together
+    they hold every true difference there ``confidence`` of the time; one pooled spread; at any
+    group size, the bootstrap serving a lone comparison); ``per_comparison`` gives each its own
+    instead (Welch's t or the bootstrap; 1 - 0.05 / m for m of them at a family-wise 95 %,
+    Bonferroni).
 
     Rows of failed runs (status "failed") are left out, and so are rows without a value of ``by``,
     ``at`` or ``metric`` (counted in ``missing``).  ``where``: {column: values}, keep only the rows
@@ -536,6 +599,9 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
         raise CompareError(f"--against must be a finite value; got {against:g}")
     if against is not None and reference is not None:
         raise CompareError("--reference and --against: compare with a group or with a value, not both")
+    if against is not None and per_comparison:
+        raise CompareError("--per-comparison and --against: each mean against a value has its own interval already; "
+                           "--per-comparison is for several groups against a reference group (Dunnett's otherwise)")  # fmt: skip
     done = [row for row in rows if row.get("status") != "failed"]
     kept, met = select(done, where)
     if not kept:
@@ -575,15 +641,14 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
         if against is None:
             order = sorted(point, key=lambda g: (g != reference, _order(g)))  # the reference first
             stats_of = {g: _group(g, point[g], metric, resamples, confidence) for g in order}
-            differences = [_difference(stats_of[g], stats_of[reference], resolve, resamples, confidence)
-                           for g in order if g != reference and reference in point]  # fmt: skip
+            differences = _differences(stats_of, reference, resolve, resamples, confidence, per_comparison) if reference in point else []
         else:
             order = sorted(point, key=_order)
             stats_of = {g: _group(g, point[g], metric, resamples, confidence) for g in order}
             differences = [_against(stats_of[g], against, resolve, confidence) for g in order]
         result.append(Point(at_key, [stats_of[g] for g in order], differences))
     comparison = Comparison(metric, by, at, reference, resolve, result, len(rows), len(rows) - len(done), where, met, missing, resamples,
-                            against, confidence)  # fmt: skip
+                            against, confidence, per_comparison)  # fmt: skip
     single = comparison.single()
     if single and not allow_single:
         named = "; ".join(f"{label(g)}" + (f" at {at} {label(p)}" if at else "") for p, g in single)
@@ -599,19 +664,38 @@ def _group(key, rows: list[dict], metric: str, resamples: int, confidence: float
     return Group(key, int(values.size), float(values.mean()), std, low, high, method, [row.get("run") for row in rows], values.tolist())
 
 
-def _difference(group: Group, reference: Group, resolve: float | None, resamples: int, confidence: float = CONFIDENCE) -> Difference:
+def _differences(stats_of: dict, reference, resolve: float | None, resamples: int, confidence: float, per_comparison: bool) -> list[Difference]:
+    """Each group's difference to the reference group at one point: Dunnett's simultaneous
+    intervals where two or more groups of at least 2 runs meet a reference of at least 2 (unless
+    ``per_comparison``), else each its own (Welch's t or the bootstrap)."""
+    others = [g for g in stats_of if g != reference]
+    family = [g for g in others if stats_of[g].n >= 2] if stats_of[reference].n >= 2 and not per_comparison else []
+    together = {}
+    if len(family) >= 2:
+        intervals = dunnett_intervals([np.array(stats_of[g].values) for g in family], np.array(stats_of[reference].values), confidence)
+        together = dict(zip(family, intervals))
+    return [_difference(stats_of[g], stats_of[reference], resolve, resamples, confidence, together.get(g), len(together) or 1) for g in others]
+
+
+def _difference(group: Group, reference: Group, resolve: float | None, resamples: int, confidence: float = CONFIDENCE,
+                simultaneous: tuple | None = None, family: int = 1) -> Difference:  # fmt: skip
     difference = group.mean - reference.mean
     delta = resolve if resolve is not None else abs(difference)
     if group.n < 2 or reference.n < 2:
         one = group.group if group.n < 2 else reference.group
         return Difference(group.group, reference.group, difference, None, None, None, delta, None, False, f"spread unknown: 1 run of {label(one)}")
-    low, high, method = difference_interval(np.array(group.values), np.array(reference.values), confidence, resamples)
     needed = runs_needed(math.sqrt((group.std**2 + reference.std**2) / 2), delta, confidence)
-    a, b = np.array(group.values), np.array(reference.values)
-    freedom = welch_freedom(a, b) if method == "Welch t" else None
-    detectable = detectable_difference(math.sqrt(group.std**2 / group.n + reference.std**2 / reference.n), freedom, confidence)
+    if simultaneous is not None:
+        low, high, design = simultaneous
+        method = "Dunnett"
+        detectable = detectable_difference(design["error"], design["freedom"], confidence, critical=design["critical"])
+    else:
+        a, b = np.array(group.values), np.array(reference.values)
+        low, high, method = difference_interval(a, b, confidence, resamples)
+        freedom = welch_freedom(a, b) if method == "Welch t" else None
+        detectable = detectable_difference(math.sqrt(group.std**2 / group.n + reference.std**2 / reference.n), freedom, confidence)
     return Difference(group.group, reference.group, difference, low, high, method, delta, needed,
-                      *_verdict(low, high, f"n = {group.n} and {reference.n}"), detectable=detectable)  # fmt: skip
+                      *_verdict(low, high, f"n = {group.n} and {reference.n}"), detectable=detectable, family=family)  # fmt: skip
 
 
 def _against(group: Group, value: float, resolve: float | None, confidence: float) -> Difference:
@@ -639,7 +723,7 @@ def error_bars(rows: list[dict], by: str, metric: str, at: str | None = None, wh
     metric's units; NaN for a group of one run), ``n`` and ``method`` ("t" or "bootstrap", None for
     one run), as :func:`compare` computes them.  ``ax.errorbar(b["at"], b["mean"],
     yerr=[b["minus"], b["plus"]])`` draws them."""
-    comparison = compare(rows, by, metric, at, where=where, allow_mixed=allow_mixed, allow_single=True)
+    comparison = compare(rows, by, metric, at, where=where, allow_mixed=allow_mixed, allow_single=True, per_comparison=True)
     bars: dict = {}
     for point in comparison.points:
         for g in point.groups:
