@@ -976,6 +976,12 @@ def compare(
         None, "--where", metavar="COLUMN=VALUE[,VALUE...]",
         help="Keep only the runs with one of these values in COLUMN (repeatable, every column must match; numbers within 1 %), e.g. --where mass_ratio=1 --where eta=3,6."
     ),
+    paired: bool = typer.Option(
+        False, "--paired", help="Pair each run with its twin in the reference group (the run that agrees in the set-up, eta, spin_kind, realization, "
+        "orientation_seed and the piles: all but --by) and give the mean of the twins' differences with Student's t interval on them (pairs - 1 dof), "
+        "their count and correlation r; runs without a twin are named and left out, a group of fewer than 2 pairs is refused. One group against "
+        "the reference per point, or --per-comparison."
+    ),
     allow_mixed: bool = typer.Option(
         False, "--allow-mixed", help="Compare runs at one point that differ in a set-up column (mass_ratio, theta_deg, k_in, dt, gravity_every, eta_potential, n_particles, restitution, mu_k, mu_r, G, rolling_friction) other than --by and --at."
     ),
@@ -987,9 +993,9 @@ def compare(
     """Compare groups of runs: per group (and point), the mean and spread of a metric, and the
     difference to a reference group (or to a value, --against) with its 95 % interval (Welch's t for
     groups under 30 runs, else a seeded bootstrap; Dunnett's simultaneous intervals where several
-    groups meet the reference at a point), a verdict, the smallest difference the runs at
-    hand resolve (detectable, power 0.8) and the runs per group a difference needs.  Rows of failed
-    runs are left out."""
+    groups meet the reference at a point; with --paired, the mean of twin runs' differences), a
+    verdict, the smallest difference the runs at hand resolve (detectable, power 0.8) and the runs
+    per group a difference needs.  Rows of failed runs are left out."""
     from .analysis.compare import SingleRunGroup, compare as compare_runs, parse_where, read_rows
     from .checks import InputError, check_destination
 
@@ -998,7 +1004,7 @@ def compare(
             check_destination(json_out, "comparison table")
         result = compare_runs(read_rows(paths), by, metric, at, reference=reference, resolve=resolve, where=parse_where(where or []),
                               allow_mixed=allow_mixed, allow_single=allow_single, against=against, confidence=confidence,
-                              per_comparison=per_comparison)  # fmt: skip
+                              per_comparison=per_comparison, paired=paired)  # fmt: skip
     except SingleRunGroup as error:  # the rest is shown, so that one sees what the runs there give
         for line in error.comparison.lines():
             typer.echo(line)

@@ -188,6 +188,89 @@ def test_the_method_follows_the_group_sizes_and_the_bootstrap_is_reproducible():
     assert first.resolved and first.verdict == "resolved"
 
 
+def twin_rows(values: dict, eta: float = 12.0, **setup) -> list[dict]:
+    """Summary rows of twins: {gravity_every: values}, the k-th value of each clock run on the k-th
+    set-up (realization k, its orientation seed and piles), as fig6_clock pairs with fig6_statistics."""
+    return [
+        {"run": f"k{clock}_r{k}", "gravity_every": clock, "spin_kind": "none", "eta": eta, **SETUP, **setup, "realization": k,
+         "orientation_seed": None if k == 0 else 1000 + k, "target_pile": f"target_s{k % 3}", "projectile_pile": "proj",
+         "largest_mass_ratio": float(value), "status": "ok"}  # fmt: skip
+        for clock, column in values.items()
+        for k, value in enumerate(column)
+    ]
+
+
+def test_paired_differences_are_scipy_s_ttest_rel_and_far_narrower_than_welch_s_for_correlated_twins():
+    """Twins that share a realization's outcome (spread 0.05) and differ by 0.01 +- 0.004: the paired
+    interval is scipy.stats.ttest_rel's (at 95 % and 90 %), its r Pearson's, its detectable
+    difference at n - 1 dof; Welch's interval on the same runs is ten times as wide and misses the
+    0.01 that the pairs resolve. The rows' order does not matter: twins are found by their columns."""
+    rng = np.random.default_rng(21)
+    shared = rng.normal(0.5, 0.05, 8)
+    k1, k10 = shared + rng.normal(0, 0.002, 8), shared + 0.01 + rng.normal(0, 0.002, 8)
+    rows = twin_rows({1: k1, 10: k10})
+    rows = [rows[k] for k in rng.permutation(len(rows))]
+    for confidence in (0.95, 0.9):
+        result = cmp.compare(rows, "gravity_every", "largest_mass_ratio", reference=1, paired=True, confidence=confidence)
+        (d,) = result.points[0].differences
+        scipy_interval = stats.ttest_rel(k10, k1).confidence_interval(confidence)
+        assert (d.low, d.high) == pytest.approx((scipy_interval.low, scipy_interval.high), rel=1e-12)
+        assert d.difference == pytest.approx(np.mean(k10 - k1), rel=1e-12) and d.pairs == 8 and d.method == "paired t"
+        assert d.correlation == pytest.approx(stats.pearsonr(k10, k1).statistic, rel=1e-12) and d.correlation > 0.99
+        spread = np.std(k10 - k1, ddof=1)
+        assert d.detectable == pytest.approx((stats.t.ppf(0.5 + confidence / 2, 7) + stats.t.ppf(0.8, 7)) * spread / math.sqrt(8), rel=1e-12)
+        assert d.runs_needed == cmp.runs_needed(spread, abs(d.difference), confidence, samples=1)
+    welch = cmp.compare(rows, "gravity_every", "largest_mass_ratio", reference=1).points[0].differences[0]
+    assert (welch.high - welch.low) > 10 * (d.high - d.low) and d.resolved and not welch.resolved
+    assert result.paired and result.unpaired == [] and "pairs: 8 twins; every run has its twin" in result.lines()
+    assert result.as_dict()["pair_columns"] == [c for c in cmp.PAIR_COLUMNS if c != "gravity_every"]
+
+
+def test_paired_intervals_cover_the_true_difference_95_percent_of_the_time():
+    """TRIALS seeded sets of five twins (shared outcome spread 0.05, own noise 0.01, true difference
+    0.01): the paired t interval holds 0.01 ~95 % of the time."""
+    covered = 0
+    for trial in range(TRIALS):
+        rng = np.random.default_rng(3000 + trial)
+        shared = rng.normal(0.5, 0.05, 5)
+        rows = twin_rows({1: shared + rng.normal(0, 0.01, 5), 10: shared + 0.01 + rng.normal(0, 0.01, 5)})
+        (d,) = cmp.compare(rows, "gravity_every", "largest_mass_ratio", reference=1, paired=True).points[0].differences
+        covered += d.low <= 0.01 <= d.high
+    assert abs(covered / TRIALS - 0.95) <= COVERAGE_TOLERANCE, covered / TRIALS
+
+
+def test_twins_agree_in_every_pairing_column_and_the_rest_are_named_or_refused():
+    """A run whose realization, piles or set-up has no counterpart is left out and named in the pairs
+    line; a group with one twin, two runs of one side alike in every column, several groups without
+    --per-comparison and --paired with --against are each refused in one line."""
+    rows = twin_rows({1: [0.50, 0.60, 0.55, 0.52], 10: [0.51, 0.62, 0.56, 0.50]})
+    rows[3] = {**rows[3], "realization": 7}  # k1_r3: realization 7 has no K = 10 run
+    rows[6] = {**rows[6], "target_pile": "other"}  # k10_r2: other piles
+    result = cmp.compare(rows, "gravity_every", "largest_mass_ratio", reference=1, paired=True)
+    (d,) = result.points[0].differences
+    assert d.pairs == 2 and d.difference == pytest.approx(((0.51 - 0.50) + (0.62 - 0.60)) / 2)
+    assert sorted(result.unpaired) == ["k10_r2 (gravity_every 10)", "k10_r3 (gravity_every 10)", "k1_r2 (gravity_every 1)", "k1_r3 (gravity_every 1)"]
+    (line,) = [line for line in result.lines() if line.startswith("pairs:")]
+    assert line.startswith("pairs: 2 twins; 4 run(s) without a twin left out: ") and "k1_r3 (gravity_every 1)" in line
+    assert [g.n for g in result.points[0].groups] == [4, 4]  # the groups' own statistics keep every run
+    # Twins at a point of --at: the at column is the point's, not a pairing column.
+    two = twin_rows({1: [0.5, 0.6], 10: [0.52, 0.61]}) + twin_rows({1: [0.3, 0.35], 10: [0.33, 0.36]}, eta=9.0)
+    assert [p.differences[0].pairs for p in cmp.compare(two, "gravity_every", "largest_mass_ratio", at="eta", reference=1, paired=True).points] == [2, 2]
+    with pytest.raises(cmp.UnpairedRuns, match=r"gravity_every 10 at eta 12 has 1 twin\(s\) among the gravity_every 1 runs .*without a twin: k1_r1"):
+        cmp.compare(two[:3] + two[4:], "gravity_every", "largest_mass_ratio", at="eta", reference=1, paired=True)  # k10_r1 of eta 12 gone
+    alike = twin_rows({1: [0.5, 0.6, 0.7], 10: [0.52, 0.61, 0.7]})
+    alike[1] = {**alike[1], "realization": 0, "orientation_seed": None, "target_pile": "target_s0"}
+    with pytest.raises(cmp.UnpairedRuns, match="runs k1_r0 and k1_r1 agree in every pairing column"):
+        cmp.compare(alike, "gravity_every", "largest_mass_ratio", reference=1, paired=True)
+    three = rows + [{**row, "run": row["run"].replace("k10", "k50"), "gravity_every": 50} for row in rows if row["gravity_every"] == 10]
+    with pytest.raises(cmp.CompareError, match="--paired: 2 groups meet 1 .10, 50.; Dunnett's"):
+        cmp.compare(three, "gravity_every", "largest_mass_ratio", reference=1, paired=True)
+    each = cmp.compare(three, "gravity_every", "largest_mass_ratio", reference=1, paired=True, per_comparison=True).points[0].differences
+    assert [(d.group, d.pairs, d.method) for d in each] == [(10.0, 2, "paired t"), (50.0, 2, "paired t")]
+    with pytest.raises(cmp.CompareError, match="--paired and --against"):
+        cmp.compare(rows, "gravity_every", "largest_mass_ratio", against=0.0, paired=True)
+
+
 def test_welch_interval_by_hand():
     a, b = np.array([1.0, 2.0, 3.0]), np.array([2.0, 4.0, 6.0, 8.0])
     # Variances of the means 1/3 and 5/3: se^2 = 2; Welch-Satterthwaite dof 4 / (1/18 + 25/27).
@@ -391,6 +474,42 @@ def test_compare_end_to_end_on_run_folders_and_on_summary_csv(sweep, tmp_path):
     assert sheet.stdout.splitlines()[1:] == lines[1:-1] and lines[-1] == f"wrote {out}"
 
 
+def test_paired_clocks_of_the_committed_runs(tmp_path):
+    """The review's case: fig6_clock's K = 1 runs and their K = 10 twins of fig6_statistics at eta 12
+    (1/10 and 1/4, realizations 0 to 2). --paired gives scipy.stats.ttest_rel's interval on the
+    twins as the csv module reads them and pairs them by realization, r 0.986 at 1/10 and its
+    interval a quarter of Welch's (+-0.035 against +-0.147); at 1/4 the twins anti-correlate (r
+    -0.87) and pairing widens it. No difference is resolved either way."""
+    from pathlib import Path
+
+    root = Path(__file__).parent.parent / "runs" / "results"
+    tables = [root / "fig6_statistics" / "summary.csv", root / "fig6_clock" / "summary.csv"]
+    args = [*map(str, tables), "--by", "gravity_every", "--metric", "largest_mass_ratio", "--at", "mass_ratio", "--where", "eta=12",
+            "--where", "mass_ratio=0.1,0.25", "--where", "realization=0,1,2", "--reference", "1"]  # fmt: skip
+    paired, welch = cli_here("compare", *args, "--paired", "--json", str(tmp_path / "paired.json")), cli_here("compare", *args)
+    assert paired.returncode == welch.returncode == 0, (paired.stderr, welch.stderr)
+    assert "pairs: 6 twins; every run has its twin" in paired.stdout.splitlines()
+    table = json.loads((tmp_path / "paired.json").read_text())
+    values = {}
+    for path in tables:
+        with path.open(newline="") as f:
+            for row in csv.DictReader(f):
+                if abs(float(row["eta"]) - 12) < 0.01 and row["realization"] in "012" and float(row["mass_ratio"]) < 0.3:
+                    values[(round(float(row["mass_ratio"]), 2), int(row["gravity_every"]), int(row["realization"]))] = float(row["largest_mass_ratio"])
+    half = {}
+    for point, welch_point, ratio in zip(table["points"], cmp.compare(cmp.read_rows(tables), "gravity_every", "largest_mass_ratio", at="mass_ratio",
+                                         where=cmp.parse_where(["eta=12", "mass_ratio=0.1,0.25", "realization=0,1,2"]), reference=1).points, (0.1, 0.25)):  # fmt: skip
+        k1, k10 = (np.array([values[(ratio, clock, k)] for k in range(3)]) for clock in (1, 10))
+        (d,), (w,) = point["differences"], welch_point.differences
+        scipy_interval = stats.ttest_rel(k10, k1).confidence_interval()
+        assert (d["low"], d["high"]) == pytest.approx((scipy_interval.low, scipy_interval.high), rel=1e-12)
+        assert d["pairs"] == 3 and d["correlation"] == pytest.approx(stats.pearsonr(k10, k1).statistic, rel=1e-9) and not d["resolved"]
+        half[ratio] = ((d["high"] - d["low"]) / 2, (w.high - w.low) / 2)
+    assert half[0.1][0] == pytest.approx(0.035, abs=5e-4) and half[0.1][1] == pytest.approx(0.147, abs=5e-4)
+    assert half[0.25][0] > half[0.25][1]  # anti-correlated twins: pairing costs
+    assert table["points"][0]["differences"][0]["correlation"] > 0.98 and table["points"][1]["differences"][0]["correlation"] < -0.8
+
+
 @pytest.fixture
 def bad_inputs(sweep, tmp_path):
     """{case: (decco-warp arguments, words its error line must hold)}: each bad input of compare."""
@@ -419,6 +538,9 @@ def bad_inputs(sweep, tmp_path):
         "read twice": ([str(sweep), str(sweep / "summary.csv"), *base], ["is read twice"]),
         "group and value": ([str(sweep), *base, "--reference", "none", "--against", "0"], ["--reference and --against", "not both"]),
         "per comparison against a value": ([str(sweep), *base, "--against", "0", "--per-comparison"], ["--per-comparison and --against"]),
+        "paired against a value": ([str(sweep), *base, "--against", "0", "--paired"], ["--paired and --against"]),
+        "twins not told apart": ([str(sweep), *base, "--at", "eta", "--paired"], ["runs parallel_eta6_r0 and parallel_eta6_r1 agree in every pairing column",
+                                                                               "realization column"]),
         "bad level": ([str(sweep), *base, "--confidence", "95"], ["--confidence must be a level from 0.5 to 0.9999", "got 95"]),
         "one set-up twice": ([str(twice), *base], ["parallel_eta6_r0 and parallel_eta6_r1 have the same outcome", "give it once"]),
     }

@@ -58,6 +58,10 @@ WHERE_TOLERANCE = 0.01
 #: it is the ``by`` or ``at`` column.
 SETUP_COLUMNS = ("mass_ratio", "theta_deg", "k_in", "dt", "gravity_every", "eta_potential", "n_particles", "restitution", "mu_k", "mu_r",
                  "G", "rolling_friction", "contact_law")  # fmt: skip
+#: With ``paired``, twins are two runs, one of a group and one of the reference group, that agree in
+#: each of these columns other than ``by`` (to KEY_DIGITS digits; a value missing in both agrees): the
+#: set-up, the energy, the spin, the realization and its turn of the piles, and the piles.
+PAIR_COLUMNS = (*SETUP_COLUMNS, "eta", "spin_kind", "realization", "orientation_seed", "target_pile", "projectile_pile")
 #: The group that ``spin_kind`` is compared against by default, where present.
 NO_SPIN = "none"
 #: Columns that a sweep's summary.csv gives each run beside its summary.json's (a run folder alone
@@ -87,6 +91,11 @@ class SingleRunGroup(CompareError):
     def __init__(self, message: str, comparison: "Comparison"):
         super().__init__(message)
         self.comparison = comparison
+
+
+class UnpairedRuns(CompareError):
+    """With ``paired``: a group with fewer than 2 twins of the reference's runs, or two runs of one
+    group that agree in every pairing column (which is whose twin?)."""
 
 
 # --- reading summaries ----------------------------------------------------------------------------
@@ -425,6 +434,8 @@ class Difference:
     #: the comparisons whose intervals hold together at ``confidence`` (Dunnett's, method "Dunnett"),
     #: this one among them; 1: an interval of its own
     family: int = 1
+    pairs: int | None = None  #: with ``paired``: the twins whose differences are averaged; else None
+    correlation: float | None = None  #: with ``paired``: Pearson's r of the twins' values (None: a side without spread)
 
 
 @dataclass
@@ -455,10 +466,19 @@ class Comparison:
     against: float | None = None  #: each group's mean compared with this value (``reference`` is it)
     confidence: float = CONFIDENCE  #: of every interval and verdict (two-sided)
     per_comparison: bool = False  #: each difference its own interval, never Dunnett's simultaneous ones
+    paired: bool = False  #: each difference the mean of its twins' differences (PAIR_COLUMNS)
+    unpaired: list = field(default_factory=list)  #: with ``paired``: the runs left out without a twin, "RUN (BY VALUE)"
+
+    @property
+    def pair_columns(self) -> list[str]:
+        """The columns in which twins agree (``paired``): PAIR_COLUMNS but ``by`` and ``at`` (a point's
+        runs share its value)."""
+        return [c for c in PAIR_COLUMNS if c not in (self.by, self.at)]
 
     def as_dict(self) -> dict:
         """Plain data (numbers as floats, None where none exists), for JSON."""
-        return {"power": POWER, "bootstrap_from": BOOTSTRAP_FROM, "seed": SEED, **asdict(self)}
+        return {"power": POWER, "bootstrap_from": BOOTSTRAP_FROM, "seed": SEED, **asdict(self),
+                "pair_columns": self.pair_columns if self.paired else None}  # fmt: skip
 
     def single(self) -> list[tuple[object, object]]:
         """(point, group) of every group of one run."""
@@ -474,7 +494,11 @@ class Comparison:
         methods = {d.method for p in self.points for d in p.differences}
         if self.against is None:
             intervals = f"difference to {label(self.reference)}: "
-            if "Dunnett" in methods:
+            if self.paired:
+                intervals += (f"the mean of the twins' differences (twins: a run and a run of {self.by} {label(self.reference)} that agree in each of "
+                              f"{', '.join(self.pair_columns)}), {level} interval by Student's t on them (pairs - 1 dof)"
+                              + (" of each group on its own (--per-comparison)" if self.per_comparison else "") + " where fewer than ")  # fmt: skip
+            elif "Dunnett" in methods:
                 several = "" if methods <= {"Dunnett", None} else f" where several groups meet {label(self.reference)} at a point"
                 intervals += (f"{level} simultaneous intervals by Dunnett's test{several} (the groups of a point together, one pooled "
                               "spread; --per-comparison gives each its own)")  # fmt: skip
@@ -490,13 +514,20 @@ class Comparison:
             f"{self.metric} by {self.by}" + (f" at {self.at}" if self.at else "")
             + (f"; reference: {label(self.reference)}" if self.against is None else f"; against: {self.against:g}"),
             f"runs: {self.read} read" + (f", {', '.join(left)} left out" if left else "") + (f", {kept} kept by --where {where}" if where else f", {kept} kept"),
-            intervals + ("" if intervals.endswith(")") else f"{BOOTSTRAP_FROM} runs, else by bootstrap (BCa, {self.resamples} resamples, seed {SEED})"),
+            intervals + ("" if intervals.endswith(")") else f"{BOOTSTRAP_FROM} {'pairs' if self.paired else 'runs'}, else by bootstrap "
+                         f"(BCa, {self.resamples} resamples, seed {SEED})"),
             f"detectable: the smallest true difference that the runs at hand resolve ({sided}): the interval's quantile plus the power's "
             "(t, or z for a bootstrap) times the difference's standard error, from the spreads, never from the difference seen; "
-            "runs to resolve: per group, for "
+            + ("pairs to resolve" if self.paired else "runs to resolve") + ": per group, for "
             + (f"a difference of {self.resolve:g}" if self.resolve is not None else "the difference seen") + f" ({sided})",
         ]
-        columns = [self.by, "n", "mean", "std", "diff", f"{level} interval", "method", "detectable", "runs to resolve", "verdict"]
+        if self.paired:
+            twins = sum(d.pairs or 0 for p in self.points for d in p.differences)
+            text.insert(3, f"pairs: {twins} twins; " + (f"{len(self.unpaired)} run(s) without a twin left out: {', '.join(self.unpaired)}"
+                                                        if self.unpaired else "every run has its twin"))  # fmt: skip
+        pairing = ["pairs", "r"] if self.paired else []
+        resolve = "pairs to resolve" if self.paired else "runs to resolve"
+        columns = [self.by, "n", "mean", "std", "diff", f"{level} interval", "method", *pairing, "detectable", resolve, "verdict"]
         left_aligned = {self.by, f"{level} interval", "method", "verdict"}
         for point in self.points:
             rows = [dict(zip(columns, columns))]
@@ -511,7 +542,9 @@ class Comparison:
                     interval = f"[{_digits(d.low, 3, '+')}, {_digits(d.high, 3, '+')}]" if d.low is not None else "-"
                     needed = "-" if d.low is None else "never" if d.runs_needed is None else str(d.runs_needed)  # "-": a spread unknown
                     row.update({"diff": _digits(d.difference, 3, "+"), f"{level} interval": interval, "method": d.method or "-",
-                                "detectable": _digits(d.detectable, 2), "runs to resolve": needed, "verdict": d.verdict})  # fmt: skip
+                                "detectable": _digits(d.detectable, 2), resolve: needed, "verdict": d.verdict})  # fmt: skip
+                    if self.paired:
+                        row.update({"pairs": str(d.pairs), "r": f"{d.correlation:.2f}" if d.correlation is not None else "-"})
                 rows.append(row)
             if self.against is None and self.reference not in {g.group for g in point.groups}:
                 rows.append({**dict.fromkeys(columns, ""), f"{level} interval": f"no {label(self.reference)} here: nothing to compare with"})
@@ -565,7 +598,7 @@ def _check_setups(point, rows: list[dict], by: str, at: str | None) -> None:
 def compare(rows: list[dict], by: str, metric: str, at: str | None = None, reference=None, resolve: float | None = None,
             where: dict | None = None, allow_mixed: bool = False, allow_single: bool = False,
             resamples: int = RESAMPLES, against: float | None = None, confidence: float = CONFIDENCE,
-            per_comparison: bool = False) -> Comparison:  # fmt: skip
+            per_comparison: bool = False, paired: bool = False) -> Comparison:  # fmt: skip
     """Group ``rows`` (run summaries) by ``by`` and ``at``, and compare each group's ``metric`` with
     the ``reference`` group's at each point (default: "none" for spin_kind where present, else the
     first group in sorted order), or, with ``against``, each group's mean with that value (a
@@ -575,7 +608,11 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
     they hold every true difference there ``confidence`` of the time; one pooled spread; at any
     group size, the bootstrap serving a lone comparison); ``per_comparison`` gives each its own
     instead (Welch's t or the bootstrap; 1 - 0.05 / m for m of them at a family-wise 95 %,
-    Bonferroni).
+    Bonferroni).  ``paired``: each group's runs are paired with their twins in the reference group
+    (the runs that agree in every PAIR_COLUMNS column but ``by``: the same set-up, realization and
+    piles) and the difference is the mean of the twins' differences, with Student's t interval on
+    them (pairs - 1 dof; the bootstrap from 30 pairs); runs without a twin are left out and named
+    (``unpaired``).  It takes one group against the reference per point, or ``per_comparison``.
 
     Rows of failed runs (status "failed") are left out, and so are rows without a value of ``by``,
     ``at`` or ``metric`` (counted in ``missing``).  ``where``: {column: values}, keep only the rows
@@ -583,7 +620,8 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
     estimate is for (default: each difference seen).
 
     Raises UnknownColumn, MixedSetups (unless ``allow_mixed``), SingleRunGroup (a group of one run
-    somewhere, unless ``allow_single``; the exception carries the comparison of the rest), and
+    somewhere, unless ``allow_single``; the exception carries the comparison of the rest),
+    UnpairedRuns (``paired``: a group with fewer than 2 twins, or twins that are not one to one), and
     CompareError for a metric that is not numeric, no rows left, or an unknown reference."""
     where = where or {}
     if not rows:
@@ -599,6 +637,9 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
         raise CompareError(f"--against must be a finite value; got {against:g}")
     if against is not None and reference is not None:
         raise CompareError("--reference and --against: compare with a group or with a value, not both")
+    if against is not None and paired:
+        raise CompareError("--paired and --against: pairs are a group's runs and their twins in the reference group; "
+                           "against a value there is nothing to pair")  # fmt: skip
     if against is not None and per_comparison:
         raise CompareError("--per-comparison and --against: each mean against a value has its own interval already; "
                            "--per-comparison is for several groups against a reference group (Dunnett's otherwise)")  # fmt: skip
@@ -632,7 +673,7 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
         if reference not in groups:
             raise CompareError(f"--reference {label(reference)}: no such {by} among the runs; they have: {', '.join(map(label, groups))}")
 
-    result = []
+    result, unpaired = [], []
     for at_key in sorted(points, key=lambda k: _order(k) if k is not None else (0, 0.0, "")):
         point = points[at_key]
         if not allow_mixed:  # the rows compared with each other: all at the point, or each group's against a value
@@ -641,14 +682,17 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
         if against is None:
             order = sorted(point, key=lambda g: (g != reference, _order(g)))  # the reference first
             stats_of = {g: _group(g, point[g], metric, resamples, confidence) for g in order}
-            differences = _differences(stats_of, reference, resolve, resamples, confidence, per_comparison) if reference in point else []
+            if not paired:
+                differences = _differences(stats_of, reference, resolve, resamples, confidence, per_comparison) if reference in point else []
+            else:
+                differences = _paired_differences(point, at_key, by, at, metric, reference, resolve, resamples, confidence, per_comparison, unpaired)
         else:
             order = sorted(point, key=_order)
             stats_of = {g: _group(g, point[g], metric, resamples, confidence) for g in order}
             differences = [_against(stats_of[g], against, resolve, confidence) for g in order]
         result.append(Point(at_key, [stats_of[g] for g in order], differences))
     comparison = Comparison(metric, by, at, reference, resolve, result, len(rows), len(rows) - len(done), where, met, missing, resamples,
-                            against, confidence, per_comparison)  # fmt: skip
+                            against, confidence, per_comparison, paired, list(dict.fromkeys(unpaired)))  # fmt: skip
     single = comparison.single()
     if single and not allow_single:
         named = "; ".join(f"{label(g)}" + (f" at {at} {label(p)}" if at else "") for p, g in single)
@@ -675,6 +719,79 @@ def _differences(stats_of: dict, reference, resolve: float | None, resamples: in
         intervals = dunnett_intervals([np.array(stats_of[g].values) for g in family], np.array(stats_of[reference].values), confidence)
         together = dict(zip(family, intervals))
     return [_difference(stats_of[g], stats_of[reference], resolve, resamples, confidence, together.get(g), len(together) or 1) for g in others]
+
+
+def pair_runs(rows: list[dict], reference_rows: list[dict], columns) -> tuple[list[tuple[dict, dict]], list[dict]]:
+    """(twins, the rest): each run of ``rows`` with the run of ``reference_rows`` that agrees with it
+    in every one of ``columns`` (values as keys: to KEY_DIGITS digits, a missing value agreeing
+    with a missing one), in the order of ``rows``; the rest are the runs of either side without a
+    twin.  Two runs of one side that agree in every column are refused (UnpairedRuns): whose twin
+    would the other side's be?"""
+    columns = list(columns)
+
+    def keyed(side: list[dict]) -> dict:
+        keys: dict = {}
+        for row in side:
+            key = tuple(value_key(row.get(c)) for c in columns)
+            if key in keys:
+                raise UnpairedRuns(f"runs {keys[key].get('run', '?')} and {row.get('run', '?')} agree in every pairing column "
+                                   f"({', '.join(columns)}): which is whose twin? Narrow with --where, or give a sweep's summary.csv "
+                                   "(its realization column tells realizations apart)")  # fmt: skip
+            keys[key] = row
+        return keys
+
+    mine, theirs = keyed(rows), keyed(reference_rows)
+    twins = [(row, theirs[key]) for key, row in mine.items() if key in theirs]
+    rest = [row for key, row in mine.items() if key not in theirs] + [row for key, row in theirs.items() if key not in mine]
+    return twins, rest
+
+
+def _paired_differences(point: dict, at_key, by: str, at: str | None, metric: str, reference, resolve: float | None, resamples: int,
+                        confidence: float, per_comparison: bool, unpaired: list) -> list[Difference]:  # fmt: skip
+    """Each group's paired difference to the reference at one point (``unpaired`` gets the runs
+    left without a twin, "RUN (BY VALUE)")."""
+    if reference not in point:
+        return []
+    others = sorted((g for g in point if g != reference), key=_order)
+    where = f" at {at} {label(at_key)}" if at else ""
+    if len(others) > 1 and not per_comparison:
+        raise CompareError(f"--paired{where}: {len(others)} groups meet {label(reference)} ({', '.join(map(label, others))}); Dunnett's "
+                           "simultaneous intervals are for independent groups, not pairs: pass --per-comparison for each group's paired "
+                           f"interval on its own (--confidence {1 - 0.05 / len(others):.4g} keeps the {len(others)} at 95 % together, Bonferroni)")  # fmt: skip
+    columns = [c for c in PAIR_COLUMNS if c not in (by, at)]
+    differences = []
+    for g in others:
+        twins, rest = pair_runs(point[g], point[reference], columns)
+        named = [f"{row.get('run', '?')} ({by} {label(value_key(row[by]))})" for row in rest]
+        if len(twins) < 2:
+            apart = [c for c in columns if {value_key(r.get(c)) for r in point[g]}.isdisjoint({value_key(r.get(c)) for r in point[reference]})]
+            raise UnpairedRuns(f"--paired: {by} {label(g)}{where} has {len(twins)} twin(s) among the {by} {label(reference)} runs "
+                               f"(twins agree in each of {', '.join(columns)})"
+                               + (f"; the two groups share no value of {', '.join(apart)}" if apart else "")
+                               + (f"; without a twin: {', '.join(named)}" if named else "")
+                               + "; a paired difference needs 2 pairs or more: compare without --paired")  # fmt: skip
+        unpaired += named
+        differences.append(_paired(g, reference, twins, metric, resolve, resamples, confidence))
+    return differences
+
+
+def _paired(group, reference, twins: list[tuple[dict, dict]], metric: str, resolve: float | None, resamples: int,
+            confidence: float) -> Difference:  # fmt: skip
+    """The mean of the twins' differences, its interval (Student's t at pairs - 1 dof, or the
+    bootstrap from BOOTSTRAP_FROM pairs), the pairs that ``resolve`` needs and the detectable
+    difference (one sample of differences), and the twins' correlation."""
+    a = np.array([float(row[metric]) for row, _ in twins])
+    b = np.array([float(row[metric]) for _, row in twins])
+    differences = a - b
+    difference = float(differences.mean())
+    delta = resolve if resolve is not None else abs(difference)
+    low, high, method = mean_interval(differences, confidence, resamples)
+    spread = float(differences.std(ddof=1))
+    detectable = detectable_difference(spread / math.sqrt(differences.size), differences.size - 1 if method == "t" else None, confidence)
+    correlation = float(np.corrcoef(a, b)[0, 1]) if np.ptp(a) > 0 and np.ptp(b) > 0 else None
+    return Difference(group, reference, difference, low, high, f"paired {method}", delta, runs_needed(spread, delta, confidence, samples=1),
+                      *_verdict(low, high, f"n = {differences.size} pairs"), detectable=detectable, pairs=int(differences.size),
+                      correlation=correlation)  # fmt: skip
 
 
 def _difference(group: Group, reference: Group, resolve: float | None, resamples: int, confidence: float = CONFIDENCE,
