@@ -983,7 +983,7 @@ def compare(
         "the reference per point, or --per-comparison."
     ),
     allow_mixed: bool = typer.Option(
-        False, "--allow-mixed", help="Compare runs at one point that differ in a set-up column (mass_ratio, theta_deg, k_in, dt, gravity_every, eta_potential, n_particles, restitution, mu_k, mu_r, G, rolling_friction) other than --by and --at."
+        False, "--allow-mixed", help="Compare runs at one point that differ in a set-up column (mass_ratio, theta_deg, k_in, dt, gravity_every, eta_potential, n_particles, restitution, mu_k, mu_r, G, rolling_friction, contact_law) other than --by and --at."
     ),
     allow_single: bool = typer.Option(
         False, "--allow-single", help="Accept groups of one run: shown without spread or interval (without it, the table is printed and the command exits 2 naming them)."
