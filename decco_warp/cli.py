@@ -974,8 +974,13 @@ def compare(
         "or the bootstrap from 30 runs), e.g. --against 0: does the size change differ from none?"
     ),
     confidence: float = typer.Option(
-        0.95, "--confidence", metavar="LEVEL", help="Level of every interval and verdict (two-sided): 0.983 (1 - 0.05/3) keeps three "
-        "comparisons with one reference at 95 % together (Bonferroni)."
+        0.95, "--confidence", metavar="LEVEL", help="Level of every interval and verdict (two-sided). Where several groups meet the reference "
+        "at a point, their intervals hold at this level together (Dunnett's test)."
+    ),
+    per_comparison: bool = typer.Option(
+        False, "--per-comparison", help="Give each group's difference to the reference its own interval (Welch's t, or the bootstrap from 30 runs) "
+        "instead of Dunnett's simultaneous ones where several groups meet the reference at a point; --confidence 0.983 (1 - 0.05/3) keeps "
+        "three of them at 95 % together (Bonferroni)."
     ),
     resolve: Optional[float] = typer.Option(
         None, "--resolve", metavar="DELTA", help="Difference to resolve [the metric's units] (default: each difference seen): the runs per group it needs are "
@@ -984,6 +989,12 @@ def compare(
     where: Optional[List[str]] = typer.Option(
         None, "--where", metavar="COLUMN=VALUE[,VALUE...]",
         help="Keep only the runs with one of these values in COLUMN (repeatable, every column must match; numbers within 1 %), e.g. --where mass_ratio=1 --where eta=3,6."
+    ),
+    paired: bool = typer.Option(
+        False, "--paired", help="Pair each run with its twin in the reference group (the run that agrees in the set-up, eta, spin_kind, realization, "
+        "orientation_seed and the piles: all but --by) and give the mean of the twins' differences with Student's t interval on them (pairs - 1 dof), "
+        "their count and correlation r; runs without a twin are named and left out, a group of fewer than 2 pairs is refused. One group against "
+        "the reference per point, or --per-comparison."
     ),
     allow_mixed: bool = typer.Option(
         False, "--allow-mixed", help="Compare runs at one point that differ in a set-up column (mass_ratio, theta_deg, k_in, dt, gravity_every, eta_potential, n_particles, restitution, mu_k, mu_r, G, rolling_friction, contact_law, k_t_ratio, eps_t, mu_s, mu_t, beta, cohesion) other than --by and --at."
@@ -995,8 +1006,10 @@ def compare(
 ) -> None:
     """Compare groups of runs: per group (and point), the mean and spread of a metric, and the
     difference to a reference group (or to a value, --against) with its 95 % interval (Welch's t for
-    groups under 30 runs, else a seeded bootstrap), a verdict, and the runs per group a difference
-    needs.  Rows of failed runs are left out."""
+    groups under 30 runs, else a seeded bootstrap; Dunnett's simultaneous intervals where several
+    groups meet the reference at a point; with --paired, the mean of twin runs' differences), a
+    verdict, the smallest difference the runs at hand resolve (detectable, power 0.8) and the runs
+    per group a difference needs.  Rows of failed runs are left out."""
     from .analysis.compare import SingleRunGroup, compare as compare_runs, parse_where, read_rows
     from .checks import InputError, check_destination
 
@@ -1004,7 +1017,8 @@ def compare(
         if json_out is not None:
             check_destination(json_out, "comparison table")
         result = compare_runs(read_rows(paths), by, metric, at, reference=reference, resolve=resolve, where=parse_where(where or []),
-                              allow_mixed=allow_mixed, allow_single=allow_single, against=against, confidence=confidence)  # fmt: skip
+                              allow_mixed=allow_mixed, allow_single=allow_single, against=against, confidence=confidence,
+                              per_comparison=per_comparison, paired=paired)  # fmt: skip
     except SingleRunGroup as error:  # the rest is shown, so that one sees what the runs there give
         for line in error.comparison.lines():
             typer.echo(line)

@@ -22,6 +22,7 @@ Pure NumPy and SciPy over dicts: no Warp, no HDF5.
 from __future__ import annotations
 
 import csv
+import functools
 import json
 import math
 from dataclasses import asdict, dataclass, field
@@ -57,6 +58,10 @@ WHERE_TOLERANCE = 0.01
 #: it is the ``by`` or ``at`` column.
 SETUP_COLUMNS = ("mass_ratio", "theta_deg", "k_in", "dt", "gravity_every", "eta_potential", "n_particles", "restitution", "mu_k", "mu_r",
                  "G", "rolling_friction", "contact_law", "k_t_ratio", "eps_t", "mu_s", "mu_t", "beta", "cohesion")  # fmt: skip
+#: With ``paired``, twins are two runs, one of a group and one of the reference group, that agree in
+#: each of these columns other than ``by`` (to KEY_DIGITS digits; a value missing in both agrees): the
+#: set-up, the energy, the spin, the realization and its turn of the piles, and the piles.
+PAIR_COLUMNS = (*SETUP_COLUMNS, "eta", "spin_kind", "realization", "orientation_seed", "target_pile", "projectile_pile")
 #: The group that ``spin_kind`` is compared against by default, where present.
 NO_SPIN = "none"
 #: Columns that a sweep's summary.csv gives each run beside its summary.json's (a run folder alone
@@ -86,6 +91,11 @@ class SingleRunGroup(CompareError):
     def __init__(self, message: str, comparison: "Comparison"):
         super().__init__(message)
         self.comparison = comparison
+
+
+class UnpairedRuns(CompareError):
+    """With ``paired``: a group with fewer than 2 twins of the reference's runs, or two runs of one
+    group that agree in every pairing column (which is whose twin?)."""
 
 
 # --- reading summaries ----------------------------------------------------------------------------
@@ -259,6 +269,37 @@ def runs_needed(spread: float, delta: float, confidence: float = CONFIDENCE, pow
     return max(2, math.ceil(samples * z**2 * spread**2 / delta**2))
 
 
+def detectable_difference(error: float, freedom: float | None = None, confidence: float = CONFIDENCE, power: float = POWER,
+                          critical: float | None = None) -> float:  # fmt: skip
+    """The minimum detectable difference: the smallest true difference that an interval whose
+    difference has standard error ``error`` resolves (leaves out 0) with probability ``power``,
+    (critical + q_power) x error.  ``critical`` is the interval's own two-sided quantile at
+    ``confidence``: Student's t at ``freedom`` degrees of freedom (Welch's, or n - 1 for one mean or
+    n pairs), the normal z where ``freedom`` is None (a bootstrap interval), or as given (Dunnett's
+    simultaneous one); q_power is the ``power`` quantile of the same t (z).  With the normal
+    quantiles it is :func:`runs_needed` inverted: two groups of n runs and mean variance s^2 have
+    error s sqrt(2 / n), and (z_(1-a/2) + z_power) s sqrt(2 / n) is the delta for which runs_needed
+    gives n.  With few runs the t quantiles are the larger (at n = 3 and 3, 3.7 errors against the
+    normal 2.8): the normal figure would name differences below the interval's own half-width, which
+    those runs never resolve.  ``error`` comes from the groups' spreads and sizes, never from the
+    difference seen: post-hoc power from the observed difference says nothing the interval does not."""
+    if freedom is not None and not freedom > 0:
+        raise ValueError(f"degrees of freedom must be > 0; got {freedom}")
+    quantile = stats.norm if freedom is None else stats.t(freedom)
+    if critical is None:
+        critical = quantile.ppf(0.5 + confidence / 2)
+    return float((critical + quantile.ppf(power)) * error)
+
+
+def welch_freedom(a: np.ndarray, b: np.ndarray) -> float:
+    """The Welch-Satterthwaite degrees of freedom of mean(a) - mean(b) (infinite for two groups
+    without any scatter, where the interval is the difference itself)."""
+    va, vb = a.var(ddof=1) / a.size, b.var(ddof=1) / b.size
+    if va + vb == 0:
+        return math.inf
+    return float((va + vb) ** 2 / (va**2 / (a.size - 1) + vb**2 / (b.size - 1)))
+
+
 def welch_interval(a: np.ndarray, b: np.ndarray, confidence: float = CONFIDENCE) -> tuple[float, float]:
     """Welch's t interval of mean(a) - mean(b) (unequal variances, Welch-Satterthwaite degrees of
     freedom); two groups without any scatter give the difference itself."""
@@ -266,8 +307,7 @@ def welch_interval(a: np.ndarray, b: np.ndarray, confidence: float = CONFIDENCE)
     difference = a.mean() - b.mean()
     if va + vb == 0:
         return float(difference), float(difference)
-    freedom = (va + vb) ** 2 / (va**2 / (a.size - 1) + vb**2 / (b.size - 1))
-    half = stats.t.ppf(0.5 + confidence / 2, freedom) * math.sqrt(va + vb)
+    half = stats.t.ppf(0.5 + confidence / 2, welch_freedom(a, b)) * math.sqrt(va + vb)
     return float(difference - half), float(difference + half)
 
 
@@ -279,7 +319,7 @@ def bootstrap_interval(samples: tuple[np.ndarray, ...], confidence: float = CONF
     value = float(statistic(*samples, axis=-1))
     if all(np.ptp(s) == 0 for s in samples):
         return value, value
-    # random_state, not rng: the keyword of every SciPy from the 1.10 that pyproject admits.
+    # random_state, not rng: the keyword of every SciPy from the 1.11 that pyproject admits.
     result = stats.bootstrap(samples, statistic, n_resamples=resamples, confidence_level=confidence, vectorized=True,
                              random_state=np.random.default_rng(SEED))  # fmt: skip
     return float(result.confidence_interval.low), float(result.confidence_interval.high)
@@ -310,6 +350,48 @@ def difference_interval(a: np.ndarray, b: np.ndarray, confidence: float = CONFID
     if min(a.size, b.size) < BOOTSTRAP_FROM:
         return (*welch_interval(a, b, confidence), "Welch t")
     return (*bootstrap_interval((a, b), confidence, resamples), "bootstrap")
+
+
+@functools.lru_cache(maxsize=256)
+def dunnett_critical(control: int, sizes: tuple[int, ...], confidence: float = CONFIDENCE) -> float:
+    """Dunnett's two-sided critical value for groups of ``sizes`` runs each compared with a control
+    of ``control`` runs at ``confidence`` together: the quantile of max |T_i| for the multivariate t
+    of sum(sizes) + control - len(sizes) - 1 degrees of freedom and correlations
+    1 / sqrt((control / n_i + 1)(control / n_j + 1)), as scipy.stats.dunnett computes it (randomized
+    quasi-Monte Carlo drawn from SEED, so the same each time).  It depends on the sizes and the level
+    only, not on the values: it is computed once a design, from stand-in samples, and equals
+    scipy.stats.dunnett's on the runs themselves with the same seed."""
+    stand_ins = [np.arange(n, dtype=float) for n in sizes]
+    reference = np.arange(control, dtype=float)
+    # random_state, not rng: the keyword of every SciPy from the 1.11 that pyproject admits.
+    result = stats.dunnett(*stand_ins, control=reference, random_state=np.random.default_rng(SEED))
+    interval = result.confidence_interval(confidence)
+    error = pooled_std([*stand_ins, reference]) * math.sqrt(1 / sizes[0] + 1 / control)
+    return float((interval.high[0] - interval.low[0]) / 2 / error)
+
+
+def pooled_std(samples: list[np.ndarray]) -> float:
+    """The pooled standard deviation of ``samples`` (one spread for all, as Dunnett's test assumes):
+    sqrt(sum (n_i - 1) s_i^2 / (sum n_i - k))."""
+    return math.sqrt(sum(float(((s - s.mean()) ** 2).sum()) for s in samples) / (sum(s.size for s in samples) - len(samples)))
+
+
+def dunnett_intervals(samples: list[np.ndarray], control: np.ndarray, confidence: float = CONFIDENCE) -> list[tuple[float, float, dict]]:
+    """Dunnett's many-to-one simultaneous intervals of mean(sample) - mean(control), one per sample
+    (each of at least 2 values, two or more samples): together they hold all their true
+    differences ``confidence`` of the time.  Each is difference -+ c s sqrt(1 / n_i + 1 / n_0), with
+    s the pooled standard deviation of every group and the control (Dunnett assumes one spread) and
+    c :func:`dunnett_critical`'s.  With each: {"critical": c, "freedom": sum n - k, "error": s
+    sqrt(1 / n_i + 1 / n_0)}."""
+    critical = dunnett_critical(control.size, tuple(s.size for s in samples), confidence)
+    spread = pooled_std([*samples, control])
+    freedom = sum(s.size for s in samples) + control.size - len(samples) - 1
+    intervals = []
+    for sample in samples:
+        error = spread * math.sqrt(1 / sample.size + 1 / control.size)
+        difference = float(sample.mean() - control.mean())
+        intervals.append((difference - critical * error, difference + critical * error, {"critical": critical, "freedom": freedom, "error": error}))
+    return intervals
 
 
 # --- the comparison ----------------------------------------------------------------------------
@@ -345,6 +427,15 @@ class Difference:
     runs_needed: int | None  #: per group, for ``delta`` at the two groups' mean variance; None: never
     resolved: bool
     verdict: str
+    #: the minimum detectable difference of the runs at hand [the metric's units]: the smallest one
+    #: they resolve at ``confidence`` with power POWER (:func:`detectable_difference`); None where a
+    #: group has one run
+    detectable: float | None = None
+    #: the comparisons whose intervals hold together at ``confidence`` (Dunnett's, method "Dunnett"),
+    #: this one among them; 1: an interval of its own
+    family: int = 1
+    pairs: int | None = None  #: with ``paired``: the twins whose differences are averaged; else None
+    correlation: float | None = None  #: with ``paired``: Pearson's r of the twins' values (None: a side without spread)
 
 
 @dataclass
@@ -374,10 +465,20 @@ class Comparison:
     resamples: int = RESAMPLES  #: of each bootstrap interval
     against: float | None = None  #: each group's mean compared with this value (``reference`` is it)
     confidence: float = CONFIDENCE  #: of every interval and verdict (two-sided)
+    per_comparison: bool = False  #: each difference its own interval, never Dunnett's simultaneous ones
+    paired: bool = False  #: each difference the mean of its twins' differences (PAIR_COLUMNS)
+    unpaired: list = field(default_factory=list)  #: with ``paired``: the runs left out without a twin, "RUN (BY VALUE)"
+
+    @property
+    def pair_columns(self) -> list[str]:
+        """The columns in which twins agree (``paired``): PAIR_COLUMNS but ``by`` and ``at`` (a point's
+        runs share its value)."""
+        return [c for c in PAIR_COLUMNS if c not in (self.by, self.at)]
 
     def as_dict(self) -> dict:
         """Plain data (numbers as floats, None where none exists), for JSON."""
-        return {"power": POWER, "bootstrap_from": BOOTSTRAP_FROM, "seed": SEED, **asdict(self)}
+        return {"power": POWER, "bootstrap_from": BOOTSTRAP_FROM, "seed": SEED, **asdict(self),
+                "pair_columns": self.pair_columns if self.paired else None}  # fmt: skip
 
     def single(self) -> list[tuple[object, object]]:
         """(point, group) of every group of one run."""
@@ -390,37 +491,66 @@ class Comparison:
         left = [f"{self.failed} failed"] if self.failed else []
         left += [f"{n} without {column}" for column, n in self.missing.items()]
         level = f"{100 * self.confidence:.4g} %"
+        methods = {d.method for p in self.points for d in p.differences}
         if self.against is None:
-            intervals = f"difference to {label(self.reference)}: {level} interval by Welch's t where a group has fewer than "
+            intervals = f"difference to {label(self.reference)}: "
+            if self.paired:
+                intervals += (f"the mean of the twins' differences (twins: a run and a run of {self.by} {label(self.reference)} that agree in each of "
+                              f"{', '.join(self.pair_columns)}), {level} interval by Student's t on them (pairs - 1 dof)"
+                              + (" of each group on its own (--per-comparison)" if self.per_comparison else "") + " where fewer than ")  # fmt: skip
+            elif "Dunnett" in methods:
+                several = "" if methods <= {"Dunnett", None} else f" where several groups meet {label(self.reference)} at a point"
+                intervals += (f"{level} simultaneous intervals by Dunnett's test{several} (the groups of a point together, one pooled "
+                              "spread; --per-comparison gives each its own)")  # fmt: skip
+                intervals += "" if not several else ", else by Welch's t where a group has fewer than "
+            elif self.per_comparison:
+                intervals += f"{level} interval of each comparison on its own (--per-comparison) by Welch's t where a group has fewer than "
+            else:
+                intervals += f"{level} interval by Welch's t where a group has fewer than "
         else:
             intervals = f"each mean minus {self.against:g}: {level} interval by Student's t where a group has fewer than "
+        sided = f"two-sided {100 * (1 - self.confidence):.3g} %, power {POWER:g}"
         text = [
             f"{self.metric} by {self.by}" + (f" at {self.at}" if self.at else "")
             + (f"; reference: {label(self.reference)}" if self.against is None else f"; against: {self.against:g}"),
             f"runs: {self.read} read" + (f", {', '.join(left)} left out" if left else "") + (f", {kept} kept by --where {where}" if where else f", {kept} kept"),
-            intervals + f"{BOOTSTRAP_FROM} runs, else by bootstrap (BCa, {self.resamples} resamples, seed {SEED}); runs to resolve: per group, for "
-            + (f"a difference of {self.resolve:g}" if self.resolve is not None else "the difference seen")
-            + f" (two-sided {100 * (1 - self.confidence):.3g} %, power {POWER:g})",
+            intervals + ("" if intervals.endswith(")") else f"{BOOTSTRAP_FROM} {'pairs' if self.paired else 'runs'}, else by bootstrap "
+                         f"(BCa, {self.resamples} resamples, seed {SEED})"),
+            f"detectable: the smallest true difference that the runs at hand resolve ({sided}): the interval's quantile plus the power's "
+            "(t, or z for a bootstrap) times the difference's standard error, from the spreads, never from the difference seen; "
+            + ("pairs to resolve" if self.paired else "runs to resolve") + ": per group, for "
+            + (f"a difference of {self.resolve:g}" if self.resolve is not None else "the difference seen") + f" ({sided})",
         ]
-        header = (self.by, "n", "mean", "std", "diff", f"{level} interval", "method", "runs to resolve", "verdict")
+        if self.paired:
+            twins = sum(d.pairs or 0 for p in self.points for d in p.differences)
+            text.insert(3, f"pairs: {twins} twins; " + (f"{len(self.unpaired)} run(s) without a twin left out: {', '.join(self.unpaired)}"
+                                                        if self.unpaired else "every run has its twin"))  # fmt: skip
+        pairing = ["pairs", "r"] if self.paired else []
+        resolve = "pairs to resolve" if self.paired else "runs to resolve"
+        columns = [self.by, "n", "mean", "std", "diff", f"{level} interval", "method", *pairing, "detectable", resolve, "verdict"]
+        left_aligned = {self.by, f"{level} interval", "method", "verdict"}
         for point in self.points:
-            rows = [header]
+            rows = [dict(zip(columns, columns))]
             differences = {d.group: d for d in point.differences}
             for g in point.groups:
                 d = differences.get(g.group)
-                row = [label(g.group), str(g.n), _digits(g.mean, 4), _digits(g.std, 2)]
+                row = dict.fromkeys(columns, "")
+                row.update({self.by: label(g.group), "n": str(g.n), "mean": _digits(g.mean, 4), "std": _digits(g.std, 2)})
                 if d is None:
-                    row += ["", "", "", "", "reference" if g.group == self.reference else ""]
+                    row["verdict"] = "reference" if g.group == self.reference else ""
                 else:
                     interval = f"[{_digits(d.low, 3, '+')}, {_digits(d.high, 3, '+')}]" if d.low is not None else "-"
                     needed = "-" if d.low is None else "never" if d.runs_needed is None else str(d.runs_needed)  # "-": a spread unknown
-                    row += [_digits(d.difference, 3, "+"), interval, d.method or "-", needed, d.verdict]
+                    row.update({"diff": _digits(d.difference, 3, "+"), f"{level} interval": interval, "method": d.method or "-",
+                                "detectable": _digits(d.detectable, 2), resolve: needed, "verdict": d.verdict})  # fmt: skip
+                    if self.paired:
+                        row.update({"pairs": str(d.pairs), "r": f"{d.correlation:.2f}" if d.correlation is not None else "-"})
                 rows.append(row)
             if self.against is None and self.reference not in {g.group for g in point.groups}:
-                rows.append(["", "", "", "", f"no {label(self.reference)} here: nothing to compare with", "", "", "", ""])
-            widths = [max(len(r[k]) for r in rows) for k in range(len(header))]
+                rows.append({**dict.fromkeys(columns, ""), f"{level} interval": f"no {label(self.reference)} here: nothing to compare with"})
+            widths = {c: max(len(r[c]) for r in rows) for c in columns}
             text.append(f"{self.at} {label(point.at)}:" if self.at else "all runs:")
-            text += ["  " + "  ".join(c.ljust(w) if k in (0, 5, 6, 8) else c.rjust(w) for k, (c, w) in enumerate(zip(r, widths))).rstrip() for r in rows]
+            text += ["  " + "  ".join(r[c].ljust(widths[c]) if c in left_aligned else r[c].rjust(widths[c]) for c in columns).rstrip() for r in rows]
         return text
 
 
@@ -467,12 +597,22 @@ def _check_setups(point, rows: list[dict], by: str, at: str | None) -> None:
 
 def compare(rows: list[dict], by: str, metric: str, at: str | None = None, reference=None, resolve: float | None = None,
             where: dict | None = None, allow_mixed: bool = False, allow_single: bool = False,
-            resamples: int = RESAMPLES, against: float | None = None, confidence: float = CONFIDENCE) -> Comparison:  # fmt: skip
+            resamples: int = RESAMPLES, against: float | None = None, confidence: float = CONFIDENCE,
+            per_comparison: bool = False, paired: bool = False) -> Comparison:  # fmt: skip
     """Group ``rows`` (run summaries) by ``by`` and ``at``, and compare each group's ``metric`` with
     the ``reference`` group's at each point (default: "none" for spin_kind where present, else the
     first group in sorted order), or, with ``against``, each group's mean with that value (a
     reference group and ``against`` exclude each other).  Intervals and verdicts are at
-    ``confidence`` (two-sided, 0.5 to 0.9999; 1 - 0.05 / m for m comparisons at a family-wise 95 %).
+    ``confidence`` (two-sided, 0.5 to 0.9999).  Where two or more groups (of 2 runs or more) meet
+    the reference at a point, their intervals are Dunnett's many-to-one simultaneous ones (together
+    they hold every true difference there ``confidence`` of the time; one pooled spread; at any
+    group size, the bootstrap serving a lone comparison); ``per_comparison`` gives each its own
+    instead (Welch's t or the bootstrap; 1 - 0.05 / m for m of them at a family-wise 95 %,
+    Bonferroni).  ``paired``: each group's runs are paired with their twins in the reference group
+    (the runs that agree in every PAIR_COLUMNS column but ``by``: the same set-up, realization and
+    piles) and the difference is the mean of the twins' differences, with Student's t interval on
+    them (pairs - 1 dof; the bootstrap from 30 pairs); runs without a twin are left out and named
+    (``unpaired``).  It takes one group against the reference per point, or ``per_comparison``.
 
     Rows of failed runs (status "failed") are left out, and so are rows without a value of ``by``,
     ``at`` or ``metric`` (counted in ``missing``).  ``where``: {column: values}, keep only the rows
@@ -480,7 +620,8 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
     estimate is for (default: each difference seen).
 
     Raises UnknownColumn, MixedSetups (unless ``allow_mixed``), SingleRunGroup (a group of one run
-    somewhere, unless ``allow_single``; the exception carries the comparison of the rest), and
+    somewhere, unless ``allow_single``; the exception carries the comparison of the rest),
+    UnpairedRuns (``paired``: a group with fewer than 2 twins, or twins that are not one to one), and
     CompareError for a metric that is not numeric, no rows left, or an unknown reference."""
     where = where or {}
     if not rows:
@@ -496,6 +637,12 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
         raise CompareError(f"--against must be a finite value; got {against:g}")
     if against is not None and reference is not None:
         raise CompareError("--reference and --against: compare with a group or with a value, not both")
+    if against is not None and paired:
+        raise CompareError("--paired and --against: pairs are a group's runs and their twins in the reference group; "
+                           "against a value there is nothing to pair")  # fmt: skip
+    if against is not None and per_comparison:
+        raise CompareError("--per-comparison and --against: each mean against a value has its own interval already; "
+                           "--per-comparison is for several groups against a reference group (Dunnett's otherwise)")  # fmt: skip
     done = [row for row in rows if row.get("status") != "failed"]
     kept, met = select(done, where)
     if not kept:
@@ -526,7 +673,7 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
         if reference not in groups:
             raise CompareError(f"--reference {label(reference)}: no such {by} among the runs; they have: {', '.join(map(label, groups))}")
 
-    result = []
+    result, unpaired = [], []
     for at_key in sorted(points, key=lambda k: _order(k) if k is not None else (0, 0.0, "")):
         point = points[at_key]
         if not allow_mixed:  # the rows compared with each other: all at the point, or each group's against a value
@@ -535,15 +682,17 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
         if against is None:
             order = sorted(point, key=lambda g: (g != reference, _order(g)))  # the reference first
             stats_of = {g: _group(g, point[g], metric, resamples, confidence) for g in order}
-            differences = [_difference(stats_of[g], stats_of[reference], resolve, resamples, confidence)
-                           for g in order if g != reference and reference in point]  # fmt: skip
+            if not paired:
+                differences = _differences(stats_of, reference, resolve, resamples, confidence, per_comparison) if reference in point else []
+            else:
+                differences = _paired_differences(point, at_key, by, at, metric, reference, resolve, resamples, confidence, per_comparison, unpaired)
         else:
             order = sorted(point, key=_order)
             stats_of = {g: _group(g, point[g], metric, resamples, confidence) for g in order}
             differences = [_against(stats_of[g], against, resolve, confidence) for g in order]
         result.append(Point(at_key, [stats_of[g] for g in order], differences))
     comparison = Comparison(metric, by, at, reference, resolve, result, len(rows), len(rows) - len(done), where, met, missing, resamples,
-                            against, confidence)  # fmt: skip
+                            against, confidence, per_comparison, paired, list(dict.fromkeys(unpaired)))  # fmt: skip
     single = comparison.single()
     if single and not allow_single:
         named = "; ".join(f"{label(g)}" + (f" at {at} {label(p)}" if at else "") for p, g in single)
@@ -559,15 +708,111 @@ def _group(key, rows: list[dict], metric: str, resamples: int, confidence: float
     return Group(key, int(values.size), float(values.mean()), std, low, high, method, [row.get("run") for row in rows], values.tolist())
 
 
-def _difference(group: Group, reference: Group, resolve: float | None, resamples: int, confidence: float = CONFIDENCE) -> Difference:
+def _differences(stats_of: dict, reference, resolve: float | None, resamples: int, confidence: float, per_comparison: bool) -> list[Difference]:
+    """Each group's difference to the reference group at one point: Dunnett's simultaneous
+    intervals where two or more groups of at least 2 runs meet a reference of at least 2 (unless
+    ``per_comparison``), else each its own (Welch's t or the bootstrap)."""
+    others = [g for g in stats_of if g != reference]
+    family = [g for g in others if stats_of[g].n >= 2] if stats_of[reference].n >= 2 and not per_comparison else []
+    together = {}
+    if len(family) >= 2:
+        intervals = dunnett_intervals([np.array(stats_of[g].values) for g in family], np.array(stats_of[reference].values), confidence)
+        together = dict(zip(family, intervals))
+    return [_difference(stats_of[g], stats_of[reference], resolve, resamples, confidence, together.get(g), len(together) or 1) for g in others]
+
+
+def pair_runs(rows: list[dict], reference_rows: list[dict], columns) -> tuple[list[tuple[dict, dict]], list[dict]]:
+    """(twins, the rest): each run of ``rows`` with the run of ``reference_rows`` that agrees with it
+    in every one of ``columns`` (values as keys: to KEY_DIGITS digits, a missing value agreeing
+    with a missing one), in the order of ``rows``; the rest are the runs of either side without a
+    twin.  Two runs of one side that agree in every column are refused (UnpairedRuns): whose twin
+    would the other side's be?"""
+    columns = list(columns)
+
+    def keyed(side: list[dict]) -> dict:
+        keys: dict = {}
+        for row in side:
+            key = tuple(value_key(row.get(c)) for c in columns)
+            if key in keys:
+                raise UnpairedRuns(f"runs {keys[key].get('run', '?')} and {row.get('run', '?')} agree in every pairing column "
+                                   f"({', '.join(columns)}): which is whose twin? Narrow with --where, or give a sweep's summary.csv "
+                                   "(its realization column tells realizations apart)")  # fmt: skip
+            keys[key] = row
+        return keys
+
+    mine, theirs = keyed(rows), keyed(reference_rows)
+    twins = [(row, theirs[key]) for key, row in mine.items() if key in theirs]
+    rest = [row for key, row in mine.items() if key not in theirs] + [row for key, row in theirs.items() if key not in mine]
+    return twins, rest
+
+
+def _paired_differences(point: dict, at_key, by: str, at: str | None, metric: str, reference, resolve: float | None, resamples: int,
+                        confidence: float, per_comparison: bool, unpaired: list) -> list[Difference]:  # fmt: skip
+    """Each group's paired difference to the reference at one point (``unpaired`` gets the runs
+    left without a twin, "RUN (BY VALUE)")."""
+    if reference not in point:
+        return []
+    others = sorted((g for g in point if g != reference), key=_order)
+    where = f" at {at} {label(at_key)}" if at else ""
+    if len(others) > 1 and not per_comparison:
+        raise CompareError(f"--paired{where}: {len(others)} groups meet {label(reference)} ({', '.join(map(label, others))}); Dunnett's "
+                           "simultaneous intervals are for independent groups, not pairs: pass --per-comparison for each group's paired "
+                           f"interval on its own (--confidence {1 - 0.05 / len(others):.4g} keeps the {len(others)} at 95 % together, Bonferroni)")  # fmt: skip
+    columns = [c for c in PAIR_COLUMNS if c not in (by, at)]
+    differences = []
+    for g in others:
+        twins, rest = pair_runs(point[g], point[reference], columns)
+        named = [f"{row.get('run', '?')} ({by} {label(value_key(row[by]))})" for row in rest]
+        if len(twins) < 2:
+            apart = [c for c in columns if {value_key(r.get(c)) for r in point[g]}.isdisjoint({value_key(r.get(c)) for r in point[reference]})]
+            raise UnpairedRuns(f"--paired: {by} {label(g)}{where} has {len(twins)} twin(s) among the {by} {label(reference)} runs "
+                               f"(twins agree in each of {', '.join(columns)})"
+                               + (f"; the two groups share no value of {', '.join(apart)}" if apart else "")
+                               + (f"; without a twin: {', '.join(named)}" if named else "")
+                               + "; a paired difference needs 2 pairs or more: compare without --paired")  # fmt: skip
+        unpaired += named
+        differences.append(_paired(g, reference, twins, metric, resolve, resamples, confidence))
+    return differences
+
+
+def _paired(group, reference, twins: list[tuple[dict, dict]], metric: str, resolve: float | None, resamples: int,
+            confidence: float) -> Difference:  # fmt: skip
+    """The mean of the twins' differences, its interval (Student's t at pairs - 1 dof, or the
+    bootstrap from BOOTSTRAP_FROM pairs), the pairs that ``resolve`` needs and the detectable
+    difference (one sample of differences), and the twins' correlation."""
+    a = np.array([float(row[metric]) for row, _ in twins])
+    b = np.array([float(row[metric]) for _, row in twins])
+    differences = a - b
+    difference = float(differences.mean())
+    delta = resolve if resolve is not None else abs(difference)
+    low, high, method = mean_interval(differences, confidence, resamples)
+    spread = float(differences.std(ddof=1))
+    detectable = detectable_difference(spread / math.sqrt(differences.size), differences.size - 1 if method == "t" else None, confidence)
+    correlation = float(np.corrcoef(a, b)[0, 1]) if np.ptp(a) > 0 and np.ptp(b) > 0 else None
+    return Difference(group, reference, difference, low, high, f"paired {method}", delta, runs_needed(spread, delta, confidence, samples=1),
+                      *_verdict(low, high, f"n = {differences.size} pairs"), detectable=detectable, pairs=int(differences.size),
+                      correlation=correlation)  # fmt: skip
+
+
+def _difference(group: Group, reference: Group, resolve: float | None, resamples: int, confidence: float = CONFIDENCE,
+                simultaneous: tuple | None = None, family: int = 1) -> Difference:  # fmt: skip
     difference = group.mean - reference.mean
     delta = resolve if resolve is not None else abs(difference)
     if group.n < 2 or reference.n < 2:
         one = group.group if group.n < 2 else reference.group
         return Difference(group.group, reference.group, difference, None, None, None, delta, None, False, f"spread unknown: 1 run of {label(one)}")
-    low, high, method = difference_interval(np.array(group.values), np.array(reference.values), confidence, resamples)
     needed = runs_needed(math.sqrt((group.std**2 + reference.std**2) / 2), delta, confidence)
-    return Difference(group.group, reference.group, difference, low, high, method, delta, needed, *_verdict(low, high, f"n = {group.n} and {reference.n}"))
+    if simultaneous is not None:
+        low, high, design = simultaneous
+        method = "Dunnett"
+        detectable = detectable_difference(design["error"], design["freedom"], confidence, critical=design["critical"])
+    else:
+        a, b = np.array(group.values), np.array(reference.values)
+        low, high, method = difference_interval(a, b, confidence, resamples)
+        freedom = welch_freedom(a, b) if method == "Welch t" else None
+        detectable = detectable_difference(math.sqrt(group.std**2 / group.n + reference.std**2 / reference.n), freedom, confidence)
+    return Difference(group.group, reference.group, difference, low, high, method, delta, needed,
+                      *_verdict(low, high, f"n = {group.n} and {reference.n}"), detectable=detectable, family=family)  # fmt: skip
 
 
 def _against(group: Group, value: float, resolve: float | None, confidence: float) -> Difference:
@@ -578,7 +823,8 @@ def _against(group: Group, value: float, resolve: float | None, confidence: floa
         return Difference(group.group, value, difference, None, None, None, delta, None, False, f"spread unknown: 1 run of {label(group.group)}")
     needed = runs_needed(group.std, delta, confidence, samples=1)
     low, high = group.low - value, group.high - value
-    return Difference(group.group, value, difference, low, high, group.method, delta, needed, *_verdict(low, high, f"n = {group.n}"))
+    detectable = detectable_difference(group.std / math.sqrt(group.n), group.n - 1 if group.method == "t" else None, confidence)
+    return Difference(group.group, value, difference, low, high, group.method, delta, needed, *_verdict(low, high, f"n = {group.n}"), detectable=detectable)
 
 
 def _verdict(low: float, high: float, runs: str) -> tuple[bool, str]:
@@ -594,7 +840,7 @@ def error_bars(rows: list[dict], by: str, metric: str, at: str | None = None, wh
     metric's units; NaN for a group of one run), ``n`` and ``method`` ("t" or "bootstrap", None for
     one run), as :func:`compare` computes them.  ``ax.errorbar(b["at"], b["mean"],
     yerr=[b["minus"], b["plus"]])`` draws them."""
-    comparison = compare(rows, by, metric, at, where=where, allow_mixed=allow_mixed, allow_single=True)
+    comparison = compare(rows, by, metric, at, where=where, allow_mixed=allow_mixed, allow_single=True, per_comparison=True)
     bars: dict = {}
     for point in comparison.points:
         for g in point.groups:

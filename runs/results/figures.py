@@ -162,12 +162,12 @@ def spin_statistics():
     """Fig. 9 with statistics (runs/results/fig9_statistics): per eta a panel of each kind's
     realizations (dots), mean and 95 % interval of the mean (bar); right, each kind's difference to
     no spin with its 95 % interval (thick) and at 98.3 % (thin: the three kinds together at 95 %,
-    Bonferroni): the numbers of ``decco-warp compare ... --by spin_kind --at eta [--confidence 0.983]``."""
+    Bonferroni): the numbers of ``decco-warp compare ... --by spin_kind --at eta --per-comparison [--confidence 0.983]``."""
     from decco_warp.analysis.compare import compare, read_rows
 
     rows = read_rows([RESULTS / "fig9_statistics"])
-    comparison = compare(rows, "spin_kind", "largest_mass_ratio", at="eta")
-    family = compare(rows, "spin_kind", "largest_mass_ratio", at="eta", confidence=1 - 0.05 / 3)
+    comparison = compare(rows, "spin_kind", "largest_mass_ratio", at="eta", per_comparison=True)
+    family = compare(rows, "spin_kind", "largest_mass_ratio", at="eta", confidence=1 - 0.05 / 3, per_comparison=True)
     colours = {kind: f"C{k}" for k, kind in enumerate(KINDS)}
     fig, axes = plt.subplots(1, len(comparison.points) + 1, figsize=(4.0 * (len(comparison.points) + 1), 4.4))
     diff = axes[-1]
