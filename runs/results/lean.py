@@ -27,20 +27,22 @@ import h5py
 from decco_warp.analysis.runs import dataset_storage
 
 DROPPED = ("final/positions", "final/velocities", "frames/label")
-#: A file attribute this script sets: the file is lean already.
+#: A file attribute this script sets: the file is lean already, stored by the storage rule of this
+#: version (LAYOUT; 1: datasets under 4 kB whole, 2: under 256 bytes, gzip 9).
 MARK = "lean_layout"
+LAYOUT = 2
 
 
 def lean(path: Path) -> bool:
     """Rewrite ``path`` lean; False if it was so already."""
     with h5py.File(path, "r") as source:
-        if not any(name in source for name in DROPPED) and source.attrs.get(MARK) == 1:
+        if not any(name in source for name in DROPPED) and source.attrs.get(MARK) == LAYOUT:
             return False
         part = path.with_name(path.name + ".lean")
         with h5py.File(part, "w", libver="latest") as target:
             for key, value in source.attrs.items():
                 target.attrs[key] = value
-            target.attrs[MARK] = 1
+            target.attrs[MARK] = LAYOUT
 
             def copy(name, item):
                 if name in DROPPED:
