@@ -22,6 +22,8 @@ system of an ensemble keeps the lists it would keep alone.
 
 import warp as wp
 
+from .contacts import note_candidate
+
 wp.set_module_options({"enable_backward": False})
 
 #: Relative margin on a list's reach R_i + R_j + skin: it covers the rounding of the float64
@@ -106,7 +108,7 @@ def build_neighbour_list(
     # Out:
     reference_out: wp.array(dtype=wp.vec3d),  # the positions of this build
     candidate_count_out: wp.array(dtype=wp.int32),  # neighbours met (past the list's width: an overflow)
-    candidates_out: wp.array2d(dtype=wp.int32),  # the first of them (as many as its columns), in increasing j
+    candidates_out: wp.array2d(dtype=wp.int32),  # the first of them (as many as its columns: arrays.candidate_width), in increasing j
 ):
     """Thread k lists the k-th particle in key order: the threads of a warp share cells, and a cell's
     particles are read from the sorted copies one after another, not gathered from all over memory.
@@ -121,7 +123,6 @@ def build_neighbour_list(
     radius = sorted_radius_in[k]
     margin = wp.float64(REACH_MARGIN)
     own = cell_of(x, cell_width)
-    width = candidates_out.shape[1]  # the list's width: sized for the pile's radius ratio (arrays.candidate_width)
     noted = int(0)
     for neighbour in range(27):  # the 3 x 3 x 3 cells around its own
         cell = own + wp.vec3i(neighbour % 3 - 1, (neighbour // 3) % 3 - 1, neighbour // 9 - 1)
@@ -130,17 +131,8 @@ def build_neighbour_list(
             if m != k:
                 reach = (radius + sorted_radius_in[m] + skin) * margin
                 r = sorted_position_in[m] - x
-                if wp.dot(r, r) < reach * reach:
-                    j = int(order_in[m])
-                    if noted < width:  # insert j (met once: a particle lies in one cell) in order, in its row
-                        s = noted
-                        while s > 0:
-                            if candidates_out[i, s - 1] < j:
-                                break
-                            candidates_out[i, s] = candidates_out[i, s - 1]
-                            s -= 1
-                        candidates_out[i, s] = wp.int32(j)
-                    noted += 1  # past the row's width only counted: an overflow
+                if wp.dot(r, r) < reach * reach:  # in order in i's row; past its width only counted (an overflow)
+                    noted = note_candidate(candidates_out, i, noted, int(order_in[m]))
     candidate_count_out[i] = wp.int32(noted)
     reference_out[i] = x
 

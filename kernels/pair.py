@@ -227,6 +227,25 @@ def rolling_force_printed(
 
 
 @wp.func
+def normal_spring(
+    model: ContactModel,
+    r_ij: wp.vec3d,
+    d2: wp.float64,
+    radius_i: wp.float64,
+    velocity_i: wp.vec3d,
+    radius_j: wp.float64,
+    velocity_j: wp.vec3d,
+):
+    """The paper's spring of a pair in contact, seen from i: (n, |F_N|, a_i), k_in while the spheres
+    approach and k_out while they part."""
+    d = wp.sqrt(d2)
+    n = r_ij / d
+    delta = overlap(d, radius_i, radius_j)
+    k = spring_constant(wp.dot(velocity_i - velocity_j, n), model.k_in, model.k_out)
+    return n, normal_force_magnitude(delta, k), lever_arm(r_ij, radius_i, radius_j)
+
+
+@wp.func
 def normal_and_sliding(
     model: ContactModel,
     r_ij: wp.vec3d,
@@ -242,12 +261,7 @@ def normal_and_sliding(
 
     Returns (spring force on i, sliding force on i, its torque on i, n, |F_N|, a_i).
     """
-    d = wp.sqrt(d2)
-    n = r_ij / d
-    delta = overlap(d, radius_i, radius_j)
-    k = spring_constant(wp.dot(velocity_i - velocity_j, n), model.k_in, model.k_out)
-    normal_magnitude = normal_force_magnitude(delta, k)
-    arm_i = lever_arm(r_ij, radius_i, radius_j)
+    n, normal_magnitude, arm_i = normal_spring(model, r_ij, d2, radius_i, velocity_i, radius_j, velocity_j)
     arm_j = lever_arm(-r_ij, radius_j, radius_i)  # j's own arm, seen from j
     slip = surface_slip(n, velocity_i, omega_i, arm_i, velocity_j, omega_j, arm_j)
     scale = velocity_scale(velocity_i, omega_i, radius_i, velocity_j, omega_j, radius_j)
@@ -361,12 +375,7 @@ def contact_as_decco_code(
 ):
     """Channels of a touching j's action on i by DECCO's code: the paper's spring, DECCO's sliding and
     rolling friction computed from the pair's higher index (A), i taking A's part or B's."""
-    d = wp.sqrt(d2)
-    n = r_ij / d
-    delta = overlap(d, radius_i, radius_j)
-    k = spring_constant(wp.dot(velocity_i - velocity_j, n), model.k_in, model.k_out)
-    normal_magnitude = normal_force_magnitude(delta, k)
-    arm_i = lever_arm(r_ij, radius_i, radius_j)
+    n, normal_magnitude, arm_i = normal_spring(model, r_ij, d2, radius_i, velocity_i, radius_j, velocity_j)
     sliding = vec3d()
     rolling = vec3d()
     if i_is_first:  # i is B: the pair seen from j (A), whose normal is -n
@@ -405,21 +414,28 @@ def rotated(v: wp.vec3d, axis: wp.vec3d, sine: wp.float64, cosine: wp.float64) -
 
 
 @wp.func
-def carried(v: wp.vec3d, normal_before: wp.vec3d, n: wp.vec3d, spin_sum: wp.vec3d, dt: wp.float64) -> wp.vec3d:
-    """A tangential spring of the step before carried into the current tangent plane, in pkdgrav's
-    two stages (smoothfcn.c 4753-4846; [S12] sect. 2.2): turned about the mean normal by the pair's
-    mean spin about it over the step, 1/2 dt (w_p + w_q).n_mean, then with the normal from
+def carried(spring: wp.vec3d, rolling: wp.vec3d, normal_before: wp.vec3d, n: wp.vec3d, spin_sum: wp.vec3d, dt: wp.float64):
+    """The tangential and rolling springs of the step before carried into the current tangent plane,
+    in pkdgrav's two stages (smoothfcn.c 4753-4846; [S12] sect. 2.2): turned about the mean normal by
+    the pair's mean spin about it over the step, 1/2 dt (w_p + w_q).n_mean, then with the normal from
     ``normal_before`` onto ``n``; then projected onto the plane (pkdgrav does not project: the
-    stages leave it off the plane by round-off and by the second order of the turns)."""
+    stages leave them off the plane by round-off and by the second order of the turns).  Both
+    springs take the same turns, computed once."""
     mean = normal_before + n
     mean = mean / wp.length(mean)  # the normal turns by far less than 90 degrees in a step
     angle = f64(0.5) * dt * wp.dot(spin_sum, mean)
-    v = rotated(v, mean, wp.sin(angle), wp.cos(angle))
+    sin_spin = wp.sin(angle)
+    cos_spin = wp.cos(angle)
+    spring = rotated(spring, mean, sin_spin, cos_spin)
+    rolling = rotated(rolling, mean, sin_spin, cos_spin)
     axis = wp.cross(normal_before, n)
     sine = wp.length(axis)
     if sine > f64(0.0):
-        v = rotated(v, axis / sine, sine, wp.dot(n, normal_before))
-    return v - wp.dot(v, n) * n
+        unit = axis / sine
+        cosine = wp.dot(n, normal_before)
+        spring = rotated(spring, unit, sine, cosine)
+        rolling = rotated(rolling, unit, sine, cosine)
+    return spring - wp.dot(spring, n) * n, rolling - wp.dot(rolling, n) * n
 
 
 @wp.func
@@ -474,8 +490,9 @@ def ssdem_contact(
     now = PairSprings()
     if found:
         spin_sum = omega_p + omega_q
-        now.spring = carried(before.spring, before.normal, n, spin_sum, model.dt)
-        now.rolling = carried(before.rolling, before.normal, n, spin_sum, model.dt)
+        spring, rolling = carried(before.spring, before.rolling, before.normal, n, spin_sum, model.dt)
+        now.spring = spring
+        now.rolling = rolling
         now.twist = before.twist
     now.normal = n
     now.spring = now.spring + model.dt * u_t  # [S12] eq. 7: this step's stretch first
