@@ -97,6 +97,17 @@ def pair_history(count: int, width: int, device: str) -> PairHistory:
     return history
 
 
+def history_arrays(count: np.ndarray, rows: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Contact histories as a snapshot holds them (host copies): ``count`` per particle and its rows
+    (HISTORY_ARRAYS' columns), as many columns as the most contacts use (at least one); the rows past
+    a particle's count, left from earlier evaluations and never read, zeros."""
+    width = next(iter(rows.values())).shape[1]
+    used = max(1, int(min(count.max(initial=0), width)))
+    live = np.arange(used)[None, :] < np.minimum(count, width)[:, None]
+    return {"contact_count": count, **{key: np.where(live.reshape(live.shape + (1,) * (values.ndim - 2)), values[:, :used], 0).astype(values.dtype)
+                                       for key, values in rows.items()}}  # fmt: skip
+
+
 class ContactHistory:
     """Each particle's contacts with pair identity (the partner's index) and the pair's springs, for a
     contact law that keeps springs (params.Params.keeps_springs; kernels/contacts.py PairHistory):
@@ -133,14 +144,8 @@ class ContactHistory:
         if not self.kept:
             return {}
         h = self.current
-        count = h.count.numpy().copy()
-        used = max(1, int(min(count.max(initial=0), self.width)))
-        # The rows past a particle's count are left from earlier evaluations and never read: zeros.
-        live = np.arange(used)[None, :] < np.minimum(count, self.width)[:, None]
         columns = (h.partner, h.spring, h.normal, h.rolling, h.twist)
-        rows = {key: array.numpy()[:, :used] for key, array in zip(HISTORY_ARRAYS[1:], columns)}
-        return {"contact_count": count, **{key: np.where(live.reshape(live.shape + (1,) * (values.ndim - 2)), values, 0).astype(values.dtype)
-                                           for key, values in rows.items()}}  # fmt: skip
+        return history_arrays(h.count.numpy().copy(), {key: array.numpy() for key, array in zip(HISTORY_ARRAYS[1:], columns)})
 
     def load(self, arrays: dict[str, np.ndarray]) -> None:
         """Rows from :meth:`arrays` (InputError for a snapshot without them, or of other shapes)."""
@@ -190,7 +195,7 @@ class ModelArrays:
     """What stays fixed while a system steps, on its device: per particle its radius, mass, moment of
     inertia and system; the systems' bounds; the constants of the model."""
 
-    def __init__(self, state: State, params: Params, device: str, precision: str, systems: Sequence[int] | None, candidate_width: int):
+    def __init__(self, state: State, params: Params, device: str, precision: str, systems: Sequence[int] | None):
         self.device = device
         self.params = params
         self.count = state.n
@@ -211,7 +216,7 @@ class ModelArrays:
         # The sweeps' per-i contact bound, in their arithmetic (float32 rounding of the largest
         # radius is no smaller than that of any other radius, so the bound holds).
         self.sweep_max_radius = (wp.float32 if precision == "mixed" else wp.float64)(self.max_radius)
-        self.candidate_width = candidate_width
+        self.candidate_width = candidate_width(self.min_radius, self.max_radius)
         """Contact candidates a particle's list holds on the paths that list them."""
 
 

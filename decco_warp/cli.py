@@ -280,12 +280,12 @@ def _form_pile(
         for line in plan.grain_lines():
             typer.echo(line)
         typer.echo(f"cost: {formation_cost(particles, density, fill, dt, gravity, chosen)}; gives up at {max_steps} steps")
-        if plan.refusal():
-            fail(plan.refusal())
+    refusal = plan.refusal()
+    if refusal:
+        fail(refusal)
+    if check:
         typer.echo(f"verdict: would form {out}" + (" (replacing it)" if out.exists() else ""))
         return
-    if plan.refusal():
-        fail(plan.refusal())
     if plan.note:
         typer.echo(f"{plan.note} (a pile takes ~{TYPICAL_FORMATION_STEPS:.0e} steps to settle)", err=True)
     typer.echo(f"forming a {particles}-particle pile on {chosen} (seed {seed}, {gravity} gravity)", err=True)

@@ -18,14 +18,14 @@ from collections.abc import Sequence
 import numpy as np
 import warp as wp
 
-from .arrays import PAIR_OBSERVABLES, ModelArrays, StateArrays, candidate_width, system_sizes
+from .arrays import PAIR_OBSERVABLES, ModelArrays, StateArrays, system_sizes
 from .device import resolve_device
 from .forces import FORCE_PATHS
+from .gravity_solvers import empty_candidates
 from .integrators import check_steps, integrator_for
 from .kernels import observables
-from .kernels.bodies import PACK_KERNELS
 from .kernels.contacts import CANDIDATES, unpack_depth
-from .layouts import Layout, particle_block
+from .layouts import Layout
 from .params import Params
 from .scheme import Scheme, choose_scheme, force_path
 from .state import State
@@ -58,31 +58,24 @@ class Engine:
         its own system; default, one system)."""
         self.device = resolve_device(device)
         self.params = params
-        sizes = system_sizes(systems, state.n)
-        self.scheme = choose_scheme(int(sizes.max()), self.device, scheme, precision=precision, force_kernel=force_kernel, layout=layout)
-        self.model = ModelArrays(state, params, self.device, self.scheme.precision, systems,
-                                 candidate_width(float(state.radii.min()), float(state.radii.max())))  # fmt: skip
+        largest = int(system_sizes(systems, state.n).max())
+        self.scheme = choose_scheme(largest, self.device, scheme, precision=precision, force_kernel=force_kernel, layout=layout)
+        self.model = ModelArrays(state, params, self.device, self.scheme.precision, systems)
         # A law with springs per pair keeps each particle's contacts: as many rows as its candidate
         # lists hold, or as it has others in its system.
-        rows = max(1, min(self.model.candidate_width, int(sizes.max()) - 1)) if params.keeps_springs else 0
+        rows = max(1, min(self.model.candidate_width, largest - 1)) if params.keeps_springs else 0
         self.state = StateArrays(state, self.device, ledger, rows)
         # The parts, chosen in one place (scheme.force_path; the integrator by the clocks).
         self.path = FORCE_PATHS[force_path(self.scheme)](self.model, self.state, self.scheme)
-        self.integrator = integrator_for(self.scheme)(self.model, self.state, self.path, self.scheme, self.pack_bodies)
+        self.integrator = integrator_for(self.scheme)(self.model, self.state, self.path, self.scheme)
 
     # -- what others read of it ----------------------------------------------------
 
     precision = property(lambda self: self.scheme.precision)
-    force_kernel = property(lambda self: self.scheme.force_kernel)
     layout = property(lambda self: self.scheme.layout)
     step_multiple = property(lambda self: self.integrator.every, doc="steps of an outer step: every step count is a multiple of it")
     ledger = property(lambda self: self.state.ledger)
     count = property(lambda self: self.model.count)
-    systems = property(lambda self: self.model.systems)
-    starts = property(lambda self: self.model.starts)
-    ends = property(lambda self: self.model.ends)
-    max_radius = property(lambda self: self.model.max_radius)
-    min_radius = property(lambda self: self.model.min_radius)
     candidate_width = property(lambda self: self.model.candidate_width)
     contact = property(lambda self: self.model.contact, doc="the pair laws' constants (kernels/pair.py ContactModel)")
     radius = property(lambda self: self.model.radius)
@@ -90,35 +83,20 @@ class Engine:
     ranges = property(lambda self: self.model.ranges)
     position = property(lambda self: self.state.position)
     velocity = property(lambda self: self.state.velocity)
-    omega = property(lambda self: self.state.omega)
     force = property(lambda self: self.state.force)
-    torque = property(lambda self: self.state.torque)
     channels = property(lambda self: self.state.channels)
 
     @property
     def candidate_count(self) -> wp.array:
         """Per particle, the contact candidates its force path met at the last evaluation (empty if it lists none)."""
-        return self.path.finder.candidate_count if self.path.finder is not None else wp.zeros(0, dtype=wp.int32, device=self.device)
+        return self.path.finder.candidate_count if self.path.finder is not None else empty_candidates(0, self.device, CANDIDATES)[0]
 
     @property
     def candidates(self) -> wp.array:
         """Per particle, the first of them (as many as its list holds)."""
-        return self.path.finder.candidates if self.path.finder is not None else wp.zeros((0, CANDIDATES), dtype=wp.int32, device=self.device)
+        return self.path.finder.candidates if self.path.finder is not None else empty_candidates(0, self.device, CANDIDATES)[1]
 
     # -- stepping --------------------------------------------------------------------
-
-    def pack_bodies(self) -> None:
-        """The sweep's packed bodies (``path.body``) from the current positions (none unless the path reads them)."""
-        if self.path.body.shape[0] > 0:
-            m = self.model
-            wp.launch(
-                PACK_KERNELS[self.scheme.precision],
-                dim=m.count,
-                inputs=[wp.float64(self.params.G), m.radius, m.mass, self.state.position],
-                outputs=[self.path.body],
-                device=self.device,
-                block_dim=particle_block(),
-            )
 
     def eval_forces(self) -> None:
         """Force and torque on every particle at the current positions and velocities."""
@@ -218,7 +196,7 @@ class Engine:
             raise InputError(f"snapshot deepest_contact has shape {records.shape}; expected {(self.count,)}")
         self.state.deepest_contact.assign(wp.array(records, dtype=wp.int64, device=self.device))
         self.state.history.load(snapshot)
-        self.path.restored(snapshot, self.pack_bodies)
+        self.path.restored(snapshot)
 
 
 def smoothed_density(sources: np.ndarray, norm: np.ndarray, inv_two_var: np.ndarray, targets: np.ndarray, device: str) -> np.ndarray:

@@ -13,7 +13,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .arrays import HISTORY_ARRAYS
+from .arrays import HISTORY_ARRAYS, history_arrays
 from .diagnostics import state_diagnostics
 from .contact_finders import NEIGHBOUR_ARRAYS, neighbour_arrays
 from .simulation import Simulation
@@ -225,7 +225,6 @@ class SystemView:
             snap.update(neighbour_arrays(reference, count, _lists_moved(count, listed, -self.first)))
         if all(key in whole for key in HISTORY_ARRAYS):
             mine = _history_moved({key: whole[key][self.first : self.end] for key in HISTORY_ARRAYS}, -self.first)
-            used = max(1, int(min(mine["contact_count"].max(initial=0), mine["contact_partner"].shape[1])))
-            snap.update({key: values[:, :used].copy() if key != "contact_count" else values for key, values in mine.items()})
+            snap.update(history_arrays(mine["contact_count"], {key: mine[key] for key in HISTORY_ARRAYS[1:]}))
         snap.update(step=self.step_count, time_origin=self._time_origin, ledger=True, energy_start=dict(self.energy_start))
         return snap

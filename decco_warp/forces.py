@@ -27,11 +27,11 @@ from .contact_finders import ContactFinder, HashGrid, NeighbourList, SweepBits
 from .errors import InputError
 from .gravity_solvers import GravitySolver, PairsOnce, Tree
 from .kernels import observables as observable_kernels
-from .kernels.bodies import BODY_TYPES
+from .kernels.bodies import BODY_TYPES, PACK_KERNELS
 from .kernels.contacts import contact_pass
 from .kernels.fused import pair_forces_tiled
 from .kernels.reference import pair_forces_reference
-from .layouts import NEWTON_MAX
+from .layouts import NEWTON_MAX, particle_block
 from .scheme import Scheme
 
 #: Threads per particle of the observables kernel on a GPU.
@@ -92,7 +92,7 @@ class ContactPass:
 
 class ForcePath:
     """What every force path gives the engine.  ``body``: the packed bodies its sweep reads (empty
-    where none: the engine packs them before :meth:`evaluate`); ``finder``: its contact finder (None
+    where none: :meth:`pack` packs them before :meth:`evaluate`); ``finder``: its contact finder (None
     where one kernel finds and evaluates the contacts)."""
 
     name = ""
@@ -159,8 +159,21 @@ class ForcePath:
         (its finder's lists; the contacts' springs are the state's own, arrays.ContactHistory)."""
         return {} if self.finder is None else self.finder.arrays()
 
-    def restored(self, snapshot: dict, pack) -> None:
-        """Called after the state's arrays were loaded from ``snapshot`` (``pack``: packs the bodies)."""
+    def pack(self) -> None:
+        """The sweep's packed bodies (``body``) from the current positions (none unless the path reads them)."""
+        if self.body.shape[0] > 0:
+            m = self.model
+            wp.launch(
+                PACK_KERNELS[self.scheme.precision],
+                dim=m.count,
+                inputs=[wp.float64(m.params.G), m.radius, m.mass, self.state.position],
+                outputs=[self.body],
+                device=m.device,
+                block_dim=particle_block(),
+            )
+
+    def restored(self, snapshot: dict) -> None:
+        """Called after the state's arrays were loaded from ``snapshot``."""
 
 
 def _check_cpu_blocks(model: ModelArrays, scheme: Scheme, newton: bool) -> None:
@@ -297,12 +310,12 @@ class ClockedForces(ForcePath):
         self.finder.refresh(self.state)
         self.contact_pass.launch(self.state, self.finder)
 
-    def restored(self, snapshot: dict, pack) -> None:
+    def restored(self, snapshot: dict) -> None:
         """Gravity at the restored positions (what the uninterrupted run holds, bit for bit: the same
         kernels on the same positions) and the snapshot's neighbour lists (a snapshot without them,
         of decco-warp 0.2, has them built afresh: the run goes on as another realization would); the
         contact force is the snapshot's."""
-        pack()
+        self.pack()
         self.gravity.evaluate(self.state, self.gravity_force)
         if not self.finder.load(snapshot):
             self.finder.find(self.state)

@@ -5,6 +5,7 @@ Large piles need this: the paper's 5 000-particle piles took ~1.5e5 steps, and a
 
 from __future__ import annotations
 
+import functools
 import math
 import time as _time
 from dataclasses import dataclass
@@ -59,11 +60,16 @@ class PilePlan:
                 "params": self.params, "ke_threshold": self.ke_threshold, "fill": self.fill, "max_steps": self.max_steps,
                 "precision": self.precision, "size_distribution": self.size_distribution, "gravity": self.gravity}  # fmt: skip
 
+    @functools.cached_property
+    def grains(self) -> tuple:
+        """The pile's grains as Formation draws them (pile.grain_sizes: radii, size classes, sizes), drawn once."""
+        return grain_sizes(self.particles, self.seed, self.radii, self.size_distribution)
+
     def grain_lines(self) -> list[str]:
         """``pile --check``'s lines on the grains: their sizes; what the smallest costs (paper eq. 17:
         the time step it allows); how many grains the largest can touch, beside what the contact lists
-        hold (engine.candidate_width)."""
-        radii, _, sizes = grain_sizes(self.particles, self.seed, self.radii, self.size_distribution)
+        hold (arrays.candidate_width)."""
+        radii, _, sizes = self.grains
         counts = ", ".join(str(int(c)) for c in sizes["size_counts"])
         if self.size_distribution is None:
             kinds = f"radii {', '.join(f'{r / 1e5:g}' for r in self.radii)} km, equal mass per size ({counts} particles)"
@@ -85,7 +91,7 @@ class PilePlan:
 
     def refusal(self) -> str | None:
         """Why the formation would be refused before it starts (its smallest grain's eq. 17 margin), or None."""
-        radii, _, _ = grain_sizes(self.particles, self.seed, self.radii, self.size_distribution)
+        radii = self.grains[0]
         safe = self._time_scale(float(radii.min())) / MIN_TIME_STEP_MARGIN
         if self.params.dt <= safe:
             return None

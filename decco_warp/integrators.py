@@ -1,13 +1,13 @@
 """Integrators: kick-drift-kick on one clock, and on two (gravity every K steps), each owning its kick
 launches and its clock (kernels/integrate.py).
 
-    integrator = integrator_for(scheme)(model, state, path, scheme, pack)   # as Engine does
+    integrator = integrator_for(scheme)(model, state, path, scheme)   # as Engine does
     integrator.step()            # one step (K > 1: one outer step of K), a launch a stage
     integrator.advance(steps)    # ``steps`` steps, a step's closing kick and the next's opening kick
                                  # and drift in one launch: the same numbers, bit for bit
 
 The force path (decco_warp/forces.py) gives the forces; the integrator decides when they are
-evaluated and how the velocities take them.  ``pack`` packs the sweep's bodies (the engine's), for
+evaluated and how the velocities take them; the path packs its sweep's bodies (``path.pack``) for
 the stages that pack them in a launch of their own.
 """
 
@@ -29,14 +29,14 @@ class OneClock:
 
     clocks = 1
 
-    def __init__(self, model: ModelArrays, state: StateArrays, path: ForcePath, scheme: Scheme, pack):
-        self.model, self.state, self.path, self.scheme, self.pack = model, state, path, scheme, pack
+    def __init__(self, model: ModelArrays, state: StateArrays, path: ForcePath, scheme: Scheme):
+        self.model, self.state, self.path, self.scheme = model, state, path, scheme
         self.every = 1
         self._no_body = wp.zeros(0, dtype=BODY_TYPES[scheme.precision], device=model.device)  # a kick_drift that packs none
 
     def evaluate(self) -> None:
         """The forces at the current state (the bodies packed first)."""
-        self.pack()
+        self.path.pack()
         self.path.evaluate()
 
     def kick_drift(self, close_step: bool = False, pack: bool = False) -> None:
@@ -89,8 +89,8 @@ class TwoClocks(OneClock):
 
     clocks = 2
 
-    def __init__(self, model: ModelArrays, state: StateArrays, path: ForcePath, scheme: Scheme, pack):
-        super().__init__(model, state, path, scheme, pack)
+    def __init__(self, model: ModelArrays, state: StateArrays, path: ForcePath, scheme: Scheme):
+        super().__init__(model, state, path, scheme)
         self.every = scheme.gravity_every
 
     def kick_outer(self, close_step: bool = False) -> None:

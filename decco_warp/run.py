@@ -551,8 +551,8 @@ class RunDriver:
         # A frame's deepest overlap is the deepest since the previous frame, which a resumed run may
         # have written before it stopped (checkpoints of decco-warp 0.2 do not say: then its start).
         self.last_frame = self.first_step if run_record.last_frame_step is None else run_record.last_frame_step
-        self.overflow_noted = False
-        self.history_overflow_noted = False
+        self.overflows_noted: set[str] = set()
+        """The overflows said in the log already ("history", "candidates"): each is said once."""
 
     @property
     def done(self) -> bool:
@@ -632,25 +632,20 @@ class RunDriver:
         holds: right, but each walks its whole system every step, so a run slows down; and once
         that some touched more particles than their contact history holds (a law with springs per
         pair): the springs of those contacts were not kept."""
-        if self.sim.params.keeps_springs and not self.history_overflow_noted:
-            overflows = self.sim.history_overflows()
+        for kind, count, said in (
+            ("history", self.sim.history_overflows,
+             "warning: at step {step}, {overflows} of the particles touched more particles than their contact history holds; the "
+             "springs of the contacts past it start afresh at every step (static friction and the rolling and twisting springs are lost there)"),
+            ("candidates", self.sim.candidate_overflows,
+             "note: at step {step}, {overflows} of the particles met more contact candidates than a list holds; their contacts are "
+             "right, but each of them walks its whole system every step, which slows the run (docs/benchmarks.md)"),
+        ):  # fmt: skip
+            if kind in self.overflows_noted:
+                continue  # said once: no more copies of the counts from the device
+            overflows = count()
             if overflows:
-                self.history_overflow_noted = True
-                self.log(
-                    f"warning: at step {step}, {overflows} of the particles touched more particles than their contact "
-                    "history holds; the springs of the contacts past it start afresh at every step (static friction "
-                    "and the rolling and twisting springs are lost there)"
-                )
-        if self.overflow_noted:
-            return  # said once: no more copies of the counts from the device
-        overflows = self.sim.candidate_overflows()
-        if overflows:
-            self.overflow_noted = True
-            self.log(
-                f"note: at step {step}, {overflows} of the particles met more contact candidates than a list holds; "
-                "their contacts are right, but each of them walks its whole system every step, which slows the run "
-                "(docs/benchmarks.md)"
-            )
+                self.overflows_noted.add(kind)
+                self.log(said.format(step=step, overflows=overflows))
 
     def failure(self, error: BaseException, log: bool = True) -> BaseException:
         """What a BlowUp or OSError raised by :meth:`after_steps` means for the user, logged."""

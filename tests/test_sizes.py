@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 import decco_warp as dw
-from decco_warp.engine import Engine, candidate_width
+from decco_warp.arrays import candidate_width
+from decco_warp.engine import Engine
 from decco_warp.errors import InputError
 from decco_warp.kernels.contacts import CANDIDATES
 from decco_warp.pile import Formation

@@ -219,7 +219,7 @@ def test_a_run_whose_contact_lists_overflow_says_so_once_in_its_log(tmp_path, mo
     candidates at 10; the tree's and the neighbour list of gravity on its own clock alike) and hold
     them all.  Narrowed to 64, both overflow: the contacts stay right (the overflow walks the whole
     system, tests/test_forces.py), and a run's log says, once, that this slows it."""
-    import decco_warp.engine as engines
+    import decco_warp.arrays as arrays
     from scenes import sphere_mass
     from typer.testing import CliRunner
 
@@ -237,7 +237,7 @@ def test_a_run_whose_contact_lists_overflow_says_so_once_in_its_log(tmp_path, mo
         listed = Engine(pile, dw.Params(), "cpu", scheme=dw.Scheme(gravity="tree", gravity_every=every))
         listed.eval_forces()
         assert listed.candidate_overflows() == 0 and listed.candidates.shape[1] == 408
-    monkeypatch.setattr(engines, "candidate_width", lambda r_min, r_max: 64)
+    monkeypatch.setattr(arrays, "candidate_width", lambda r_min, r_max: 64)
     for every in (1, 5):
         engine = Engine(pile, dw.Params(), "cpu", scheme=dw.Scheme(gravity="tree", gravity_every=every))
         engine.eval_forces()
