@@ -1085,18 +1085,6 @@ def finished_line(row: dict) -> str:
     return f"{row['run']}: {outcome}{detail} ({spent})"
 
 
-def histories_of(run_dirs: dict) -> dict:
-    """run name -> (time, m_lf/m_t) of its analysed frames, for the runs (name -> folder) analysed."""
-    from .analysis.runs import read_history
-
-    histories = {}
-    for name, run_dir in run_dirs.items():
-        history = read_history(run_dir) if run_dir else None
-        if history is not None:
-            histories[name] = history
-    return histories
-
-
 #: The file in a sweep's folder through which a stopped sweep asks its workers' runs to stop
 #: (decco_warp/stops.py): every worker writes into that folder, so every worker sees it.
 STOP_REQUEST = ".stop-request"
@@ -1236,6 +1224,8 @@ class SweepJob:
 
         summary = write_summary(self.folder, self.rows, self.swept)
         done = [r for r in self.rows if r.get("status") != "failed"]
+        from .analysis.runs import histories_of
+
         write_cross_run(self.folder, done, self.swept, histories=histories_of({r["run"]: r.get("run_dir") for r in done}))
         return summary
 

@@ -171,15 +171,12 @@ def write_cross_run_results(path, summaries: list[dict]) -> None:
     """A folder of runs' summary.csv (a row per run), cross-run figures (figures/, series split by
     the set-up columns that differ among the runs) and summaries.json, each whole or absent."""
     from .analysis.figures import write_cross_run
-    from .analysis.runs import read_history
+    from .analysis.runs import histories_of
     from .spec import SCHEMA
 
     path = Path(path)
     write_table(path / TABLE, summaries, list(dict.fromkeys(key for summary in summaries for key in summary)))
-    histories = {}
-    for summary in summaries:  # the runs of a folder are its subfolders, named as their summaries' run
-        history = read_history(path / summary["run"])
-        if history is not None:
-            histories[summary["run"]] = history
+    # The runs of a folder are its subfolders, named as their summaries' run.
+    histories = histories_of({summary["run"]: path / summary["run"] for summary in summaries})
     write_cross_run(path, summaries, split=[*SCHEMA["params"], *SPLIT_COLLISION], histories=histories)
     write_atomic(path / "summaries.json", json_text(summaries))

@@ -62,6 +62,13 @@ SETUP_COLUMNS = ("mass_ratio", "theta_deg", "k_in", "dt", "gravity_every", "eta_
 #: each of these columns other than ``by`` (to KEY_DIGITS digits; a value missing in both agrees): the
 #: set-up, the energy, the spin, the realization and its turn of the piles, and the piles.
 PAIR_COLUMNS = (*SETUP_COLUMNS, "eta", "spin_kind", "realization", "orientation_seed", "target_pile", "projectile_pile")
+
+
+def pair_columns(by: str, at: str | None) -> list[str]:
+    """The columns in which twins agree: PAIR_COLUMNS but ``by`` and ``at``."""
+    return [c for c in PAIR_COLUMNS if c not in (by, at)]
+
+
 #: The group that ``spin_kind`` is compared against by default, where present.
 NO_SPIN = "none"
 #: Columns that a sweep's summary.csv gives each run beside its summary.json's (a run folder alone
@@ -141,7 +148,7 @@ def _rows_of(path: Path) -> list[tuple[Path, str, dict]]:
             raise CompareError(f"{path}: cannot read it as a table ({' '.join(str(error).split())})") from None
         if not table:
             raise CompareError(f"{path} holds no rows")
-        rows = [{key: parse_cell(text) for key, text in row.items() if key is not None} for row in table]
+        rows = [typed_row(row) for row in table]
         return [((path.parent / str(row.get("run", f"line {k + 2}"))).resolve(), f"{path} line {k + 2}", row) for k, row in enumerate(rows)]
     if (path / RunFolder.SUMMARY).is_file():
         summaries = [path / RunFolder.SUMMARY]
@@ -473,7 +480,7 @@ class Comparison:
     def pair_columns(self) -> list[str]:
         """The columns in which twins agree (``paired``): PAIR_COLUMNS but ``by`` and ``at`` (a point's
         runs share its value)."""
-        return [c for c in PAIR_COLUMNS if c not in (self.by, self.at)]
+        return pair_columns(self.by, self.at)
 
     def as_dict(self) -> dict:
         """Plain data (numbers as floats, None where none exists), for JSON."""
@@ -758,7 +765,7 @@ def _paired_differences(point: dict, at_key, by: str, at: str | None, metric: st
         raise CompareError(f"--paired{where}: {len(others)} groups meet {label(reference)} ({', '.join(map(label, others))}); Dunnett's "
                            "simultaneous intervals are for independent groups, not pairs: pass --per-comparison for each group's paired "
                            f"interval on its own (--confidence {1 - 0.05 / len(others):.4g} keeps the {len(others)} at 95 % together, Bonferroni)")  # fmt: skip
-    columns = [c for c in PAIR_COLUMNS if c not in (by, at)]
+    columns = pair_columns(by, at)
     differences = []
     for g in others:
         twins, rest = pair_runs(point[g], point[reference], columns)

@@ -210,18 +210,22 @@ RUN_FIGURES = {
 }
 
 
+#: The run figures drawn from the final frame, and the array of it each needs (a lean analysis.h5,
+#: runs/results/lean.py, keeps no final positions): no time axis, and none drawn without it.
+FINAL_FRAME_FIGURES = {"clusters": "positions", "debris_sizes": "particle_mass"}
+
+
 def draw_run(analysis: dict, run_dir: Path, end_time: float | None = None) -> list[Path]:
-    """Every figure of RUN_FIGURES for one analysed run (the clusters only where the final positions
-    are kept), into ``run_dir``/figures; with ``end_time``
-    [s] the time axes run from 0 to it (the same scale for every run of a set)."""
+    """Every figure of RUN_FIGURES for one analysed run (those of the final frame only where it keeps
+    what they draw), into ``run_dir``/figures; with ``end_time`` [s] the time axes run from 0 to it
+    (the same scale for every run of a set)."""
     paths = []
     for name, plot in RUN_FIGURES.items():
-        if name == "clusters" and "positions" not in analysis.get("final", {}):
-            continue  # a lean analysis.h5 (runs/results/lean.py) keeps no final positions
-        if name == "debris_sizes" and "particle_mass" not in analysis.get("final", {}):
+        needs = FINAL_FRAME_FIGURES.get(name)
+        if needs is not None and needs not in analysis.get("final", {}):
             continue
         fig = plot(analysis)
-        if end_time is not None and name not in ("clusters", "debris_sizes"):
+        if end_time is not None and needs is None:
             for ax in fig.axes:
                 ax.set_xlim(0.0, end_time / HOUR)
         paths += save(fig, Path(run_dir) / "figures", name)

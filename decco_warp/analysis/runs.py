@@ -619,6 +619,17 @@ def read_history(run_dir) -> tuple[np.ndarray, np.ndarray] | None:
         return f["frames/time"][()], f["frames/largest_mass_ratio"][()]
 
 
+def histories_of(run_dirs: dict) -> dict:
+    """run name -> (time, m_lf/m_t) of its analysed frames (:func:`read_history`), for the runs (name ->
+    folder, or None) that have been analysed."""
+    histories = {}
+    for name, run_dir in run_dirs.items():
+        history = read_history(run_dir) if run_dir else None
+        if history is not None:
+            histories[name] = history
+    return histories
+
+
 def read_catalogue(path) -> dict[str, np.ndarray]:
     """The fragment catalogue of an analysis.h5 as columns, vectors split into _x, _y, _z and the
     composition into class_0, class_1, ...: ``pandas.DataFrame(read_catalogue(path))`` is a table

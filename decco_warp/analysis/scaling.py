@@ -59,6 +59,17 @@ def interacting_fraction(target_radius: float, projectile_radius: float, theta_d
     return (3.0 * projectile_radius * length**2 - length**3) / (4.0 * projectile_radius**3)
 
 
+def equal_mass_threshold(total_mass: float, c_star: float, G: float = G_CGS) -> float:
+    """LS12's Q*_RD,1 = c* 4/5 pi rho1 G R_C1^2 [erg/g], R_C1 the radius of ``total_mass`` at rho1."""
+    radius_c1 = (3.0 * total_mass / (4.0 * math.pi * RHO_1)) ** (1.0 / 3.0)
+    return c_star * 0.8 * math.pi * RHO_1 * G * radius_c1**2
+
+
+def mass_ratio_factor(mass_ratio: float) -> float:
+    """(gamma + 1)^2 / (4 gamma): Q*_RD / Q*_RD,1 is this to the power 2 / (3 mu_bar) - 1 (LS12)."""
+    return (mass_ratio + 1.0) ** 2 / (4.0 * mass_ratio)
+
+
 def disruption_energy(target_mass: float, projectile_mass: float, target_radius: float, projectile_radius: float,
                       theta_deg: float, G: float = G_CGS, law: Law = SMALL_BODIES,
                       c_star: float | None = None) -> float:  # fmt: skip
@@ -70,9 +81,7 @@ def disruption_energy(target_mass: float, projectile_mass: float, target_radius:
     reduced = target_mass * projectile_mass / total
     alpha = interacting_fraction(target_radius, projectile_radius, theta_deg)
     reduced_alpha = alpha * projectile_mass * target_mass / (alpha * projectile_mass + target_mass)
-    radius_c1 = (3.0 * total / (4.0 * math.pi * RHO_1)) ** (1.0 / 3.0)
-    equal_mass = c_star * 0.8 * math.pi * RHO_1 * G * radius_c1**2
-    unequal = equal_mass * ((gamma + 1.0) ** 2 / (4.0 * gamma)) ** (2.0 / (3.0 * law.mu_bar) - 1.0)
+    unequal = equal_mass_threshold(total, c_star, G) * mass_ratio_factor(gamma) ** (2.0 / (3.0 * law.mu_bar) - 1.0)
     return unequal * (reduced / reduced_alpha) ** (2.0 - 1.5 * law.mu_bar)
 
 

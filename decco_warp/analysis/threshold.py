@@ -30,7 +30,7 @@ from scipy import stats
 
 from ..checks import InputError
 from ..params import G_CGS
-from .scaling import RHO_1
+from .scaling import equal_mass_threshold, mass_ratio_factor  # noqa: F401 (threshold's names too)
 
 #: Runs whose remnant holds this fraction of the total mass or more, or this little or less, lie off
 #: the law's straight line (a merger's plateau, the super-catastrophic tail) and are not fitted.
@@ -155,17 +155,6 @@ def thresholds(rows: list[dict], confidence: float = CONFIDENCE, regime: tuple[f
         fraction = [remnant_fraction(float(r["largest_mass_ratio"]), float(r["mass_ratio"])) for r in members]
         found[ratio] = disruption_threshold(q_r, fraction, target_mass, gamma, confidence, regime)
     return found
-
-
-def equal_mass_threshold(total_mass: float, c_star: float, G: float = G_CGS) -> float:
-    """LS12's Q*_RD,1 = c* 4/5 pi rho1 G R_C1^2 [erg/g], R_C1 the radius of ``total_mass`` at rho1."""
-    radius_c1 = (3.0 * total_mass / (4.0 * math.pi * RHO_1)) ** (1.0 / 3.0)
-    return c_star * 0.8 * math.pi * RHO_1 * G * radius_c1**2
-
-
-def mass_ratio_factor(mass_ratio: float) -> float:
-    """(gamma + 1)^2 / (4 gamma): Q*_RD / Q*_RD,1 is this to the power 2 / (3 mu_bar) - 1 (LS12)."""
-    return (mass_ratio + 1.0) ** 2 / (4.0 * mass_ratio)
 
 
 @dataclass(frozen=True)
