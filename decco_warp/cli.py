@@ -9,6 +9,7 @@ import typer
 
 from ._version import __version__
 from .folder import RunFolder, missing
+from .params import PHYSICS_RANGES
 from .spec import pile_defaults
 from .errors import EXIT_BLOW_UP, EXIT_INPUT, EXIT_NOT_SETTLED, EXIT_OUTPUT, EXIT_STOPPED, DeccoError  # noqa: F401
 # (The exit codes, README "When things go wrong", live in errors.py beside the errors that carry them.)
@@ -538,9 +539,9 @@ def simulate(
     k_in: Optional[str] = typer.Option(
         None, "--k-in", help='Spring constant while approaching [dyne/cm], or "auto" (from the impact speed, eq. 12).'
     ),
-    restitution: Optional[float] = typer.Option(None, "--restitution", help="Coefficient of restitution, in (0, 1]."),
-    mu_k: Optional[float] = typer.Option(None, "--mu-k", help="Sliding friction coefficient, >= 0."),
-    mu_r: Optional[float] = typer.Option(None, "--mu-r", help="Rolling friction coefficient, >= 0."),
+    restitution: Optional[float] = typer.Option(None, "--restitution", help=f"Coefficient of restitution, {PHYSICS_RANGES['restitution'].words}."),
+    mu_k: Optional[float] = typer.Option(None, "--mu-k", help=f"Sliding friction coefficient, {PHYSICS_RANGES['mu_k'].words}."),
+    mu_r: Optional[float] = typer.Option(None, "--mu-r", help=f"Rolling friction coefficient, {PHYSICS_RANGES['mu_r'].words}."),
     max_overlap: Optional[float] = typer.Option(
         None, "--max-overlap", help="Stop the run when a contact is deeper than this fraction of the smaller radius."
     ),
@@ -553,12 +554,12 @@ def simulate(
     contact_law: Optional[str] = typer.Option(
         None, "--contact-law", help="paper (the paper's law as docs/model.md states it), decco-code (DECCO's pair forces as its code computes them) or ssdem (pkdgrav's soft-sphere law: a tangential spring per contact, static friction, rolling and twisting springs)."
     ),
-    mu_s: Optional[float] = typer.Option(None, "--mu-s", help="ssdem: static friction coefficient (the tangential spring's cap), >= 0."),
-    mu_t: Optional[float] = typer.Option(None, "--mu-t", help="ssdem: twisting friction coefficient, >= 0."),
-    beta: Optional[float] = typer.Option(None, "--beta", help="ssdem: shape parameter, the rolling and twisting radius over R*, >= 0."),
-    eps_t: Optional[float] = typer.Option(None, "--eps-t", help="ssdem: tangential damping as a restitution, in (0, 1] (1: none)."),
-    k_t_ratio: Optional[float] = typer.Option(None, "--k-t-ratio", help="ssdem: k_t / k_n, >= 0 (default 2/7)."),
-    cohesion: Optional[float] = typer.Option(None, "--cohesion", help="ssdem: cohesive strength, a tensile stress [dyne/cm^2], >= 0 (0: none)."),
+    mu_s: Optional[float] = typer.Option(None, "--mu-s", help=f"ssdem: static friction coefficient (the tangential spring's cap), {PHYSICS_RANGES['mu_s'].words}."),
+    mu_t: Optional[float] = typer.Option(None, "--mu-t", help=f"ssdem: twisting friction coefficient, {PHYSICS_RANGES['mu_t'].words}."),
+    beta: Optional[float] = typer.Option(None, "--beta", help=f"ssdem: shape parameter, the rolling and twisting radius over R*, {PHYSICS_RANGES['beta'].words}."),
+    eps_t: Optional[float] = typer.Option(None, "--eps-t", help=f"ssdem: tangential damping as a restitution, {PHYSICS_RANGES['eps_t'].words} (1: none)."),
+    k_t_ratio: Optional[float] = typer.Option(None, "--k-t-ratio", help=f"ssdem: k_t / k_n, {PHYSICS_RANGES['k_t_ratio'].words} (default 2/7)."),
+    cohesion: Optional[float] = typer.Option(None, "--cohesion", help=f"ssdem: cohesive strength, a tensile stress [dyne/cm^2], {PHYSICS_RANGES['cohesion'].words} (0: none)."),
     check: bool = typer.Option(False, "--check", help="Set up the collision, print its margins and predicted deepest overlap, run nothing."),
     output_every: Optional[int] = typer.Option(None, "--output-every", help="Steps between trajectory frames."),
     checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Steps between checkpoints."),
@@ -645,8 +646,9 @@ def _check(spec: dict) -> None:
     for line in [*plan.lines(), *plan.choices()]:
         typer.echo(line)
     typer.echo(f"cost: {run_cost(plan.state.n, plan.scheme, plan.device, plan.steps)}")
-    if cost_note(plan.scheme):
-        typer.echo(cost_note(plan.scheme))
+    note = cost_note(plan.scheme)
+    if note:
+        typer.echo(note)
     if plan.run_dir.exists():
         typer.echo(f"note: run folder {plan.run_dir} exists (resume continues it, --overwrite replaces it)")
     if not plan.stability.stable and not plan.allow_unstable:

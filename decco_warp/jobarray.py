@@ -158,10 +158,9 @@ def run_task(settings: dict, runs: list[dict], names: list[str]) -> list[dict]:
         if row["status"] in ("ok", "skipped (complete)"):
             try:
                 device = sweeps.analysis_device(row, gpus, k)
-                args = (row["run_dir"], settings["min_members"], settings["analyze_every"], settings["keep_trajectory"], device)
-                rows[k] = sweeps.analysed(row, sweeps.analyse_one(*args))
+                rows[k] = sweeps.analysed(row, sweeps.analyse_one(*sweeps.analysis_args(row, settings, device)))
             except (OSError, ValueError, RuntimeError) as error:  # --collect tries again
-                rows[k] = {**row, "status": "failed", "reason": f"analysis: {' '.join(str(error).split())}"}
+                rows[k] = sweeps.analysis_failed(row, error)
     return rows
 
 
@@ -196,7 +195,7 @@ def collect(settings: dict, runs: list[dict], analysis_workers: int | None = Non
             try:
                 rows[k] = sweeps.analysed(row, future.result())
             except Exception as error:  # a damaged trajectory, a full disk: this run only
-                rows[k] = {**row, "status": "failed", "reason": f"analysis: {' '.join(str(error).split())}"}
+                rows[k] = sweeps.analysis_failed(row, error)
     finally:
         analyses.shutdown(wait=True)
     finished = [row for row in rows if row is not None]

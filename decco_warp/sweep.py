@@ -676,6 +676,16 @@ def analysis_device(row: dict, gpus: dict[str, str], turn: int = 0) -> str:
     return gpus.get(row.get("device_uuid") or "") or list(gpus.values())[turn % len(gpus)]
 
 
+def analysis_args(row: dict, settings: dict, device: str) -> tuple:
+    """:func:`analyse_one`'s arguments for a finished run's row, analysed on ``device``."""
+    return row["run_dir"], settings["min_members"], settings["analyze_every"], settings["keep_trajectory"], device
+
+
+def analysis_failed(row: dict, error: BaseException) -> dict:
+    """A finished run's row once its analysis failed (a damaged trajectory, a full disk: this run only)."""
+    return {**row, "status": "failed", "reason": f"analysis: {' '.join(str(error).split())}"}
+
+
 class Analyses:
     """The analyses of finished runs, in processes of this machine: a pool of processes per device,
     so that each process opens one CUDA context (a process that took runs of every GPU would hold a
@@ -696,8 +706,7 @@ class Analyses:
             share = self.processes if device == "cpu" else max(1, -(-self.processes // len(self.gpus)))
             context = multiprocessing.get_context("spawn")
             self.pools[device] = ProcessPoolExecutor(max_workers=share, mp_context=context, initializer=ignore_stops)
-        args = (row["run_dir"], settings["min_members"], settings["analyze_every"], settings["keep_trajectory"], device)
-        return self.pools[device].submit(analyse_one, *args)
+        return self.pools[device].submit(analyse_one, *analysis_args(row, settings, device))
 
     def shutdown(self, wait: bool) -> None:
         for pool in self.pools.values():
@@ -803,7 +812,7 @@ def run_sweep(
             try:
                 finish(k, analysed(row, future.result()))
             except Exception as error:  # a damaged trajectory, a full disk: this run only
-                finish(k, {**row, "status": "failed", "reason": f"analysis: {' '.join(str(error).split())}"})
+                finish(k, analysis_failed(row, error))
 
     abandoned = False
     lost = None  # why the scheduler was lost, once it was
