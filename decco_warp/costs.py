@@ -15,7 +15,8 @@ import numpy as np
 
 from .arrays import PAIR_OBSERVABLES
 from .gravity_tree import walk_parts
-from .kernels.contacts import CANDIDATES, LEDGER_CHANNELS
+from .kernels.channels import LEDGER_CHANNELS, WORK_CHANNELS
+from .kernels.contacts import CANDIDATES
 from .layouts import newton_scratch_bytes
 from .params import G_CGS
 from .scheme import Scheme
@@ -140,7 +141,7 @@ def memory_estimate(
     gravity = scheme.gravity
     vec3d, f64, i32 = 24, 8, 4
     per = 3 * f64 + 5 * vec3d  # radius, mass, inertia; position, velocity, omega, force, torque
-    per += (len(LEDGER_CHANNELS) * vec3d + 32) if ledger else 0  # channels, work
+    per += (len(LEDGER_CHANNELS) * vec3d + len(WORK_CHANNELS) * f64) if ledger else 0  # channels, work
     per += 8 + 32 + 8  # deepest contact, packed body, system range
     per += i32 * (1 + candidate_width)  # the contact candidates of the Newton layout, the tree or the neighbour list
     per += 3 * vec3d + f64 + 5 * i32  # gravity on its own clock: gravity, the list's build positions, the build's sorted
