@@ -15,7 +15,9 @@ import numpy as np
 import warp as wp
 
 from .errors import InputError
-from .kernels.contacts import CANDIDATES, LEDGER_CHANNELS, PairHistory, commit_springs
+from .kernels.channels import LEDGER_CHANNELS
+from .kernels.contacts import CANDIDATES, PairHistory, commit_springs
+from .kernels.integrate import Work
 from .kernels.pair import ContactModel
 from .params import Params
 from .sizes import contact_list_rule
@@ -237,7 +239,7 @@ class StateArrays:
         # work of each channel since the start, per particle (no rows without the ledger).
         rows = count if ledger else 0
         self.channels = wp.zeros((rows, len(LEDGER_CHANNELS)), dtype=wp.vec3d, device=device)
-        self.work = wp.zeros(rows, dtype=wp.vec4d, device=device)
+        self.work = wp.zeros(rows, dtype=Work, device=device)
         # Each particle's deepest contact met by any force evaluation since the host last took it
         # (kernels/contacts.py note_depth): frames report the peak between them, not a sample.
         self.deepest_contact = wp.zeros(count, dtype=wp.int64, device=device)

@@ -423,7 +423,7 @@ def _rerun_observer(prepared, mode_text: str | None, every: int | None):
     try:
         mode, address = parse_mode(mode_text)
         every = every or prepared.plan.outputs.output_every
-        outer = prepared.plan.scheme.gravity_every
+        outer = prepared.plan.scheme.step_multiple
         if every < 1 or every % outer:
             raise ValueError(f"--rerun-every must be a multiple of [params] gravity_every = {outer} (>= 1); got {every}")
         if prepared.resume:

@@ -24,7 +24,8 @@ from .arrays import ModelArrays, StateArrays
 from .errors import InputError
 from .gravity_solvers import Tree, empty_candidates
 from .kernels.contacts import CANDIDATES
-from .kernels.neighbours import GRID_CELLS, REACH_MARGIN, build_neighbour_list, cell_keys, cell_ranges, lists_built
+from .kernels.neighbours import GRID_CELLS, build_neighbour_list, cell_keys, cell_ranges, lists_built
+from .kernels.pair import NEIGHBOUR_LIST_MARGIN, host_reach
 from .layouts import particle_block
 
 
@@ -142,7 +143,7 @@ class NeighbourList(ContactFinder):
         # The grid: a cell as wide as the farthest reach, 2 R_max + skin; its keys hold each particle's
         # system, so that the systems of an ensemble never meet.
         self.system = wp.array(np.repeat(np.arange(systems), model.systems).astype(np.int32), device=device)
-        self.cell_width = (2.0 * model.max_radius + self.skin) * REACH_MARGIN
+        self.cell_width = host_reach(model.max_radius, model.max_radius, self.skin, NEIGHBOUR_LIST_MARGIN)
         self.keys = wp.zeros(2 * count, dtype=wp.int32, device=device)  # radix_sort_pairs needs room for 2 N
         # The keys' bits (kernels/neighbours.py cell_key): the sort passes over these alone (3 of
         # CUB's 8-bit passes for one system, not 4).

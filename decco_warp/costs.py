@@ -15,7 +15,8 @@ import numpy as np
 
 from .arrays import PAIR_OBSERVABLES
 from .gravity_tree import walk_parts
-from .kernels.contacts import CANDIDATES, LEDGER_CHANNELS
+from .kernels.channels import LEDGER_CHANNELS, WORK_CHANNELS
+from .kernels.contacts import CANDIDATES
 from .layouts import newton_scratch_bytes
 from .params import G_CGS
 from .scheme import Scheme
@@ -45,12 +46,12 @@ GPU_CONTACT_SECONDS_PER_PARTICLE = 5e-9
 
 def step_seconds(n: int, scheme: Scheme, device: str) -> float:
     """About how long one step of ``n`` particles takes on ``device`` [s] by ``scheme`` (its gravity
-    solver, evaluated every ``gravity_every`` steps, the contacts every step)."""
-    gravity, gravity_every = scheme.gravity, scheme.gravity_every
+    solver, evaluated every ``scheme.step_multiple`` steps, the contacts every step)."""
+    gravity, every = scheme.gravity, scheme.step_multiple
     if not device.startswith("cuda"):
         step = cpu_step_seconds(n, gravity)
-        if gravity_every > 1:  # the same cores' share as the pair sums (cpu_step_seconds)
-            step = step / gravity_every + CPU_CONTACT_SECONDS_PER_PARTICLE * n / (max(1, os.cpu_count() or 1) / 2.0)
+        if every > 1:  # the same cores' share as the pair sums (cpu_step_seconds)
+            step = step / every + CPU_CONTACT_SECONDS_PER_PARTICLE * n / (max(1, os.cpu_count() or 1) / 2.0)
         return step
     if gravity == "tree":
         step = max(GPU_STEP_FLOOR, GPU_TREE_SECONDS_PER_PARTICLE * n)
@@ -58,8 +59,8 @@ def step_seconds(n: int, scheme: Scheme, device: str) -> float:
         size, rate = GPU_PAIRS_PER_S_AT
         rate = min(GPU_PAIRS_PER_S_MAX, rate * math.sqrt(n / size))
         step = max(GPU_STEP_FLOOR, float(n) * float(n) / rate)
-    if gravity_every > 1:
-        step = max(GPU_STEP_FLOOR, step / gravity_every + GPU_CONTACT_SECONDS_PER_PARTICLE * n)
+    if every > 1:
+        step = max(GPU_STEP_FLOOR, step / every + GPU_CONTACT_SECONDS_PER_PARTICLE * n)
     return step
 
 
@@ -79,7 +80,7 @@ def run_cost(n: int, scheme: Scheme, device: str, steps: int) -> str:
     (:func:`step_seconds`), and how it is made."""
     step = step_seconds(n, scheme, device)
     where = "an H100's rates" if device.startswith("cuda") else "this CPU"
-    clock = f" at gravity every {scheme.gravity_every} steps" if scheme.gravity_every > 1 else ""
+    clock = f" at {scheme.clock_text()}" if scheme.clocks > 1 else ""
     return f"about {duration(step * steps)} on {device} ({1e3 * step:.3g} ms a step x {steps} steps{clock}; {where}, docs/benchmarks.md)"
 
 
@@ -93,7 +94,7 @@ GRAVITY_EVERY_NOTE = (
 
 def cost_note(scheme: Scheme) -> str | None:
     """What a cost by ``scheme`` rests on, where a line should say so (gravity on its own clock)."""
-    return GRAVITY_EVERY_NOTE if scheme.gravity_every > 1 else None
+    return GRAVITY_EVERY_NOTE if scheme.clocks > 1 else None
 
 
 def formation_steps(density: float, fill: float, dt: float) -> tuple[int, int]:
@@ -140,7 +141,7 @@ def memory_estimate(
     gravity = scheme.gravity
     vec3d, f64, i32 = 24, 8, 4
     per = 3 * f64 + 5 * vec3d  # radius, mass, inertia; position, velocity, omega, force, torque
-    per += (len(LEDGER_CHANNELS) * vec3d + 32) if ledger else 0  # channels, work
+    per += (len(LEDGER_CHANNELS) * vec3d + len(WORK_CHANNELS) * f64) if ledger else 0  # channels, work
     per += 8 + 32 + 8  # deepest contact, packed body, system range
     per += i32 * (1 + candidate_width)  # the contact candidates of the Newton layout, the tree or the neighbour list
     per += 3 * vec3d + f64 + 5 * i32  # gravity on its own clock: gravity, the list's build positions, the build's sorted
@@ -153,7 +154,7 @@ def memory_estimate(
         per += 2 * (f64 + vec3d + 72 + 2 * vec3d + 2 * f64 + 16 + 5 * i32) + 4 * i32 + vec3d + 12
         per += walk_parts(n, device) * (vec3d + f64)
     newton = scheme.newton_sweep(n, device)
-    scratch = newton_scratch_bytes(n, newton, 12 if scheme.precision == "mixed" else 24, listing=scheme.gravity_every == 1) if newton else 0
+    scratch = newton_scratch_bytes(n, newton, 12 if scheme.precision == "mixed" else 24, listing=scheme.clocks == 1) if newton else 0
     return int(n * (per + HOST_BYTES_PER_PARTICLE) + scratch + FIXED_BYTES)
 
 

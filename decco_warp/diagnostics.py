@@ -11,14 +11,12 @@ import math
 
 import numpy as np
 
+from .kernels.channels import ENERGY_CHANNELS, HELD_ENERGIES, LEDGER_ENTRIES
 from .params import Params
 from .state import State
 
 #: Fraction of particles counted as "most stressed" (paper sect. 4.1, Fig. 8).
 TOP_STRESS_FRACTION = 0.01
-
-#: Energy-ledger entries, in the order of the per-particle work columns.
-WORK_CHANNELS = ("gravity", "spring", "sliding", "rolling")
 
 
 def diagnostics(state: State, params: Params, device: str | None = None) -> dict:
@@ -92,24 +90,16 @@ def energy_ledger(current: dict, start: dict, work: np.ndarray) -> dict:
       integration_error: minus the work of gravity, less the change of potential energy.
     """
     total = work.sum(axis=0)
-    gravity, spring, sliding, rolling = (float(total[k]) for k in range(4))
 
     def change(key: str) -> float:  # (diagnostics of decco-warp 0.2 have no springs' energies: none held)
         return current.get(key, 0.0) - start.get(key, 0.0)
 
-    return {
-        "dissipated_sliding": -sliding - change("elastic_tangential"),
-        "dissipated_rolling": -rolling - change("elastic_rolling"),
-        "dissipated_hysteresis": -spring - (current["elastic"] - start["elastic"]),
-        "integration_error": -gravity - (current["potential"] - start["potential"]),
-    }
+    took = {channel.entry: -float(total[column]) - change(channel.held) for column, channel in enumerate(ENERGY_CHANNELS)}
+    return {entry: took[entry] for entry in LEDGER_ENTRIES}
 
 
 #: The diagnostics a ledger's starting point keeps (a snapshot's "energy_start").
-ENERGY_START_KEYS = ("potential", "elastic", "elastic_tangential", "elastic_rolling", "total_energy")
-
-#: Energy-ledger entries that, added to the total energy, give back the starting total energy.
-LEDGER_ENTRIES = ("dissipated_sliding", "dissipated_rolling", "dissipated_hysteresis", "integration_error")
+ENERGY_START_KEYS = (*HELD_ENERGIES, "total_energy")
 
 
 def energy_scale(start: dict) -> float:

@@ -24,6 +24,7 @@ from .forces import FORCE_PATHS
 from .gravity_solvers import empty_candidates
 from .integrators import check_steps, integrator_for
 from .kernels import observables
+from .kernels.channels import WORK_CHANNELS
 from .kernels.contacts import CANDIDATES, unpack_depth
 from .layouts import Layout
 from .params import Params
@@ -165,8 +166,9 @@ class Engine:
         return self.path.total_force(), self.state.torque.numpy().copy()
 
     def read_work(self) -> np.ndarray:
-        """Work of (gravity, spring, sliding, rolling) on each particle since the start [erg], (N, 4)."""
-        return self.state.work.numpy().copy() if self.ledger else np.zeros((self.count, 4))
+        """Work of each energy channel (WORK_CHANNELS: gravity, spring, sliding, rolling) on each particle
+        since the start [erg], (N, 4)."""
+        return self.state.work.numpy().copy() if self.ledger else np.zeros((self.count, len(WORK_CHANNELS)))
 
     #: The state's arrays a snapshot holds and restores, by snapshot key.
     SNAPSHOT_ARRAYS = {"positions": "position", "velocities": "velocity", "omegas": "omega", "force": "force",

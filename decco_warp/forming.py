@@ -22,7 +22,7 @@ from .pile import Formation, FormationError, FormationProgress, check_formation_
 from .sizes import PowerLaw, parse_size_distribution, touching_limit
 from .stability import MIN_TIME_STEP_MARGIN
 from .state import State
-from .stops import StopRequests
+from .stops import StopRequests, drive
 from .errors import FormationStopped, InputError  # noqa: F401 (re-exported: the error lives in errors.py)
 
 #: A forming pile's checkpoint is its file's name plus this.
@@ -147,6 +147,38 @@ def _save(formation: Formation, partial: Path) -> None:
     formation.seconds["saves"] += _time.perf_counter() - started
 
 
+class _Forming:
+    """A forming pile, for :func:`~decco_warp.stops.drive`: a batch of steps at a time, a checkpoint
+    every ``checkpoint_seconds`` of wall time, and one before a stop or the step limit ends it."""
+
+    def __init__(self, formation: Formation, partial: Path, progress, checkpoint_seconds: float):
+        self.formation, self.partial, self.progress, self.checkpoint_seconds = formation, partial, progress, checkpoint_seconds
+        self.saved = _time.perf_counter()
+
+    @property
+    def done(self) -> bool:
+        return self.formation.settled
+
+    def advance(self) -> None:
+        try:
+            self.formation.advance()
+        except FormationError:
+            _save(self.formation, self.partial)
+            raise
+
+    def after(self, seconds: float, stop: StopRequests) -> None:
+        formation = self.formation
+        if self.progress is not None:
+            self.progress(formation.progress())
+        requested = stop.signal  # read after the progress: a stop asked for there is answered now
+        if requested is not None:
+            _save(formation, self.partial)
+            raise FormationStopped(requested, formation.sim.step_count, self.partial, formation.timing())
+        if _time.perf_counter() - self.saved >= self.checkpoint_seconds:
+            _save(formation, self.partial)
+            self.saved = _time.perf_counter()
+
+
 def form_pile_file(
     out: Path,
     progress: Callable[[FormationProgress], None] | None = None,
@@ -170,22 +202,7 @@ def form_pile_file(
     formation = Formation(**options, snapshot=snapshot)
     if snapshot is not None and on_resume is not None:
         on_resume(formation.sim.step_count)
-    saved = _time.perf_counter()
-    with StopRequests() as stop:
-        while not formation.settled:
-            try:
-                formation.advance()
-            except FormationError:
-                _save(formation, partial)
-                raise
-            if progress is not None:
-                progress(formation.progress())
-            if stop.signal is not None:
-                _save(formation, partial)
-                raise FormationStopped(stop.signal, formation.sim.step_count, partial, formation.timing())
-            if _time.perf_counter() - saved >= checkpoint_seconds:
-                _save(formation, partial)
-                saved = _time.perf_counter()
+    drive(_Forming(formation, partial, progress, checkpoint_seconds))
     pile = formation.pile()
     save_pile(pile, out)
     partial.unlink(missing_ok=True)

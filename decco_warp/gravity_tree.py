@@ -6,6 +6,7 @@ from __future__ import annotations
 import warp as wp
 
 from .kernels import tree as kernels
+from .kernels.pair import TREE_GRID_MARGIN, host_reach
 
 #: Hash grid cells per axis (the grid wraps: a bigger pile costs longer cell lists, not errors).
 GRID_CELLS = 128
@@ -122,7 +123,7 @@ class GravityTree:
     def contact_candidates(self, position, radius, max_radius: float, candidate_count, candidates) -> None:
         """Each particle's contact candidates (neighbours within R_i + R_j, plus a margin), from the hash grid."""
         self._launch(kernels.float32_points, self.count, [position, self.box], [self.points])
-        self.grid.build(self.points, 2.0 * max_radius * 1.0001)
+        self.grid.build(self.points, host_reach(max_radius, max_radius, 0.0, TREE_GRID_MARGIN))
         self._launch(
             kernels.grid_candidates,
             self.count,

@@ -91,7 +91,7 @@ class TwoClocks(OneClock):
 
     def __init__(self, model: ModelArrays, state: StateArrays, path: ForcePath, scheme: Scheme):
         super().__init__(model, state, path, scheme)
-        self.every = scheme.gravity_every
+        self.every = scheme.step_multiple
 
     def kick_outer(self, close_step: bool = False) -> None:
         """A gravity half kick of K dt / 2; with ``close_step`` first the last contact half kick (:meth:`kick`)."""
@@ -156,7 +156,7 @@ INTEGRATORS = {integrator.clocks: integrator for integrator in (OneClock, TwoClo
 
 def integrator_for(scheme: Scheme) -> type:
     """The integrator of a scheme: one clock at K = 1 (the paper's), two where gravity has its own."""
-    return INTEGRATORS[1 if scheme.gravity_every == 1 else 2]
+    return INTEGRATORS[scheme.clocks]
 
 
 def check_steps(steps: int, every: int) -> None:

@@ -36,6 +36,7 @@ import numpy as np
 from ._version import __version__
 from .checks import InputError, check_particles, check_pile
 from .durable import WRITE_ERRNOS, abandon, as_os_error, atomic_h5, check_space, complaints_held, first_line, pause_point, write_point
+from .kernels.channels import HELD_ENERGIES, LEDGER_ENTRIES
 from .repair import HDF5_SIGNATURE, clear_write_flags
 from .state import State
 from .errors import FileFormatError  # noqa: F401 (re-exported: the error lives in errors.py)
@@ -190,17 +191,8 @@ def load_pile(path) -> State:
 
 #: Units of the trajectory's /observables (the attribute "unit" of each value; docs/data.md).
 OBSERVABLE_UNITS = {
-    "kinetic_translational": "erg",
-    "kinetic_rotational": "erg",
-    "potential": "erg",
-    "elastic": "erg",
-    "elastic_tangential": "erg",
-    "elastic_rolling": "erg",
-    "total_energy": "erg",
-    "dissipated_sliding": "erg",
-    "dissipated_rolling": "erg",
-    "dissipated_hysteresis": "erg",
-    "integration_error": "erg",
+    # The energies: kinetic, those the channels hold, the total, the ledger's entries (kernels/channels.py).
+    **{name: "erg" for name in ("kinetic_translational", "kinetic_rotational", *HELD_ENERGIES, "total_energy", *LEDGER_ENTRIES)},
     "momentum": "g cm s-1",
     "angular_momentum": "g cm2 s-1",
     "number_of_contacts": "1",

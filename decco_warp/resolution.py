@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from .scheme import auto_gravity_every
+from .scheme import step_multiple_of
 from .sizes import parse_size_distribution
 from .errors import InputError
 
@@ -66,8 +66,7 @@ def scaled_run(run: dict, resolution: float, scale_contacts: bool, defaults: dic
             value = params.get(key, defaults["params"][key])
             if value != "auto":
                 params[key] = float(value) * f
-        outer = params.get("gravity_every", defaults["params"].get("gravity_every", 1))
-        outer = auto_gravity_every() if outer == "auto" else int(outer)
+        outer = step_multiple_of({**defaults["params"], **params})
         table = run.setdefault("run", {})
         for key in ("steps", "output_every", "checkpoint_every"):
             if key == "steps" and "duration" in table:

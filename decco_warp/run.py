@@ -26,7 +26,7 @@ from .lock import RunFolderLock
 from .record import RunRecord
 from .plan import Plan, RunError, builtin_pile, pile_path, plan_resume, plan_start, run_dir_of  # noqa: F401 (run's names)
 from .simulation import Simulation, graph_steps
-from .stops import StopRequests
+from .stops import StopRequests, drive
 from .stability import MIN_TIME_STEP_MARGIN, StabilityReport
 from .xdmf import write_xdmf
 from .errors import BlowUp, NotSettled, OutputError, RunStopped  # noqa: F401 (re-exported: the error lives in errors.py)
@@ -279,7 +279,7 @@ def execute(
     run.lock = run.lock or RunFolder(run.run_dir).lock()
     try:
         run.lock.acquire()  # a new folder: before anything in it is touched
-        return _advance(run.sim, _open_or_clean(run, progress, observers), stop_file)
+        return _advance(_open_or_clean(run, progress, observers), stop_file)
     finally:
         run.lock.release()
 
@@ -406,21 +406,7 @@ def execute_ensemble(runs: list[PreparedRun], stop_file=None) -> list[RunResult 
                 drivers[k].log(f"ensemble: stepped together with {len(others)} other run(s) in one set of launches: {', '.join(others)}")
             except (RunError, OSError, FileFormatError, OutputError) as error:
                 outcomes[k] = error
-        stop = StopRequests(stop_file)
-        with stop:
-            while active := [k for k, driver in drivers.items() if not driver.done and outcomes[k] is None]:
-                before = _time.perf_counter()
-                ensemble.step(min(drivers[k].steps_to_next_stop() for k in active))
-                ensemble.finish()
-                seconds = _time.perf_counter() - before
-                requested = stop.signal  # read once, so that every run stops at the same step
-                for k in active:
-                    try:
-                        drivers[k].after_steps(seconds, requested)
-                    except (BlowUp, OSError) as error:
-                        outcomes[k] = drivers[k].failure(error)
-                    except RunStopped as stopped:
-                        outcomes[k] = stopped
+        drive(_Together(ensemble, drivers, outcomes), stop_file)
     finally:
         for k, driver in drivers.items():
             closing = driver.close()
@@ -431,6 +417,39 @@ def execute_ensemble(runs: list[PreparedRun], stop_file=None) -> list[RunResult 
         for lock in locks:
             lock.release()
     return outcomes
+
+
+class _Together:
+    """Runs stepped as one ensemble, for :func:`~decco_warp.stops.drive`: each chunk ends at the
+    nearest stop of any run still going; a run that fails or stops ends with its outcome, the
+    others go on."""
+
+    def __init__(self, ensemble, drivers: dict[int, RunDriver], outcomes: list):
+        self.ensemble, self.drivers, self.outcomes = ensemble, drivers, outcomes
+        self.stepped: list[int] = []
+
+    @property
+    def active(self) -> list[int]:
+        return [k for k, driver in self.drivers.items() if not driver.done and self.outcomes[k] is None]
+
+    @property
+    def done(self) -> bool:
+        return not self.active
+
+    def advance(self) -> None:
+        self.stepped = self.active  # the runs of this chunk (the last chunk of a run makes it done)
+        self.ensemble.step(min(self.drivers[k].steps_to_next_stop() for k in self.stepped))
+        self.ensemble.finish()
+
+    def after(self, seconds: float, stop: StopRequests) -> None:
+        requested = stop.signal  # read once, so that every run stops at the same step
+        for k in self.stepped:
+            try:
+                self.drivers[k].after_steps(seconds, requested)
+            except (BlowUp, OSError) as error:
+                self.outcomes[k] = self.drivers[k].failure(error)
+            except RunStopped as stopped:
+                self.outcomes[k] = stopped
 
 
 def start_run(spec: dict, overwrite: bool = False, device: str | None = None, progress=None) -> RunResult:
@@ -498,15 +517,9 @@ def _parse_toml(text: str) -> dict:
     return specs.tomllib.loads(text)
 
 
-def _advance(sim, driver: RunDriver, stop_file=None) -> RunResult:
-    stop = StopRequests(stop_file)
+def _advance(driver: RunDriver, stop_file=None) -> RunResult:
     try:
-        with stop:
-            while not driver.done:
-                before = _time.perf_counter()
-                sim.step(driver.steps_to_next_stop())
-                sim.finish()  # so that the steps' time is counted here, not in the frame that reads them
-                driver.after_steps(_time.perf_counter() - before, stop.signal)
+        drive(driver, stop_file)
     except (BlowUp, OSError) as error:
         failure = driver.failure(error)
         driver.close()
@@ -557,6 +570,15 @@ class RunDriver:
     @property
     def done(self) -> bool:
         return self.sim.step_count >= self.total
+
+    def advance(self) -> None:
+        """Step this run alone up to its next stop (an ensemble's runs are stepped together: _Together)."""
+        self.sim.step(self.steps_to_next_stop())
+        self.sim.finish()  # so that the steps' time is counted here, not in the frame that reads them
+
+    def after(self, seconds: float, stop: StopRequests) -> None:
+        """:meth:`after_steps`, the stop asked for read first."""
+        self.after_steps(seconds, stop.signal)
 
     def steps_to_next_stop(self) -> int:
         step = self.sim.step_count

@@ -103,6 +103,17 @@ class Scheme:
             raise InputError(f"gravity_every must be an integer >= 1 (steps of dt per gravity evaluation); got {every!r}")
         object.__setattr__(self, "gravity_every", int(every))
 
+    @property
+    def step_multiple(self) -> int:
+        """K, the steps of an outer step: every step count of a run is a multiple of it (1 at the paper's
+        clock).  Code that steps, checks step counts or costs a step asks this, not the field."""
+        return self.gravity_every
+
+    @property
+    def clocks(self) -> int:
+        """1 where gravity and contacts share the step (K = 1), 2 where gravity has its own clock."""
+        return 1 if self.gravity_every == 1 else 2
+
     def newton_sweep(self, n: int, device: str) -> Layout | None:
         """The layout with which all-pairs gravity is summed by the Newton sweep (each pair once):
         the scheme's own where that is a Newton layout, else, for gravity on its own clock (which
@@ -123,6 +134,13 @@ class Scheme:
             return ""
         how = f" ({'the tree' if self.gravity == 'tree' else 'each pair once'})" if solver else ""
         return f"gravity every {self.gravity_every} steps{how}"
+
+
+def step_multiple_of(table: dict) -> int:
+    """K of a specification's [params] table as given (not yet checked): its ``gravity_every``, an
+    "auto" read as :func:`auto_gravity_every`, 1 where the key is absent."""
+    every = table.get("gravity_every", 1)
+    return auto_gravity_every() if every == "auto" else int(every)
 
 
 def choose_scheme(largest: int, device: str, asked: Scheme | None = None, **choices) -> Scheme:

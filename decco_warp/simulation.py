@@ -139,7 +139,7 @@ class Simulation:
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` steps of ``params.dt`` (with gravity on its own clock, a multiple of
-        ``scheme.gravity_every``: whole outer steps): whole blocks of steps replay a recorded graph
+        ``scheme.step_multiple``: whole outer steps): whole blocks of steps replay a recorded graph
         (the steps of a block, and those left over, share launches: :meth:`Engine.advance`)."""
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise InputError(f"step count must be a non-negative integer; got {n!r}")

@@ -2,13 +2,17 @@
 stop) are noted instead of ending the process, so that long work (a run, a forming pile) can save
 a checkpoint first and then end.  A run stepped for a sweep on a Dask worker (a thread, which
 signals never reach) is asked to stop through a file instead: the sweep writes the signal's name
-into it (:func:`request_stop`), and the run's loop reads it where it would read a signal."""
+into it (:func:`request_stop`), and the run's loop reads it where it would read a signal.
+
+:func:`drive` is that loop, the one of runs, ensembles of runs and forming piles."""
 
 from __future__ import annotations
 
 import signal
 import threading
+import time
 from pathlib import Path
+from typing import Protocol
 
 
 class StopRequests:
@@ -44,6 +48,30 @@ class StopRequests:
     def __exit__(self, *exc) -> None:
         for number, handler in self._previous.items():
             signal.signal(number, handler)
+
+
+class Stepping(Protocol):
+    """What :func:`drive` steps: a run (run.RunDriver), runs stepped together, a forming pile."""
+
+    @property
+    def done(self) -> bool: ...
+
+    def advance(self) -> None:
+        """Step a chunk: up to the next stop (a frame, a checkpoint, a report), or one batch."""
+
+    def after(self, seconds: float, stop: StopRequests) -> None:
+        """What is due after ``seconds`` of stepping (frames, checkpoints, progress); where ``stop.signal``
+        is read (once, where it says), the save that a stop asks for and the typed error that ends the work."""
+
+
+def drive(stepping: Stepping, request_file=None) -> None:
+    """Step ``stepping`` in chunks until it is done, the stops (Ctrl-C, SIGTERM, ``request_file``)
+    noted and handed to it after each chunk, its safe point."""
+    with StopRequests(request_file) as stop:
+        while not stepping.done:
+            began = time.perf_counter()
+            stepping.advance()
+            stepping.after(time.perf_counter() - began, stop)
 
 
 def request_stop(request_file, signal_name: str) -> None:

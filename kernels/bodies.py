@@ -21,7 +21,7 @@ from typing import Any, NamedTuple
 
 import warp as wp
 
-from .pair import inverse_sqrt_exact, inverse_sqrt_fast
+from .pair import CONTACT_CANDIDATE, inverse_sqrt_exact, inverse_sqrt_fast, reach, squared_reach, within_reach
 
 wp.set_module_options({"enable_backward": False})
 
@@ -33,9 +33,6 @@ BodyMixed = wp.types.vector(length=8, dtype=wp.float32)
 BodyDouble = wp.types.vector(length=5, dtype=wp.float64)
 BODY_TYPES = {"mixed": BodyMixed, "float64": BodyDouble}
 
-#: A float32 separation is good to ~1e-7 relative; pairs this close (in d^2) are
-#: contact candidates, confirmed or rejected in float64.
-CONTACT_CANDIDATE = 1.0 + 1e-5
 
 
 @wp.func
@@ -130,9 +127,9 @@ def sweep_of(precision: str) -> Sweep:
 
 @wp.func
 def is_candidate(d2: Any, radius_i: Any, radius_j: Any, candidate: Any) -> bool:
-    """The sweep's contact test: d^2 < (R_i + R_j)^2 (1 + margin), confirmed later in float64."""
-    reach = radius_i + radius_j
-    return d2 < reach * reach * candidate
+    """The sweep's contact test: d^2 < (R_i + R_j)^2 candidate (pair.CONTACT_CANDIDATE in mixed
+    precision), confirmed later in float64."""
+    return within_reach(d2, reach(radius_i, radius_j, type(radius_i)(0.0), type(radius_i)(1.0)), candidate)
 
 
 @wp.func
@@ -140,8 +137,7 @@ def near_bound(radius_i: Any, max_radius: Any, candidate: Any) -> Any:
     """The same bound with R_max for R_j: computed once per i, it holds every candidate of i
     (rounding is monotone, so R_j <= R_max gives a bound no smaller), and one comparison
     per pair clears the others."""
-    reach = radius_i + max_radius
-    return reach * reach * candidate
+    return squared_reach(reach(radius_i, max_radius, type(radius_i)(0.0), type(radius_i)(1.0)), candidate)
 
 
 @wp.func

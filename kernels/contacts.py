@@ -22,13 +22,15 @@ import functools
 
 import warp as wp
 
+from .channels import CONTACT_CHANNELS, LEDGER_CHANNELS
 from .pair import CONTACT_LAWS, LAWS_WITH_SPRINGS, ContactModel, PairSprings, in_contact, overlap
 
 wp.set_module_options({"enable_backward": False})
 
-#: Per-particle contact channels written by the ledger variants, in this order
-#: (float64, summed over contacts); gravity is the rest of the force.
-LEDGER_CHANNELS = ("spring_force", "sliding_force", "sliding_torque", "rolling_force")
+#: Where a contact's rows (ContactRows) hold each channel (kernels/channels.py CONTACT_CHANNELS).
+SPRING_FORCE, SLIDING_FORCE, SLIDING_TORQUE, ROLLING_FORCE, ROLLING_TORQUE = (
+    CONTACT_CHANNELS.index(name) for name in ("spring_force", "sliding_force", "sliding_torque", "rolling_force", "rolling_torque")
+)
 
 
 # The deepest contact of each particle since the host last read it, as one int64 so that a
@@ -207,21 +209,20 @@ def contact_function(law: str):
     return contact_channels
 
 
-@wp.struct
-class ContactSum:
-    """The contact channels on one particle, summed over its contacts."""
+#: A contact's channels on i, one per row (kernels/channels.py CONTACT_CHANNELS: spring force,
+#: sliding force, sliding torque, rolling force, rolling torque, the order of
+#: :func:`contact_function`'s results), or their sum over i's contacts.
+ContactRows = wp.types.matrix(shape=(len(CONTACT_CHANNELS), 3), dtype=wp.float64)
 
-    spring: wp.vec3d
-    sliding: wp.vec3d
-    sliding_torque: wp.vec3d
-    rolling: wp.vec3d
-    rolling_torque: wp.vec3d
+#: The ledger's channels on i, one per row (the order of LEDGER_CHANNELS, the first rows of a
+#: ContactRows): one value, so that the lanes of a block can sum them with one reduction (kernels/fused.py).
+LedgerRows = wp.types.matrix(shape=(len(LEDGER_CHANNELS), 3), dtype=wp.float64)
 
 
 @functools.cache
 def contact_sum_function(law: str):
     """The Warp function adding the contact channels on i from j (zero unless they touch) to a
-    ContactSum; returns it and the count of i's contacts met (``rows`` before: the row j's springs
+    ContactRows sum; returns it and the count of i's contacts met (``rows`` before: the row j's springs
     are kept in, for a law with springs)."""
     contact_channels = contact_function(law)
 
@@ -239,41 +240,24 @@ def contact_sum_function(law: str):
         rows: int,
         history_out: PairHistory,
         deepest_out: wp.array(dtype=wp.int64),
-        total: ContactSum,
+        total: ContactRows,
     ):
         spring, sliding, sliding_torque, rolling_force, rolling_torque, touching = contact_channels(
             model, i, j, radius_in, mass_in, position_in, velocity_in, omega_in, history_in, rows, history_out, deepest_out
         )
-        out = ContactSum()
-        out.spring = total.spring + spring
-        out.sliding = total.sliding + sliding
-        out.sliding_torque = total.sliding_torque + sliding_torque
-        out.rolling = total.rolling + rolling_force
-        out.rolling_torque = total.rolling_torque + rolling_torque
-        return out, rows + touching
+        return total + wp.matrix_from_rows(spring, sliding, sliding_torque, rolling_force, rolling_torque), rows + touching
 
     return add_contact
 
 
 @wp.func
-def write_contacts(total: ContactSum, i: int, torque_out: wp.array(dtype=wp.vec3d), channels_out: wp.array2d(dtype=wp.vec3d)) -> wp.vec3d:
+def write_contacts(total: ContactRows, i: int, torque_out: wp.array(dtype=wp.vec3d), channels_out: wp.array2d(dtype=wp.vec3d)) -> wp.vec3d:
     """Write i's contact torque and (when the ledger has rows) its channels; return its contact force."""
-    torque_out[i] = total.sliding_torque + total.rolling_torque
+    torque_out[i] = total[SLIDING_TORQUE] + total[ROLLING_TORQUE]
     if channels_out.shape[0] > 0:
-        channels_out[i, 0] = total.spring
-        channels_out[i, 1] = total.sliding
-        channels_out[i, 2] = total.sliding_torque
-        channels_out[i, 3] = total.rolling
-    return total.spring + total.sliding + total.rolling
-
-
-#: A contact's channels on i, one per row: spring force, sliding force, sliding torque, rolling
-#: force, rolling torque (the order of :func:`contact_function`'s results).
-ContactRows = wp.types.matrix(shape=(5, 3), dtype=wp.float64)
-
-#: The ledger's channels on i, one per row (the order of LEDGER_CHANNELS): one value, so that the
-#: lanes of a block can sum them with one reduction (kernels/fused.py).
-LedgerRows = wp.types.matrix(shape=(len(LEDGER_CHANNELS), 3), dtype=wp.float64)
+        for k in range(wp.static(len(LEDGER_CHANNELS))):
+            channels_out[i, k] = total[k]
+    return total[SPRING_FORCE] + total[SLIDING_FORCE] + total[ROLLING_FORCE]
 
 
 @wp.func
@@ -281,17 +265,6 @@ def write_channels(rows: LedgerRows, i: int, channels_out: wp.array2d(dtype=wp.v
     """Write i's ledger channels whole."""
     for k in range(wp.static(len(LEDGER_CHANNELS))):
         channels_out[i, k] = rows[k]
-
-
-@wp.func
-def contact_sum_of(rows: ContactRows) -> ContactSum:
-    total = ContactSum()
-    total.spring = rows[0]
-    total.sliding = rows[1]
-    total.sliding_torque = rows[2]
-    total.rolling = rows[3]
-    total.rolling_torque = rows[4]
-    return total
 
 
 # --- Candidate lists and the contact pass -------------------------------------------
@@ -407,7 +380,7 @@ def contact_pass(law: str = "paper", lanes: int = 1, particles: int = 1, accumul
         per_lane = wp.tile_reshape(wp.tile(mine, preserve_type=True), shape=(wp.static(particles), wp.static(lanes)))
         sums = wp.tile_sum(per_lane, axis=1)
         if lane == 0 and i < candidate_count_in.shape[0]:
-            total = contact_sum_of(sums[group])
+            total = sums[group]
             if not listed:  # every j of the system, each checked in float64
                 for j in range(ranges_in[i][0], ranges_in[i][1]):
                     total, rows = add_contact(

@@ -148,8 +148,7 @@ def pair_forces_tiled(
                         j = j_first + lane + s * wp.static(T)
                         body_j = body_in[j]
                         r = separation(body_i, body_j)
-                        reach = body_i[radius_at] + body_j[radius_at]
-                        if wp.dot(r, r) >= reach * reach * candidate:
+                        if not is_candidate(wp.dot(r, r), body_i[radius_at], body_j[radius_at], candidate):
                             continue
                     else:
                         j = slots[p, s]
@@ -165,8 +164,7 @@ def pair_forces_tiled(
                     j = j_first + lane + s * wp.static(T)
                     body_j = body_in[j]
                     r = separation(body_i, body_j)
-                    reach = body_i[radius_at] + body_j[radius_at]
-                    if wp.dot(r, r) >= reach * reach * candidate:
+                    if not is_candidate(wp.dot(r, r), body_i[radius_at], body_j[radius_at], candidate):
                         continue
                 else:
                     j = slots[p, s]

@@ -22,8 +22,12 @@ from typing import Any
 import warp as wp
 
 from .bodies import body_overloads, pack_body
+from .channels import WORK_CHANNELS
 
 wp.set_module_options({"enable_backward": False})
+
+#: A particle's work, one entry per energy channel (kernels/channels.py WORK_CHANNELS).
+Work = wp.types.vector(length=len(WORK_CHANNELS), dtype=wp.float64)
 
 
 @wp.func
@@ -39,12 +43,12 @@ def half_kick_work(
     omega_old: wp.vec3d,
     omega_new: wp.vec3d,
     half_dt: wp.float64,
-) -> wp.vec4d:
+) -> Work:
     """Work of (gravity, spring, sliding, rolling) during one half kick; sums to the kinetic energy change."""
     v = wp.float64(0.5) * (velocity_old + velocity_new)
     w = wp.float64(0.5) * (omega_old + omega_new)
     gravity = force - spring_force - sliding_force - rolling_force  # the rest of the force
-    return half_dt * wp.vec4d(
+    return half_dt * Work(
         wp.dot(gravity, v),
         wp.dot(spring_force, v),
         wp.dot(sliding_force, v) + wp.dot(sliding_torque, w),
@@ -59,12 +63,12 @@ class Motion:
 
     velocity: wp.vec3d
     omega: wp.vec3d
-    work: wp.vec4d  # (gravity, spring, sliding, rolling); zero without the ledger
+    work: Work  # (gravity, spring, sliding, rolling); zero without the ledger
 
 
 @wp.func
 def load_motion(
-    i: int, velocity_in: wp.array(dtype=wp.vec3d), omega_in: wp.array(dtype=wp.vec3d), work_in: wp.array(dtype=wp.vec4d)
+    i: int, velocity_in: wp.array(dtype=wp.vec3d), omega_in: wp.array(dtype=wp.vec3d), work_in: wp.array(dtype=Work)
 ) -> Motion:
     motion = Motion()
     motion.velocity = velocity_in[i]
@@ -76,7 +80,7 @@ def load_motion(
 
 @wp.func
 def store_motion(
-    motion: Motion, i: int, velocity_out: wp.array(dtype=wp.vec3d), omega_out: wp.array(dtype=wp.vec3d), work_out: wp.array(dtype=wp.vec4d)
+    motion: Motion, i: int, velocity_out: wp.array(dtype=wp.vec3d), omega_out: wp.array(dtype=wp.vec3d), work_out: wp.array(dtype=Work)
 ):
     velocity_out[i] = motion.velocity
     omega_out[i] = motion.omega
@@ -132,7 +136,7 @@ def kick(
     # Out:
     velocity_inout: wp.array(dtype=wp.vec3d),
     omega_inout: wp.array(dtype=wp.vec3d),
-    work_inout: wp.array(dtype=wp.vec4d),
+    work_inout: wp.array(dtype=Work),
 ):
     i = wp.tid()
     motion = load_motion(i, velocity_inout, omega_inout, work_inout)
@@ -157,7 +161,7 @@ def kick_drift(
     position_inout: wp.array(dtype=wp.vec3d),
     velocity_inout: wp.array(dtype=wp.vec3d),
     omega_inout: wp.array(dtype=wp.vec3d),
-    work_inout: wp.array(dtype=wp.vec4d),  # (N,) with the ledger, else empty
+    work_inout: wp.array(dtype=Work),  # (N,) with the ledger, else empty
     body_out: wp.array(dtype=Any),  # the sweep's packed bodies (kernels/bodies.py), or empty: none packed
 ):
     """Half kick with the current forces, then a full drift; with ``close_step`` first ``kick``, and
@@ -227,7 +231,7 @@ def kick_outer(
     # Out:
     velocity_inout: wp.array(dtype=wp.vec3d),
     omega_inout: wp.array(dtype=wp.vec3d),
-    work_inout: wp.array(dtype=wp.vec4d),
+    work_inout: wp.array(dtype=Work),
 ):
     """A gravity half kick of K dt / 2; with ``close_step`` first ``kick`` (which closes an outer step)."""
     i = wp.tid()
@@ -261,7 +265,7 @@ def kick_drift_inner(
     position_inout: wp.array(dtype=wp.vec3d),
     velocity_inout: wp.array(dtype=wp.vec3d),
     omega_inout: wp.array(dtype=wp.vec3d),
-    work_inout: wp.array(dtype=wp.vec4d),
+    work_inout: wp.array(dtype=Work),
     stale_out: wp.array(dtype=wp.int32),  # [0] = 1 when a particle is now past skin / 2 from its build position
     stale_system_out: wp.array(dtype=wp.int32),  # [s] = 1 when one of system s's particles is
     body_out: wp.array(dtype=Any),  # the gravity sweep's packed bodies (the last inner step), or empty

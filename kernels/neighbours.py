@@ -23,12 +23,10 @@ system of an ensemble keeps the lists it would keep alone.
 import warp as wp
 
 from .contacts import note_candidate
+from .pair import NEIGHBOUR_LIST_MARGIN, reach, within_reach
 
 wp.set_module_options({"enable_backward": False})
 
-#: Relative margin on a list's reach R_i + R_j + skin: it covers the rounding of the float64
-#: distances of the build and of the displacement check (a pair at the reach exactly stays listed).
-REACH_MARGIN = 1.0 + 1e-9
 #: Cells per axis of the list's grid.  It wraps: particles far apart may share a cell, which costs
 #: distance checks, never a missed neighbour (the 27 cells around any cell are distinct).
 GRID_CELLS = 64
@@ -121,7 +119,7 @@ def build_neighbour_list(
         return
     x = sorted_position_in[k]
     radius = sorted_radius_in[k]
-    margin = wp.float64(REACH_MARGIN)
+    margin = wp.float64(NEIGHBOUR_LIST_MARGIN)
     own = cell_of(x, cell_width)
     noted = int(0)
     for neighbour in range(27):  # the 3 x 3 x 3 cells around its own
@@ -129,9 +127,9 @@ def build_neighbour_list(
         key = cell_key(cell, system)
         for m in range(int(start_in[key]), int(end_in[key])):
             if m != k:
-                reach = (radius + sorted_radius_in[m] + skin) * margin
                 r = sorted_position_in[m] - x
-                if wp.dot(r, r) < reach * reach:  # in order in i's row; past its width only counted (an overflow)
+                # In order in i's row; past its width only counted (an overflow).
+                if within_reach(wp.dot(r, r), reach(radius, sorted_radius_in[m], skin, margin), wp.float64(1.0)):
                     noted = note_candidate(candidates_out, i, noted, int(order_in[m]))
     candidate_count_out[i] = wp.int32(noted)
     reference_out[i] = x

@@ -17,6 +17,8 @@ operations on negated operands), so computing every pair twice, once from each
 side, still conserves momentum to round-off.
 """
 
+from typing import Any
+
 import warp as wp
 
 wp.set_module_options({"enable_backward": False})
@@ -97,11 +99,50 @@ def overlap(distance: wp.float64, radius_i: wp.float64, radius_j: wp.float64) ->
     return radius_i + radius_j - distance
 
 
+# --- who interacts ---------------------------------------------------------------
+# Every test of who may touch whom is reach() and within_reach(); a path's margin is its own
+# argument (the margins differ, and the motion keeps each path's bits).
+
+#: The all-pairs sweep's float32 candidates: on d^2, as a float32 separation is good to ~1e-7
+#: relative (the candidates are confirmed in float64).
+CONTACT_CANDIDATE = 1.0 + 1e-5
+#: The tree's hash grid, on the reach: it covers float32 positions to |x| ~ 1e9 cm.
+TREE_GRID_MARGIN = 1.0001
+#: The neighbour list, on R_i + R_j + skin: it covers the rounding of the float64 distances of the
+#: build and of the displacement check (a pair at the reach exactly stays listed).
+NEIGHBOUR_LIST_MARGIN = 1.0 + 1e-9
+
+
+@wp.func
+def reach(radius_i: Any, radius_j: Any, skin: Any, margin: Any) -> Any:
+    """How far i and j interact: (R_i + R_j + skin) margin.  A contact is skin 0 and margin 1
+    (delta > 0); a contact finder adds its skin or its rounding margin (above)."""
+    return (radius_i + radius_j + skin) * margin
+
+
+@wp.func
+def squared_reach(reach: Any, square_margin: Any) -> Any:
+    """reach^2 square_margin: the bound on d^2 (``square_margin``: CONTACT_CANDIDATE in the float32
+    sweep, else 1)."""
+    return reach * reach * square_margin
+
+
+@wp.func
+def within_reach(d2: Any, reach: Any, square_margin: Any) -> bool:
+    """Whether d^2 < reach^2 square_margin: tested on d^2, no square root for distant pairs."""
+    return d2 < squared_reach(reach, square_margin)
+
+
+def host_reach(radius_i, radius_j, skin=0.0, margin=1.0):
+    """:func:`reach` on the host (floats or NumPy arrays): the same operations in the same order,
+    for the cells the finders' grids are built with."""
+    return (radius_i + radius_j + skin) * margin
+
+
 @wp.func
 def in_contact(d2: wp.float64, radius_i: wp.float64, radius_j: wp.float64) -> bool:
-    """True when delta > 0, tested on d^2 so that no square root is taken for distant pairs."""
-    reach = radius_i + radius_j
-    return d2 < reach * reach
+    """True when delta > 0."""
+    return within_reach(d2, reach(radius_i, radius_j, f64(0.0), f64(1.0)), f64(1.0))
 
 
 @wp.func

@@ -11,7 +11,7 @@ import functools
 import warp as wp
 
 from .bodies import real_types
-from .contacts import ContactSum, PairHistory, close_rows, contact_sum_function, write_contacts
+from .contacts import ContactRows, PairHistory, close_rows, contact_sum_function, write_contacts
 from .pair import ContactModel, gravity, in_contact
 
 wp.set_module_options({"enable_backward": False})
@@ -47,7 +47,7 @@ def pair_forces_reference(precision: str = "mixed", law: str = "paper"):
         position_i = position_in[i]
         g_mass_i = model.G * mass_in[i]
         gravity_sum = vec_real()
-        total = ContactSum()
+        total = ContactRows()
         rows = int(0)
         for j in range(ranges_in[i][0], ranges_in[i][1]):
             r_ij = position_i - position_in[j]

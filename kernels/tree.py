@@ -39,7 +39,7 @@ from typing import Any
 import warp as wp
 
 from .contacts import note_candidate
-from .pair import inverse_sqrt_exact, inverse_sqrt_fast
+from .pair import TREE_GRID_MARGIN, inverse_sqrt_exact, inverse_sqrt_fast, reach, within_reach
 
 wp.set_module_options({"enable_backward": False})
 
@@ -593,21 +593,19 @@ def grid_candidates(
     candidate_count_out: wp.array(dtype=wp.int32),  # candidates met (past the list's width: an overflow)
     candidates_out: wp.array2d(dtype=wp.int32),  # the first of them, in increasing j
 ):
-    """Each particle's contact candidates: neighbours closer than (R_i + R_j) (1 + 1e-4), a
+    """Each particle's contact candidates: neighbours closer than (R_i + R_j) TREE_GRID_MARGIN, a
     superset of its contacts confirmed in float64 by the contact pass.  The grid is asked for
     R_i + R_max and returns whole cells (90 points on average in the shipped pile, up to 260);
-    only the few that can touch are noted, so that the list does not overflow.  The margin covers
-    float32 positions to |x| ~ 1e9 cm."""
+    only the few that can touch are noted, so that the list does not overflow."""
     i = wp.tid()
-    margin = wp.float64(1.0001)
-    reach = wp.float32((radius_in[i] + max_radius) * margin)
-    query = wp.hash_grid_query(grid, points_in[i], reach)
+    margin, none = wp.float64(TREE_GRID_MARGIN), wp.float64(0.0)
+    query = wp.hash_grid_query(grid, points_in[i], wp.float32(reach(radius_in[i], max_radius, none, margin)))
     j = int(0)
     noted = int(0)
     while wp.hash_grid_query_next(query, j):
         if j != i:
-            touch = wp.float32((radius_in[i] + radius_in[j]) * margin)
-            if wp.length_sq(points_in[j] - points_in[i]) < touch * touch:
+            touch = wp.float32(reach(radius_in[i], radius_in[j], none, margin))
+            if within_reach(wp.length_sq(points_in[j] - points_in[i]), touch, wp.float32(1.0)):
                 noted = note_candidate(candidates_out, i, noted, j)
     candidate_count_out[i] = wp.int32(noted)
 

@@ -2,11 +2,53 @@
 
 import numpy as np
 import pytest
+import warp as wp
 from scenes import overlapping_cloud, sphere_mass, two_spheres
 
 import decco_warp as dw
+from decco_warp.kernels import pair
 
 NO_GRAVITY = dict(G=0.0)
+
+
+@wp.kernel
+def _reach_of_pairs(
+    # In:
+    radius_i_in: wp.array(dtype=wp.float64),
+    radius_j_in: wp.array(dtype=wp.float64),
+    skin: wp.float64,
+    margin: wp.float64,
+    d2_in: wp.array(dtype=wp.float64),
+    # Out:
+    reach_out: wp.array(dtype=wp.float64),
+    within_out: wp.array(dtype=wp.int32),
+    touching_out: wp.array(dtype=wp.int32),
+):
+    k = wp.tid()
+    reach = pair.reach(radius_i_in[k], radius_j_in[k], skin, margin)
+    reach_out[k] = reach
+    within_out[k] = wp.where(pair.within_reach(d2_in[k], reach, wp.float64(1.0)), 1, 0)
+    touching_out[k] = wp.where(pair.in_contact(d2_in[k], radius_i_in[k], radius_j_in[k]), 1, 0)
+
+
+@pytest.mark.parametrize("skin, margin", [(0.0, 1.0), (0.3, pair.NEIGHBOUR_LIST_MARGIN), (0.0, pair.TREE_GRID_MARGIN)])
+def test_reach_is_one_function_on_device_and_host(device, skin, margin):
+    """Who interacts is pair.reach: its host twin gives the same bits, a pair is within reach strictly
+    inside it, and a contact is the reach of skin 0 and margin 1 (delta > 0)."""
+    rng = np.random.default_rng(5)
+    ri, rj = rng.uniform(0.5, 2.0, 64), rng.uniform(0.5, 2.0, 64)
+    host = pair.host_reach(ri, rj, skin, margin)
+    touch = ri + rj
+    d2 = np.concatenate([host[:16] ** 2, np.nextafter(host[16:32] ** 2, 0), rng.uniform(0.0, 16.0, 32)])
+    arrays = [wp.array(a, dtype=wp.float64, device=device) for a in (ri, rj)]
+    out = [wp.zeros(64, dtype=t, device=device) for t in (wp.float64, wp.int32, wp.int32)]
+    wp.launch(_reach_of_pairs, dim=64, inputs=[*arrays, skin, margin, wp.array(d2, dtype=wp.float64, device=device)],
+              outputs=out, device=device)  # fmt: skip
+    reach, within, touching = (a.numpy() for a in out)
+    assert np.array_equal(reach, host)
+    assert np.array_equal(within, d2 < host * host)
+    assert np.array_equal(touching, d2 < touch * touch)
+    assert not within[:16].any() and within[16:32].all()
 
 
 def _relative_normal_speed(state):

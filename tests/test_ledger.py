@@ -126,3 +126,23 @@ def test_the_other_layout_keeps_the_books_and_matches_the_default_layout(precisi
     moved = np.abs(early[0] - clump.positions).max()
     tolerance = 1e-12 if precision == "float64" else 1e-6
     assert moved > 0 and np.abs(early[1] - early[0]).max() <= tolerance * moved
+
+
+def test_the_channel_table_sizes_the_kernels_types_and_names_the_outputs():
+    """kernels/channels.py is the one list of energy channels: the kernels' rows and work vector are
+    as long as it says, the ledger's entries are its own, and docs/data.md names each energy."""
+    from pathlib import Path
+
+    from decco_warp.io import OBSERVABLE_UNITS
+    from decco_warp.kernels import channels, contacts, integrate
+
+    assert contacts.ContactRows._shape_ == (len(channels.CONTACT_CHANNELS), 3)
+    assert contacts.LedgerRows._shape_ == (len(channels.LEDGER_CHANNELS), 3)
+    assert channels.CONTACT_CHANNELS[: len(channels.LEDGER_CHANNELS)] == channels.LEDGER_CHANNELS
+    assert integrate.Work._length_ == len(channels.WORK_CHANNELS) == integrate.Motion.vars["work"].type._length_
+    sim = dw.Simulation(contact_cluster(8, 1), dw.Params(), device="cpu", ledger=True)
+    assert sim.work().shape == (sim.state.n, len(channels.WORK_CHANNELS))
+    assert set(energy_ledger(sim.diagnostics(), sim.energy_start, sim.work())) == set(channels.LEDGER_ENTRIES)
+    data_md = (Path(__file__).parent.parent / "docs" / "data.md").read_text()
+    for name in (*channels.HELD_ENERGIES, *channels.LEDGER_ENTRIES):
+        assert OBSERVABLE_UNITS[name] == "erg" and f"`{name}`" in data_md, name

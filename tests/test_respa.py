@@ -359,6 +359,17 @@ def test_auto_gravity_every_is_the_k_of_the_equivalence_table_and_the_spec_recor
     assert spec["run"]["steps"] == GRAVITY_EVERY_AUTO * math.ceil(1.0 / 0.04 / GRAVITY_EVERY_AUTO)
 
 
+def test_the_scheme_answers_for_its_clock():
+    """Code outside scheme.py learns K from the Scheme: its step multiple, its number of clocks, and
+    the K of a specification's [params] table as given ("auto", absent)."""
+    from decco_warp.scheme import GRAVITY_EVERY_AUTO, Scheme, step_multiple_of
+
+    assert (Scheme().step_multiple, Scheme().clocks) == (1, 1)
+    assert (Scheme(gravity_every=5).step_multiple, Scheme(gravity_every=5).clocks) == (5, 2)
+    assert step_multiple_of({}) == 1 and step_multiple_of({"gravity_every": 20}) == 20
+    assert step_multiple_of({"gravity_every": "auto"}) == GRAVITY_EVERY_AUTO
+
+
 def test_a_duration_becomes_whole_outer_steps():
     """A duration that is not a whole number of outer steps rounds up to the next one."""
     from decco_warp import spec as specs
