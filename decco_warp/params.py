@@ -9,6 +9,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 
 from .errors import InputError
+from .kernels.pair import CONTACT_LAWS as KERNEL_LAWS, LAW_VARIANTS, LAWS_WITH_SPRINGS
 
 #: Gravitational constant [cm^3 g^-1 s^-2] (CODATA 2018).
 G_CGS = 6.67430e-8
@@ -21,7 +22,7 @@ ROLLING_FRICTION_FORMS = ("couple", "paper")
 #: (rolling friction by ``rolling_friction``); "decco-code", DECCO's pair forces as its code computes
 #: them (LucasKolanz/DECCO at fae89d3); "ssdem", pkdgrav's soft-sphere law (Schwartz, Richardson &
 #: Michel 2012), with a tangential spring per pair (static friction) and rolling and twisting springs.
-CONTACT_LAWS = ("paper", "decco-code", "ssdem")
+CONTACT_LAWS = tuple(name for name in KERNEL_LAWS if name not in LAW_VARIANTS)
 
 #: The constants of the soft-sphere law alone (contact_law = "ssdem"): the other laws read none of them.
 SSDEM_CONSTANTS = ("k_t_ratio", "eps_t", "mu_s", "mu_t", "beta", "cohesion")
@@ -126,7 +127,7 @@ class Params:
     @property
     def keeps_springs(self) -> bool:
         """Whether the contact law keeps springs per pair (a contact history, saved in snapshots)."""
-        return self.contact_law == "ssdem"
+        return self.law in LAWS_WITH_SPRINGS
 
     @property
     def k_n(self) -> float:

@@ -579,7 +579,7 @@ def ssdem_contact(
 #: action on i.  "paper": the paper's law, rolling friction as a couple (docs/model.md);
 #: "paper-printed-rolling": the same, rolling friction as the force printed as the paper's eq. 9;
 #: "decco-code": DECCO's pair forces as its code computes them.  A new law is one function of that
-#: signature and its line here.  "ssdem", pkdgrav's soft-sphere law, keeps springs per pair: its
+#: signature and its line here (the spec, the CLI and Params take their names from this table).  "ssdem", pkdgrav's soft-sphere law, keeps springs per pair: its
 #: function (:func:`ssdem_contact`) takes the pair from its lower index with the springs of the step
 #: before, and kernels/contacts.py keeps them (:data:`LAWS_WITH_SPRINGS`).
 CONTACT_LAWS = {
@@ -591,3 +591,6 @@ CONTACT_LAWS = {
 
 #: The laws that keep springs per pair (a contact history, kernels/contacts.py PairHistory).
 LAWS_WITH_SPRINGS = ("ssdem",)
+#: Laws of CONTACT_LAWS that are another law's variant, chosen by a constant of that law (Params'
+#: rolling_friction), not by name: what a user may ask for by name is the rest (params.CONTACT_LAWS).
+LAW_VARIANTS = {"paper-printed-rolling": "paper"}
