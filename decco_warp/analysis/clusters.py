@@ -310,22 +310,22 @@ class _FreeParticles:
 
         |v - V|^2 |x - X| < 2 G M holds only within a distance D of the centre, or below
         sqrt(2 G M / D) in relative speed beyond it, for any D > 0; D is the distance to the centre's
-        _NEAR_COUNT-th nearest particle, both radii widened by 1e-6 so that rounding never drops a
-        particle the exact test takes."""
+        _NEAR_COUNT-th nearest particle, so that those within it are the nearest found, and the
+        speed is widened by 1e-6 so that rounding never drops a particle the exact test takes.
+        The nearest are asked once, as an array (not counted, then listed)."""
         count = self.indices.size
         if count < max(_SCAN_BELOW, _NEAR_COUNT):
             return None
         positions, velocities = self.trees()
-        reach = 2.0 * G * mass
-        near = float(positions.query(com, k=_NEAR_COUNT)[0][-1]) or 1.0
-        slow = math.sqrt(reach / near)
-        if positions.query_ball_point(com, near * _WIDEN, return_length=True) > count // 4:
+        distance, close = positions.query(com, k=_NEAR_COUNT)
+        near = float(distance[-1])
+        if near == 0.0:  # the nearest all at the centre: no speed bound from there
             return None
-        if velocities.query_ball_point(velocity, slow * _WIDEN, return_length=True) > count // 4:
+        slow = math.sqrt(2.0 * G * mass / near) * _WIDEN
+        if velocities.query_ball_point(velocity, slow, return_length=True) > count // 4:
             return None
-        close = positions.query_ball_point(com, near * _WIDEN)
-        slow_ones = velocities.query_ball_point(velocity, slow * _WIDEN)
-        return self.indices[np.union1d(np.asarray(close, dtype=np.int64), np.asarray(slow_ones, dtype=np.int64))]
+        slow_ones = velocities.query_ball_point(velocity, slow)
+        return self.indices[np.union1d(close, np.asarray(slow_ones, dtype=np.int64))]
 
 
 #: Below this many free particles the escape-speed test scans them all; above it, a small group's
