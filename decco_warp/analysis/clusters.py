@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -34,6 +33,7 @@ from scipy import sparse
 from scipy.spatial import cKDTree
 
 from ..params import G_CGS
+from ..processes import usable_cores
 from ..state import State
 from ..errors import InputError
 
@@ -100,11 +100,12 @@ def smoothed_density(
         density[start : start + rows] = exponent @ norm
 
     starts = range(0, targets.shape[0], rows)
-    if len(starts) < 4:
+    threads = usable_cores()  # an analysis worker's share of them
+    if len(starts) < 4 or threads == 1:
         for start in starts:
             block(start)
     else:
-        with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
+        with ThreadPoolExecutor(max_workers=threads) as pool:
             list(pool.map(block, starts))
     return density
 
