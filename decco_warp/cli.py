@@ -836,6 +836,10 @@ def analyze(
     device: Optional[str] = typer.Option(
         None, "--device", help="Where the cluster finder's O(N^2) smoothed density is summed: cpu (NumPy, all cores) or cuda[:N] (default: $DECCO_DEVICE, else CUDA if present, else cpu)."
     ),
+    workers: Optional[int] = typer.Option(
+        None, "--workers", help="Processes that analyse a run's frames side by side, each reading its share of the frames (on a GPU, each with a CUDA context); "
+        "the results are the same. Default: one a CPU core ($DECCO_CORES, else every core; at most 16 on a GPU), 1 for a small run. 1: frame by frame in this process."
+    ),
 ) -> None:
     """Fragments, the paper's metrics, conservation and energy of runs: analysis.h5, summary.json, figures.
 
@@ -845,8 +849,8 @@ def analyze(
     from .device import DeviceError, resolve_device
     from .watch import analyse_runs, check_analysable, find_runs, write_cross_run_results
 
-    if min_members is not None and min_members < 1 or every < 1 or not poll > 0:
-        fail("--min-members and --every must be >= 1, --poll > 0")
+    if min_members is not None and min_members < 1 or every < 1 or workers is not None and workers < 1 or not poll > 0:
+        fail("--min-members, --every and --workers must be >= 1, --poll > 0")
     try:
         device = resolve_device(device)
     except DeviceError as error:
@@ -874,7 +878,7 @@ def analyze(
             bar.console.print(f"{run_dir}: analysed to step {step}; following the run", soft_wrap=True, highlight=False)
 
         try:
-            runs_analysed = analyse_runs(runs, min_members, every, device, follow=follow, poll=poll, on_run=frames_of, on_follow=following)
+            runs_analysed = analyse_runs(runs, min_members, every, device, follow=follow, poll=poll, on_run=frames_of, on_follow=following, workers=workers)
             for result in runs_analysed:  # each kept as it comes, so that a failed write can say how many are whole
                 results.append(result)
         except DeccoError as error:

@@ -553,6 +553,18 @@ def read_frame(path, index: int = 0) -> tuple[dict, dict, dict]:
     return frame, observables, static
 
 
+def read_frames(path, indices, elements=("position", "velocity", "omega")) -> tuple[dict, dict]:
+    """(particles, static) of the frames ``indices`` (increasing) of a trajectory: each of
+    ``elements`` as (len(indices), N, ...), as :func:`read_trajectory` has them, without reading the
+    other frames (what an analysis worker reads of its share)."""
+    indices = [int(k) for k in indices]
+    with open_trajectory(path) as f:
+        particles = f["particles/all"]
+        frames = {name: particles[name]["value"][indices] for name in elements}
+        static = {name: particles[name][()] for name in ("radius", "mass", "species", "pile_id")}
+    return frames, static
+
+
 # --- checkpoints ---------------------------------------------------------------------
 
 

@@ -46,6 +46,7 @@ import time
 from concurrent.futures import CancelledError, Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from datetime import datetime, timezone
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -54,6 +55,7 @@ from . import resolution as resolutions
 from . import spec as specs
 from ._version import __version__
 from .folder import SWEEP_RECORD, RunFolder
+from .processes import usable_cores, use_cores
 from .stops import clear_request
 
 #: ``ensemble = "auto"`` on a GPU: runs go to a worker up to 8 at a time (fewer where that leaves a
@@ -571,7 +573,8 @@ def analyse_one(run_dir: str, min_members: int, analyze_every: int, keep_traject
     drop its trajectory if asked; returns its summary (``analysis_seconds``: what the analysis
     took when it ran, also for a run found analysed).  Runs in a process of this machine; the
     cluster finder's O(N^2) density is summed on ``device`` (default as for runs: this machine's
-    GPU when it has one, where a 6 250-particle frame takes milliseconds, else NumPy)."""
+    GPU when it has one, where a 6 250-particle frame takes milliseconds, else NumPy), its frames
+    in as many processes as this one's share of the cores allows (:class:`Analyses`)."""
     from .lock import AnalysisLock
 
     # The run has finished: no one else should be writing there, nor analysing it (decco-warp analyze).
@@ -686,10 +689,21 @@ def analysis_failed(row: dict, error: BaseException) -> dict:
     return {**row, "status": "failed", "reason": f"analysis: {' '.join(str(error).split())}"}
 
 
+def analysis_process(cores: int) -> None:
+    """The start of an analysis process of :class:`Analyses`: SIGINT and SIGTERM left to the sweep,
+    ``cores`` cores its own (decco_warp/processes.py)."""
+    from .stops import ignore_stops
+
+    ignore_stops()
+    use_cores(cores)
+
+
 class Analyses:
     """The analyses of finished runs, in processes of this machine: a pool of processes per device,
     so that each process opens one CUDA context (a process that took runs of every GPU would hold a
-    context on each), ``processes`` on the CPU and a share of them on each GPU."""
+    context on each), ``processes`` on the CPU and a share of them on each GPU.  Each process has
+    its share of the cores ($DECCO_CORES): a run's frames are analysed in as many processes as that
+    allows (one, where the processes are one a core), never processes^2 of them."""
 
     def __init__(self, processes: int, gpus: dict[str, str]):
         self.processes, self.gpus = processes, gpus
@@ -698,14 +712,13 @@ class Analyses:
 
     def submit(self, row: dict, settings: dict) -> Future:
         """:func:`analyse_one` of a finished run's row, on :func:`analysis_device`."""
-        from .stops import ignore_stops
-
         device = analysis_device(row, self.gpus, self.turn)
         self.turn += 1
         if device not in self.pools:
             share = self.processes if device == "cpu" else max(1, -(-self.processes // len(self.gpus)))
             context = multiprocessing.get_context("spawn")
-            self.pools[device] = ProcessPoolExecutor(max_workers=share, mp_context=context, initializer=ignore_stops)
+            cores = max(1, usable_cores() // self.processes)
+            self.pools[device] = ProcessPoolExecutor(max_workers=share, mp_context=context, initializer=partial(analysis_process, cores))
         return self.pools[device].submit(analyse_one, *analysis_args(row, settings, device))
 
     def shutdown(self, wait: bool) -> None:

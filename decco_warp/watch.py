@@ -106,13 +106,15 @@ class RunAnalysis:
 
 
 def analyse_folder(
-    run_dir, min_members: int = 50, every: int = 1, device: str | None = None, end_time: float | None = None, progress=None
-) -> RunAnalysis:
+    run_dir, min_members: int = 50, every: int = 1, device: str | None = None, end_time: float | None = None, progress=None,
+    workers: int | None = None,
+) -> RunAnalysis:  # fmt: skip
     """Analyse a run folder once (``analysis.runs.analyse_run``: analysis.h5 and summary.json) and
     draw its figures (time axes to ``end_time``, default the run's own).  A finished run is held
     meanwhile (its lock), so that no run starts writing there; a running one is read as a SWMR
     reader, its frames so far.  ``progress(frames done, frames in all)``; ``device``: where the
-    cluster finder sums its density."""
+    cluster finder sums its density; ``workers``: processes that analyse its frames (None: chosen
+    from the cores and the run's size)."""
     from .analysis.figures import draw_run
     from .analysis.runs import analyse_run
 
@@ -122,7 +124,7 @@ def analyse_folder(
     except RunFolderBusy:
         writer = None  # a running run
     try:
-        analysis = analyse_run(run_dir, min_members=min_members, every=every, progress=progress, device=device)
+        analysis = analyse_run(run_dir, min_members=min_members, every=every, progress=progress, device=device, workers=workers)
         draw_run(analysis, run_dir, end_time)
     finally:
         if writer is not None:
@@ -139,6 +141,7 @@ def analyse_runs(
     poll: float = 10.0,
     on_run: Callable[[Path], Callable[[int, int], None] | None] | None = None,
     on_follow: Callable[[Path, int], None] | None = None,
+    workers: int | None = None,
 ) -> Iterator[RunAnalysis]:
     """Analyse each of ``runs`` in turn (:func:`analyse_folder`) under its analysis lock, yielding
     each RunAnalysis; several runs share one time axis, to the latest end their spec.toml plan.
@@ -146,19 +149,20 @@ def analyse_runs(
     seconds) until it ends, ``on_follow(run_dir, step analysed to)`` told before each wait.
     ``on_run(run_dir)``, as a run's analysis begins, returns its progress callback (or None).
     ``min_members``: the smallest cluster; None: each run's own (RunFolder.min_members: what it
-    was analysed or swept with).
+    was analysed or swept with).  ``workers``: processes that analyse a run's frames side by side
+    (None: chosen for each run from the cores and its size, analysis.runs.frame_workers).
     Raises what the analysis meets: FileFormatError, RunFolderBusy (another analysis), OSError."""
     end_time = planned_end(runs) if len(runs) > 1 else None
     for run_dir in runs:
         progress = on_run(run_dir) if on_run is not None else None
         smallest = min_members if min_members is not None else RunFolder(run_dir).min_members()
         with AnalysisLock(run_dir):
-            result = analyse_folder(run_dir, smallest, every, device, end_time, progress)
+            result = analyse_folder(run_dir, smallest, every, device, end_time, progress, workers)
             while follow and result.live:
                 if on_follow is not None:
                     on_follow(run_dir, result.summary["steps"])
                 wait_for_frame(run_dir, result.summary["steps"], poll)
-                result = analyse_folder(run_dir, smallest, every, device, end_time, progress)
+                result = analyse_folder(run_dir, smallest, every, device, end_time, progress, workers)
         yield result
 
 

@@ -488,3 +488,88 @@ def test_cross_run_figures_draw_a_series_per_value_of_a_swept_key():
     assert pooled.axes[0].get_legend_handles_labels()[1] == ["0 deg"]
     np.testing.assert_allclose(line_data(pooled)[0][1], [1.41, 1.01])
 
+
+
+def test_frames_analysed_in_processes_give_the_results_of_one_process(tmp_path):
+    """analyze --workers 2 (the frames in two spawned processes, each reading its share of the
+    trajectory itself, merged in frame order) writes the analysis.h5 and summary.json of
+    --workers 1 (frame by frame in the command's process), dataset for dataset: each frame's
+    cluster of every particle, the catalogue, the last frame's members; the same lines printed."""
+    result = cli("simulate", "--name", "a", "--eta", "0.5", "--steps", "400", "--output-every", "20", "--out", str(tmp_path), "--device", "cpu")
+    assert result.returncode == 0, result.stderr
+    run, outputs = tmp_path / "a", []
+    for workers in ("1", "2"):
+        result = cli("analyze", str(run), "--min-members", "20", "--workers", workers)
+        assert result.returncode == 0, result.stderr
+        summary = json.loads((run / "summary.json").read_text())
+        outputs.append((read_analysis(run / "analysis.h5"), summary, result.stdout.splitlines()[-1]))
+    (serial, serial_summary, serial_line), (parallel, parallel_summary, parallel_line) = outputs
+    assert serial.keys() == parallel.keys()
+    for group in serial:
+        if group == "summary":
+            continue
+        assert serial[group].keys() == parallel[group].keys(), group
+        for name, value in serial[group].items():
+            assert value.dtype == parallel[group][name].dtype and value.shape == parallel[group][name].shape, (group, name)
+            assert np.array_equal(value, parallel[group][name], equal_nan=value.dtype.kind == "f"), (group, name)
+    assert (serial["frames"]["label"] >= 0).any() and serial["frames"]["label"].shape[0] == 21  # clusters in every frame's labels
+    for summary in (serial_summary, parallel_summary, serial["summary"], parallel["summary"]):
+        summary.pop("analysis_seconds")
+    assert serial_summary == parallel_summary and serial["summary"] == parallel["summary"]
+    assert serial_line == parallel_line
+
+
+def test_how_many_processes_analyse_a_runs_frames(monkeypatch):
+    """One a core this process may use ($DECCO_CORES where set), at most 16 on a GPU and one a frame;
+    one (here) for a small run, a process that may not start processes, or a single core; what is
+    asked where asked."""
+    from decco_warp.analysis import runs
+    from decco_warp.errors import InputError
+
+    monkeypatch.setenv("DECCO_CORES", "6")
+    assert runs.frame_workers(1001, 6250) == 6 and runs.frame_workers(1001, 6250, device="cuda:0") == 6
+    assert runs.frame_workers(4, 100_000) == 4  # one a frame at most
+    assert runs.frame_workers(21, 450) == 1  # 9 450 particle-frames: a process's start costs more
+    assert runs.frame_workers(21, 450, workers=2) == 2 and runs.frame_workers(3, 450, workers=8) == 3
+    monkeypatch.setenv("DECCO_CORES", "64")
+    assert runs.frame_workers(1001, 6250) == 64 and runs.frame_workers(1001, 6250, device="cuda") == runs.MAX_GPU_WORKERS
+    monkeypatch.setenv("DECCO_CORES", "1")
+    assert runs.frame_workers(1001, 6250) == 1
+    monkeypatch.setenv("DECCO_CORES", "64")
+    monkeypatch.setattr(runs, "can_start_processes", lambda: False)  # a daemonic process (a multiprocessing.Pool's worker)
+    assert runs.frame_workers(1001, 6250) == 1
+    monkeypatch.setenv("DECCO_CORES", "many")
+    with pytest.raises(InputError, match="DECCO_CORES"):
+        runs.usable_cores()
+
+
+def test_a_sweeps_analysis_processes_each_have_their_share_of_the_cores(monkeypatch):
+    """The analysis processes of a sweep (16 cores, 4 processes) are each told 4 cores: a run's frames
+    are analysed in up to 4 processes of its own, never 16 x 16; its frame workers 4 / 4 = 1 core each."""
+    import functools
+    import os
+
+    from decco_warp import processes, sweep
+
+    pools = []
+
+    class Pool:
+        def __init__(self, max_workers, mp_context, initializer):
+            self.size, self.initializer = max_workers, initializer
+            pools.append(self)
+
+        def submit(self, function, *args):
+            return args
+
+    monkeypatch.setenv("DECCO_CORES", "16")
+    monkeypatch.setattr(sweep, "ProcessPoolExecutor", Pool)
+    sweep.Analyses(4, {}).submit({"run_dir": "r0", "n_particles": 6250}, {"min_members": 50, "analyze_every": 1, "keep_trajectory": True})
+    (pool,) = pools
+    assert pool.size == 4 and isinstance(pool.initializer, functools.partial) and pool.initializer.args == (4,)
+    monkeypatch.setattr("decco_warp.stops.ignore_stops", lambda: None)
+    pool.initializer()  # as the process starts
+    assert os.environ["DECCO_CORES"] == "4" and processes.usable_cores() == 4
+    before = os.environ.get("OPENBLAS_NUM_THREADS")
+    with processes.helpers_environment(processes.usable_cores() // 4):  # what its frame workers start with
+        assert os.environ["DECCO_CORES"] == "1" and os.environ["OPENBLAS_NUM_THREADS"] == "1"
+    assert os.environ["DECCO_CORES"] == "4" and os.environ.get("OPENBLAS_NUM_THREADS") == before  # restored

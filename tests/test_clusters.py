@@ -383,3 +383,69 @@ def test_escape_speed_screen_holds_every_particle_a_group_binds():
             assert np.isin(bound, found).all()
             assert found.size <= n // 2
     assert answered >= 20 and binding >= 10  # most groups screened, many of them binding someone
+
+
+def _alone_by_shells(x, v, m, radii, contacts, G):
+    """The lone-seed screen as first written, the reference for its per-seed reach: every seed
+    paired with the particles it could bind by the heaviest mass, shell by shell over every
+    particle (six-dimensional box queries), then the exact test."""
+    from scipy.spatial import cKDTree
+
+    from decco_warp.analysis import clusters as finder
+
+    alone = contacts.getnnz(axis=1) == 0
+    near, reach = finder.NEAR_RADII * radii.max(), 2 * G * m.max()
+    second, _ = cKDTree(v).query(v, k=2, distance_upper_bound=np.nextafter(math.sqrt(reach / near), np.inf))
+    alone &= ~np.isfinite(second[:, 1])
+    seeds = np.flatnonzero(alone)
+
+    def ball(points, radius, p=2.0):
+        around = cKDTree(points).query_ball_point(points[seeds], r=radius, p=p)
+        return np.stack([np.repeat(seeds, [len(a) for a in around]), np.concatenate([np.asarray(a, dtype=np.int64) for a in around] + [np.zeros(0, np.int64)])])
+
+    closest, widen = 2 * radii.min(), finder._WIDEN
+    pairs, inner = [ball(x, closest * widen)], closest / widen
+    while inner < near:
+        pairs.append(ball(np.hstack([x / (2 * inner), v / math.sqrt(reach / inner)]), widen, p=np.inf))
+        inner *= 2
+    s, j = np.concatenate(pairs, axis=1)
+    distance, speed2 = np.linalg.norm(x[j] - x[s], axis=1), ((v[j] - v[s]) ** 2).sum(axis=1)
+    binds = np.zeros(len(m), dtype=bool)
+    binds[s[(s != j) & (distance <= near) & (speed2 * distance < 2 * G * m[s])]] = True
+    return alone & ~binds
+
+
+def _remnant_in_debris(seed):
+    """A compact remnant at rest (the shipped target: touching grains, and its co-moving neighbours)
+    beside a debris cloud of six piles (:func:`_debris_field`, near-threshold pairs included)."""
+    pile = dw.load_pile(builtin_pile("target"))
+    cloud = _combine(*(_moved(pile, (k * 8 * pile_radius(pile), 0, 0), (0, 0, 0)) for k in range(1, 7)))
+    return _combine(pile, _debris_field(cloud, seed, pairs=60))
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_lone_seeds_by_each_seeds_reach_are_those_of_the_shells_over_every_particle(seed, monkeypatch):
+    """The lone-seed screen pairs a seed only with the particles within the reach its slowest
+    neighbour allows (2 G m_s / u_s^2), crowded seeds shell by shell: on debris fields with and
+    without a remnant, every seed sent either way or as it comes (_CROWDED), it finds the lone seeds
+    that the shells over every particle with the heaviest mass find, and the finder the same
+    clusters with every screen as with none."""
+    from decco_warp.analysis import clusters as finder
+
+    pile = dw.load_pile(builtin_pile("target"))
+    fields = [_debris_field(_combine(*(_moved(pile, (k * 8 * pile_radius(pile), 0, 0), (0, 0, 0)) for k in range(8))), seed), _remnant_in_debris(seed)]
+    for state in fields:
+        x, v, m, radii = state.positions, state.velocities, state.masses, state.radii
+        contacts = finder.contact_graph(x, radii)
+        reference = _alone_by_shells(x, v, m, radii, contacts, dw.G_CGS)
+        assert 200 < reference.sum() < state.n - 100
+        for crowded in (0, finder._CROWDED, 10**9):
+            monkeypatch.setattr(finder, "_CROWDED", crowded)
+            assert np.array_equal(finder._alone(x, v, m, radii, contacts, dw.G_CGS), reference)
+    monkeypatch.undo()
+    state = fields[1]
+    screened = [c.members.tolist() for c in dw.find_clusters(state, min_members=20)]
+    monkeypatch.setattr(finder, "_alone", lambda x, *rest: np.zeros(len(x), dtype=bool))
+    monkeypatch.setattr(finder, "_SCAN_BELOW", 10**9)
+    assert [c.members.tolist() for c in dw.find_clusters(state, min_members=20)] == screened
+    assert screened and len(screened[0]) >= pile.n  # the remnant is found

@@ -23,8 +23,8 @@ half a minute on 16 cores).
 
 from __future__ import annotations
 
+import itertools
 import math
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -33,6 +33,7 @@ from scipy import sparse
 from scipy.spatial import cKDTree
 
 from ..params import G_CGS
+from ..processes import usable_cores
 from ..state import State
 from ..errors import InputError
 
@@ -99,19 +100,20 @@ def smoothed_density(
         density[start : start + rows] = exponent @ norm
 
     starts = range(0, targets.shape[0], rows)
-    if len(starts) < 4:
+    threads = usable_cores()  # an analysis worker's share of them
+    if len(starts) < 4 or threads == 1:
         for start in starts:
             block(start)
     else:
-        with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
+        with ThreadPoolExecutor(max_workers=threads) as pool:
             list(pool.map(block, starts))
     return density
 
 
-def contact_graph(positions: np.ndarray, radii: np.ndarray) -> sparse.csr_matrix:
-    """Symmetric adjacency of the pairs in contact (delta >= 0)."""
+def contact_graph(positions: np.ndarray, radii: np.ndarray, tree: cKDTree | None = None) -> sparse.csr_matrix:
+    """Symmetric adjacency of the pairs in contact (delta >= 0); ``tree``: a k-d tree of ``positions``, if made."""
     n = positions.shape[0]
-    pairs = cKDTree(positions).query_pairs(r=2.0 * radii.max(), output_type="ndarray")
+    pairs = (cKDTree(positions) if tree is None else tree).query_pairs(r=2.0 * radii.max(), output_type="ndarray")
     if pairs.size:
         i, j = pairs[:, 0], pairs[:, 1]
         touching = np.linalg.norm(positions[i] - positions[j], axis=1) <= radii[i] + radii[j]
@@ -133,16 +135,17 @@ def find_clusters(state: State, min_members: int = 50, G: float = G_CGS, device:
         raise InputError(f"min_members must be an integer >= 1; got {min_members!r}")
     x, v, m, radii = state.positions, state.velocities, state.masses, state.radii
     n = state.n
-    contacts = contact_graph(x, radii)
+    trees = _Trees(x, v)  # of every particle, made once: the contacts, the lone-seed screen and the first binding tests ask them
+    contacts = contact_graph(x, radii, trees.positions)
     sigmas = SMOOTHING_RADII * radii
     # The density of the particles left: computed once, then each cluster's share is taken off.
     density = smoothed_density(x, m, sigmas, device=device)
     left = np.ones(n, dtype=bool)  # free: in no cluster yet
     may_seed = np.ones(n, dtype=bool)  # free and never in a group that fell short
     if min_members > 1:  # a particle whose group is itself alone falls short wherever it is met
-        may_seed &= ~_alone(x, v, m, radii, contacts, G)
+        may_seed &= ~_alone(x, v, m, radii, contacts, G, trees)
     clusters: list[Cluster] = []
-    free = _FreeParticles(x, v, left)
+    free = _FreeParticles(x, v, left, trees)
     while left.sum() >= min_members and may_seed.any():
         seeds = np.flatnonzero(may_seed)
         member = np.zeros(n, dtype=bool)
@@ -175,7 +178,29 @@ def find_clusters(state: State, min_members: int = 50, G: float = G_CGS, device:
     return clusters
 
 
-def _alone(x: np.ndarray, v: np.ndarray, m: np.ndarray, radii: np.ndarray, contacts: sparse.csr_matrix, G: float) -> np.ndarray:
+class _Trees:
+    """k-d trees of a frame's positions and velocities, each made when first asked."""
+
+    def __init__(self, x: np.ndarray, v: np.ndarray):
+        self.x, self.v = x, v
+        self._positions: cKDTree | None = None
+        self._velocities: cKDTree | None = None
+
+    @property
+    def positions(self) -> cKDTree:
+        if self._positions is None:
+            self._positions = cKDTree(self.x)
+        return self._positions
+
+    @property
+    def velocities(self) -> cKDTree:
+        if self._velocities is None:
+            self._velocities = cKDTree(self.v)
+        return self._velocities
+
+
+def _alone(x: np.ndarray, v: np.ndarray, m: np.ndarray, radii: np.ndarray, contacts: sparse.csr_matrix, G: float,
+           trees: _Trees | None = None) -> np.ndarray:  # fmt: skip
     """Particles whose group, seeded by them alone, stays themselves: they touch nobody and bind
     nobody by their own escape speed (|v_j - v_s|^2 < 2 G m_s / |x_j - x_s|).  Such a seed falls
     short of any minimum above 1, before or after other clusters take their members, so it is
@@ -193,11 +218,12 @@ def _alone(x: np.ndarray, v: np.ndarray, m: np.ndarray, radii: np.ndarray, conta
     # nearest, found or not, rather than counting every particle of a co-moving remnant.  Tested
     # first: it is cheap, and it clears the particles of a compact remnant that touch nobody (each
     # has thousands within NEAR_RADII: 2.5e7 pairs in a 100 000-particle remnant otherwise).
-    second, _ = cKDTree(v).query(v, k=2, distance_upper_bound=np.nextafter(slow, np.inf))
+    trees = _Trees(x, v) if trees is None else trees
+    second, _ = trees.velocities.query(v, k=2, distance_upper_bound=np.nextafter(slow, np.inf))
     alone &= ~np.isfinite(second[:, 1])
     seeds = np.flatnonzero(alone)
     if seeds.size:
-        s, j = _pairs_that_could_bind(x, v, seeds, 2.0 * float(radii.min()), near, reach)
+        s, j = _pairs_that_could_bind(x, v, m, seeds, trees, 2.0 * float(radii.min()), near, G)
         distance = np.linalg.norm(x[j] - x[s], axis=1)
         speed2 = ((v[j] - v[s]) ** 2).sum(axis=1)
         binds = np.zeros(n, dtype=bool)
@@ -206,44 +232,73 @@ def _alone(x: np.ndarray, v: np.ndarray, m: np.ndarray, radii: np.ndarray, conta
     return alone
 
 
-def _pairs_that_could_bind(x: np.ndarray, v: np.ndarray, seeds: np.ndarray, closest: float, near: float, reach: float):
+def _pairs_that_could_bind(x, v, m, seeds: np.ndarray, trees: _Trees, closest: float, near: float, G: float):
     """Pairs (seed s, other j) holding every pair within ``near`` with |v_j - v_s|^2 |x_j - x_s| <
-    ``reach`` (2 G m_max), for seeds that touch nobody, so that no j lies closer than ``closest``
-    (the smallest sum of two radii).  A pair at a distance in [D, 2 D] can bind only below
-    sqrt(reach / D) in relative speed: each such shell is one box query of a k-d tree in
-    six dimensions, positions over 2 D and velocities over that speed (a debris cloud just after
-    impact has thousands of particles within ``near`` of a seed, but few that slow: the pairs
-    found are few, where all within ``near`` were ~1e7 a frame).  Pairs closer than ``closest``
-    (none where the contact graph is right) are found by position alone."""
-    pairs = [_ball_pairs(x, seeds, closest * _WIDEN)]
-    inner = closest / _WIDEN
-    while inner < near:
-        outer = 2.0 * inner
-        speed = math.sqrt(reach / inner)
-        pairs.append(_ball_pairs(np.hstack([x / outer, v / speed]), seeds, _WIDEN, p=np.inf))
-        inner = outer
+    2 G m_s, for seeds that touch nobody, so that no j lies closer than ``closest`` (the smallest
+    sum of two radii); ``trees``: those of ``x`` and ``v``.
+
+    No j is slower relative to s than u_s, the distance to s's nearest other particle in velocity
+    space, so a pair binds only within far_s = 2 G m_s / u_s^2: a debris cloud's seeds, fast
+    relative to all others, each need the few particles of that ball (a light seed's is a few
+    radii: every other particle is at least ``slow`` of :func:`_alone` away).  A seed whose ball
+    holds more than _CROWDED particles (a heavy one with a slow neighbour, in a dense cloud) is
+    paired instead shell by shell: a pair at a distance in [D, 2 D] can bind only below
+    sqrt(2 G m_s / D) in relative speed, so each such shell is one box query of a k-d tree in six
+    dimensions, positions over 2 D and velocities over that speed (few pairs, where all within
+    ``near`` can be ~1e7 a frame).  Pairs closer than ``closest`` (none where the contact graph is
+    right) are found by position alone."""
+    nearest, _ = trees.velocities.query(v[seeds], k=2)  # itself, then u_s
+    with np.errstate(divide="ignore"):
+        # Widened for rounding twice: u_s from the tree against |v_j - v_s| in NumPy, then the
+        # tree's distances against np.linalg.norm.
+        far = np.minimum(near, 2.0 * G * m[seeds] / nearest[:, 1] ** 2 * _WIDEN) * _WIDEN
+    positions = trees.positions
+    few = positions.query_ball_point(x[seeds], r=far, return_length=True) <= _CROWDED
+    pairs = [_ball_pairs(positions, x[seeds[few]], far[few], seeds[few])]
+    crowded = seeds[~few]
+    if crowded.size:
+        pairs.append(_ball_pairs(positions, x[crowded], closest * _WIDEN, crowded))
+        reach = 2.0 * G * float(m[crowded].max())
+        farthest = float(far[~few].max())
+        inner = closest / _WIDEN
+        while inner < farthest:
+            outer = min(2.0 * inner, farthest)
+            speed = math.sqrt(reach / inner)
+            points = np.hstack([x / outer, v / speed])
+            pairs.append(_ball_pairs(cKDTree(points), points[crowded], _WIDEN, crowded, p=np.inf))
+            inner = 2.0 * inner
     s, j = np.concatenate(pairs, axis=1)
     other = s != j
     return s[other], j[other]
 
 
-def _ball_pairs(points: np.ndarray, seeds: np.ndarray, radius: float, p: float = 2.0) -> np.ndarray:
-    """(2, pairs): each seed s with every point j within ``radius`` of it (Minkowski ``p``-norm)."""
-    around = cKDTree(points).query_ball_point(points[seeds], r=radius, p=p)
-    s = np.repeat(seeds, [len(a) for a in around])
-    j = np.concatenate([np.asarray(a, dtype=np.int64) for a in around]) if len(around) else np.zeros(0, dtype=np.int64)
-    return np.stack([s.astype(np.int64), j])
+def _ball_pairs(tree: cKDTree, centres: np.ndarray, radius, owners: np.ndarray, p: float = 2.0) -> np.ndarray:
+    """(2, pairs): the owner of each of ``centres`` with every point j of ``tree`` within ``radius``
+    of it (one for all, or one a centre; Minkowski ``p``-norm)."""
+    around = tree.query_ball_point(centres, r=radius, p=p)
+    lengths = np.fromiter(map(len, around), dtype=np.int64, count=len(around))
+    # One array from the lists at once (concatenating an array per centre costs several times more).
+    j = np.fromiter(itertools.chain.from_iterable(around), dtype=np.int64, count=int(lengths.sum()))
+    return np.stack([np.repeat(owners.astype(np.int64), lengths), j])
+
+
+#: A seed whose ball of possible partners (:func:`_pairs_that_could_bind`) holds more particles than
+#: this is paired shell by shell instead.
+_CROWDED = 1024
 
 
 class _FreeParticles:
     """The particles in no cluster yet when made, with k-d trees of their positions and velocities
-    (built when first asked): a small group's escape-speed test looks only at those that could pass
-    it.  Particles taken since stay in the trees; callers screen them out with ``left``."""
+    (built when first asked; ``every``: the frame's, used while all are free): a small group's
+    escape-speed test looks only at those that could pass it.  Particles taken since stay in the
+    trees; callers screen them out with ``left``."""
 
-    def __init__(self, x: np.ndarray, v: np.ndarray, left: np.ndarray):
+    def __init__(self, x: np.ndarray, v: np.ndarray, left: np.ndarray, every: _Trees | None = None):
         self.indices = np.flatnonzero(left)
         self.x, self.v = x[self.indices], v[self.indices]
         self._trees: tuple[cKDTree, cKDTree] | None = None
+        if every is not None and self.indices.size == left.size:  # all free: the frame's own trees
+            self._trees = (every.positions, every.velocities)
 
     def trees(self) -> tuple[cKDTree, cKDTree]:
         if self._trees is None:
@@ -256,27 +311,28 @@ class _FreeParticles:
 
         |v - V|^2 |x - X| < 2 G M holds only within a distance D of the centre, or below
         sqrt(2 G M / D) in relative speed beyond it, for any D > 0; D is the distance to the centre's
-        _NEAR_COUNT-th nearest particle, both radii widened by 1e-6 so that rounding never drops a
-        particle the exact test takes."""
+        _NEAR_COUNT-th nearest particle, so that those within it are the nearest found, and the
+        speed is widened by 1e-6 so that rounding never drops a particle the exact test takes.
+        The nearest are asked once, as an array (not counted, then listed)."""
         count = self.indices.size
         if count < max(_SCAN_BELOW, _NEAR_COUNT):
             return None
         positions, velocities = self.trees()
-        reach = 2.0 * G * mass
-        near = float(positions.query(com, k=_NEAR_COUNT)[0][-1]) or 1.0
-        slow = math.sqrt(reach / near)
-        if positions.query_ball_point(com, near * _WIDEN, return_length=True) > count // 4:
+        distance, close = positions.query(com, k=_NEAR_COUNT)
+        near = float(distance[-1])
+        if near == 0.0:  # the nearest all at the centre: no speed bound from there
             return None
-        if velocities.query_ball_point(velocity, slow * _WIDEN, return_length=True) > count // 4:
+        slow = math.sqrt(2.0 * G * mass / near) * _WIDEN
+        if velocities.query_ball_point(velocity, slow, return_length=True) > count // 4:
             return None
-        close = positions.query_ball_point(com, near * _WIDEN)
-        slow_ones = velocities.query_ball_point(velocity, slow * _WIDEN)
-        return self.indices[np.union1d(np.asarray(close, dtype=np.int64), np.asarray(slow_ones, dtype=np.int64))]
+        slow_ones = velocities.query_ball_point(velocity, slow)
+        return self.indices[np.union1d(close, np.asarray(slow_ones, dtype=np.int64))]
 
 
 #: Below this many free particles the escape-speed test scans them all; above it, a small group's
-#: test first asks the k-d trees which could pass (:meth:`_FreeParticles.could_bind`).
-_SCAN_BELOW = 4096
+#: test first asks the k-d trees which could pass (:meth:`_FreeParticles.could_bind`): ~0.1 ms a test
+#: either way at 1 000 free particles, the scan 2x and 3x the screen at 2 000 and 4 000 (2 CPU cores).
+_SCAN_BELOW = 1024
 #: The near reach of that screen: the distance to the group centre's this-many-th nearest free particle.
 _NEAR_COUNT = 64
 _WIDEN = 1.0 + 1e-6

@@ -15,8 +15,9 @@ import numpy as np
 from ..diagnostics import energy_scale, ledger_closure
 from ..durable import json_ready, json_text, write_atomic
 from ..folder import RunFolder
-from ..io import OBSERVABLE_UNITS, read_trajectory
+from ..io import OBSERVABLE_UNITS, read_frames, read_trajectory
 from ..params import G_CGS
+from ..processes import can_start_processes, in_processes, usable_cores
 from ..sizes import class_ranges
 from ..state import State
 from . import scaling
@@ -322,23 +323,28 @@ def _padded(rows: list[np.ndarray]) -> np.ndarray:
     return out
 
 
-def _analyse_frames(data: dict, frames: list[int], target_mass: float, min_members: int, G, device, progress=None) -> tuple[dict, dict, dict]:
+def _analyse_frames(data: dict, frames: list[int], target_mass: float, min_members: int, G, device, progress=None,
+                    trajectory=None, workers: int = 1) -> tuple[dict, dict, dict]:  # fmt: skip
     """The /frames series and the /catalogue of the trajectory ``data``'s frames ``frames``, and the
-    last frame's full result (:func:`analyse_snapshot`)."""
+    last frame's full result (:func:`analyse_snapshot`); ``workers`` > 1: the frames analysed in
+    that many processes, each reading its frames of the file ``trajectory`` itself, their results
+    merged here in frame order (the same numbers as here, frame by frame)."""
+    if workers > 1 and trajectory is not None:
+        args = (str(trajectory), target_mass, min_members, G, device)
+        results = in_processes(_analyse_chunk, frames, args, workers, CHUNKS_PER_WORKER, progress)
+    else:
+        results = _analysed_here(data, frames, target_mass, min_members, G, device, progress)
     series: dict[str, list] = {name: [] for name in FRAME_SERIES}
     n_clusters, cluster_masses = [], []
     catalogue: dict[str, list] = {name: [] for name in CATALOGUE_UNITS}
     result = None
-    for done, frame in enumerate(frames):
-        result = analyse_snapshot(snapshot_state(data, frame), target_mass, min_members, G, device)
+    for frame, result in zip(frames, results):
         for name in FRAME_SERIES:
             series[name].append(result[name])
         for name, values in catalogue_rows(frame, int(data["step"][frame]), float(data["time"][frame]), result["clusters"]).items():
             catalogue[name] += values
         n_clusters.append(len(result["clusters"]))
         cluster_masses.append(np.array([c["mass"] for c in result["clusters"]]))
-        if progress is not None:
-            progress(done + 1, len(frames))
     arrays = {"step": data["step"][frames], "time": data["time"][frames], **{name: np.array(values) for name, values in series.items()}}
     arrays.update(clusters=np.array(n_clusters), cluster_mass=_padded(cluster_masses))
     classes = int(data["static"]["species"].max()) + 1
@@ -347,23 +353,73 @@ def _analyse_frames(data: dict, frames: list[int], target_mass: float, min_membe
     return arrays, catalogue, result
 
 
-def late_verdict(run_dir, min_members: int = 50, device: str | None = None) -> dict:
+def _analysed_here(data: dict, frames: list[int], target_mass: float, min_members: int, G, device, progress=None):
+    """:func:`analyse_snapshot` of each of the frames, in this process, one after the other."""
+    for done, frame in enumerate(frames):
+        yield analyse_snapshot(snapshot_state(data, frame), target_mass, min_members, G, device)
+        if progress is not None:
+            progress(done + 1, len(frames))
+
+
+def _analyse_chunk(frames: list[int], trajectory: str, target_mass: float, min_members: int, G, device) -> list[dict]:
+    """:func:`analyse_snapshot` of the frames ``frames`` of the trajectory file ``trajectory``, read
+    here: an analysis worker's share (:func:`_analyse_frames`)."""
+    particles, static = read_frames(trajectory, frames)
+    data = {"particles": particles, "static": static}
+    return [analyse_snapshot(snapshot_state(data, k), target_mass, min_members, G, device) for k in range(len(frames))]
+
+
+#: A run of fewer particle-frames (frames x particles) than this is analysed in its own process: a
+#: worker takes ~1.5 s to start (Python, NumPy, SciPy, Warp; a CUDA context more), where the frames
+#: of a few hundred particles take milliseconds each.
+PARALLEL_MIN_WORK = 200_000
+#: Chunks of frames per worker: the progress moves as each ends, and the worker that drew the debris
+#: just after impact (the slow frames) does not hold the others up.
+CHUNKS_PER_WORKER = 4
+#: At most this many workers sum the density on one GPU: each holds a CUDA context (~0.3 to 0.5 GB
+#: of its memory), and 16 keep a 16-core machine's GPU ahead of their cluster finders.
+MAX_GPU_WORKERS = 16
+
+
+def frame_workers(frames: int, particles: int, workers: int | None = None, device: str | None = None) -> int:
+    """How many processes analyse a run's ``frames`` frames of ``particles`` particles: ``workers``
+    where given (at most one a frame), else one a core this process may use (:func:`usable_cores`,
+    MAX_GPU_WORKERS with ``device`` a GPU), or 1 (here) for a run of less than PARALLEL_MIN_WORK or
+    a process that may not start processes."""
+    if workers is not None:
+        return max(1, min(int(workers), frames))
+    if frames * particles < PARALLEL_MIN_WORK or not can_start_processes():
+        return 1
+    chosen = usable_cores()
+    if device is not None and str(device).startswith("cuda"):
+        chosen = min(chosen, MAX_GPU_WORKERS)
+    return max(1, min(chosen, frames))
+
+
+def late_verdict(run_dir, min_members: int = 50, device: str | None = None, workers: int | None = None) -> dict:
     """:func:`late_statistics` of a run as its trajectory stands, from the frames of its late window
-    only (what ``resume --until-settled`` asks after each extension); writes nothing."""
-    data = read_trajectory(RunFolder(run_dir).trajectory)
+    only (what ``resume --until-settled`` asks after each extension); writes nothing.  ``workers``:
+    as for :func:`analyse_run`."""
+    trajectory = RunFolder(run_dir).trajectory
+    data = read_trajectory(trajectory)
     target_mass = float(data["static"]["mass"][data["static"]["pile_id"] == 0].sum())
     G = data["parameters"].get("spec", {}).get("params", {}).get("G")
-    frames, _, _ = _analyse_frames(data, late_window(data["time"]).tolist(), target_mass, min_members, G, device)
+    late = late_window(data["time"]).tolist()
+    workers = frame_workers(len(late), len(data["static"]["mass"]), workers, device)
+    frames, _, _ = _analyse_frames(data, late, target_mass, min_members, G, device, trajectory=trajectory, workers=workers)
     late = late_statistics(frames, target_mass, start=float(data["time"][0]))
     return {"steps": int(data["step"][-1]), "time": float(data["time"][-1]), **late}
 
 
-def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, device: str | None = None) -> dict:
+def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, device: str | None = None, workers: int | None = None) -> dict:
     """Analyse every ``every``-th frame of a run (and always the last); write analysis.h5 and summary.json.
-    ``device``: as for :func:`analyse_snapshot`."""
+    ``device``: as for :func:`analyse_snapshot`; ``workers``: processes that analyse the frames side
+    by side (:func:`frame_workers`; default chosen from the cores and the run's size; 1: here).
+    ``progress(frames done, frames in all)``."""
     started = time.perf_counter()
     run_dir = Path(run_dir)
-    data = read_trajectory(RunFolder(run_dir).trajectory)
+    trajectory = RunFolder(run_dir).trajectory
+    data = read_trajectory(trajectory)
     static = data["static"]
     spec = data["parameters"].get("spec", {})
     G = spec.get("params", {}).get("G")
@@ -373,7 +429,8 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
     if frames[-1] != len(data["step"]) - 1:
         frames.append(len(data["step"]) - 1)
 
-    series, catalogue, final = _analyse_frames(data, frames, target_mass, min_members, G, device, progress)
+    workers = frame_workers(len(frames), len(static["mass"]), workers, device)
+    series, catalogue, final = _analyse_frames(data, frames, target_mass, min_members, G, device, progress, trajectory, workers)
 
     obs = data["observables"]
     # Trajectories written before decco-warp 0.2 have no deepest_overlap series.
