@@ -505,20 +505,31 @@ class TrajectoryData:
         return self.__dataclass_fields__.keys()
 
 
-def read_trajectory(path) -> TrajectoryData:
+def read_trajectory(path, particle_frames=None) -> TrajectoryData:
     """A finished or running trajectory as NumPy arrays (:class:`TrajectoryData`): steps, times,
     particle frames, observables, parameters.
 
     Of a run still being written, the frames whole in every element so far (a frame being
-    written is left out)."""
+    written is left out).  ``particle_frames``: the particles of these frames only (indices of the
+    whole frames, -1 the last, in the order given), the others left on disk (an analysis reads the
+    rest a share at a time: a long run of many particles is gigabytes)."""
     with open_trajectory(path) as f:
         particles = f["particles/all"]
         elements = [particles[name] for name in Trajectory.PARTICLE_ELEMENTS] + list(f["observables"].values())
         n = min(_complete_frames(element, np.iinfo(np.int64).max) for element in elements)
+        if particle_frames is None:
+            chosen = {name: particles[name]["value"][:n] for name in Trajectory.PARTICLE_ELEMENTS}
+        else:
+            wanted = [int(k) + n if int(k) < 0 else int(k) for k in particle_frames]
+            if any(not 0 <= k < n for k in wanted):
+                raise InputError(f"{path}: frames {list(particle_frames)} asked of a trajectory of {n} whole frame(s)")
+            read = sorted(set(wanted))  # HDF5 reads a selection in increasing order, once each
+            chosen = {name: particles[name]["value"][read][[read.index(k) for k in wanted]] if read
+                      else particles[name]["value"][:0] for name in Trajectory.PARTICLE_ELEMENTS}  # fmt: skip
         return TrajectoryData(
             step=particles["position/step"][:n],
             time=particles["position/time"][:n],
-            particles={name: particles[name]["value"][:n] for name in Trajectory.PARTICLE_ELEMENTS},
+            particles=chosen,
             static={name: particles[name][()] for name in ("radius", "mass", "species", "pile_id")},
             observables={name: group["value"][:n] for name, group in f["observables"].items()},
             observable_step={name: group["step"][:n] for name, group in f["observables"].items()},

@@ -448,6 +448,29 @@ def test_every_dataset_of_a_run_carries_its_unit_and_data_md_lists_it(sweep):
     assert data.time is data["time"] and data.particles["position"].shape[1:] == (data.static["radius"].size, 3)
 
 
+def test_a_trajectory_read_with_some_frames_holds_those_frames_bit_for_bit(sweep):
+    """read_trajectory(particle_frames=...): the particles of the frames asked (in that order, -1
+    the last, a frame asked twice given twice), the rest of the trajectory as a whole read; a frame
+    it does not hold is refused in one line."""
+    from decco_warp.checks import InputError
+
+    out, _ = sweep
+    path = out / "eta1" / "trajectory.h5"
+    whole = dw.read_trajectory(path)
+    last = len(whole.step) - 1
+    some = dw.read_trajectory(path, particle_frames=[last, 0, -1, 2])
+    for name, frames in whole.particles.items():
+        assert np.array_equal(some.particles[name], frames[[last, 0, last, 2]]), name
+    assert np.array_equal(some.time, whole.time) and np.array_equal(some.step, whole.step)
+    assert some.parameters.keys() == whole.parameters.keys()
+    assert all(np.array_equal(some.observables[k], v) for k, v in whole.observables.items())
+    none = dw.read_trajectory(path, particle_frames=[])
+    assert none.particles["position"].shape == (0, *whole.particles["position"].shape[1:])
+    with pytest.raises(InputError) as raised:
+        dw.read_trajectory(path, particle_frames=[last + 1])
+    assert "whole frame(s)" in str(raised.value) and "\n" not in str(raised.value)
+
+
 def test_the_runs_of_a_set_share_their_time_axis(sweep, monkeypatch):
     """draw_run with the set's end time sets every time axis from 0 to it (the clusters' map has no
     time axis); analyze of a folder takes the latest end its runs' spec.toml plan."""

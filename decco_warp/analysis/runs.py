@@ -325,15 +325,16 @@ def _padded(rows: list[np.ndarray]) -> np.ndarray:
 
 def _analyse_frames(data: dict, frames: list[int], target_mass: float, min_members: int, G, device, progress=None,
                     trajectory=None, workers: int = 1) -> tuple[dict, dict, dict]:  # fmt: skip
-    """The /frames series and the /catalogue of the trajectory ``data``'s frames ``frames``, and the
-    last frame's full result (:func:`analyse_snapshot`); ``workers`` > 1: the frames analysed in
-    that many processes, each reading its frames of the file ``trajectory`` itself, their results
-    merged here in frame order (the same numbers as here, frame by frame)."""
-    if workers > 1 and trajectory is not None:
+    """The /frames series and the /catalogue of the frames ``frames`` of the file ``trajectory``
+    (``data``: its steps, times and particles' constants), and the last frame's full result
+    (:func:`analyse_snapshot`), the frames read a share at a time; ``workers`` > 1: analysed in that
+    many processes, each reading its frames itself, their results merged here in frame order (the
+    same numbers as here, frame by frame)."""
+    if workers > 1:
         args = (str(trajectory), target_mass, min_members, G, device)
         results = in_processes(_analyse_chunk, frames, args, workers, CHUNKS_PER_WORKER, progress)
     else:
-        results = _analysed_here(data, frames, target_mass, min_members, G, device, progress)
+        results = _analysed_here(trajectory, frames, target_mass, min_members, G, device, progress)
     series: dict[str, list] = {name: [] for name in FRAME_SERIES}
     n_clusters, cluster_masses = [], []
     catalogue: dict[str, list] = {name: [] for name in CATALOGUE_UNITS}
@@ -353,12 +354,15 @@ def _analyse_frames(data: dict, frames: list[int], target_mass: float, min_membe
     return arrays, catalogue, result
 
 
-def _analysed_here(data: dict, frames: list[int], target_mass: float, min_members: int, G, device, progress=None):
-    """:func:`analyse_snapshot` of each of the frames, in this process, one after the other."""
-    for done, frame in enumerate(frames):
-        yield analyse_snapshot(snapshot_state(data, frame), target_mass, min_members, G, device)
-        if progress is not None:
-            progress(done + 1, len(frames))
+def _analysed_here(trajectory, frames: list[int], target_mass: float, min_members: int, G, device, progress=None):
+    """:func:`analyse_snapshot` of each of the frames, in this process, one after the other, read
+    HERE_CHUNK frames at a time (a run's frames whole would not fit a laptop's memory)."""
+    for start in range(0, len(frames), HERE_CHUNK):
+        chunk = frames[start : start + HERE_CHUNK]
+        for done, result in enumerate(_analyse_chunk(chunk, str(trajectory), target_mass, min_members, G, device), start + 1):
+            yield result
+            if progress is not None:
+                progress(done, len(frames))
 
 
 def _analyse_chunk(frames: list[int], trajectory: str, target_mass: float, min_members: int, G, device) -> list[dict]:
@@ -369,6 +373,8 @@ def _analyse_chunk(frames: list[int], trajectory: str, target_mass: float, min_m
     return [analyse_snapshot(snapshot_state(data, k), target_mass, min_members, G, device) for k in range(len(frames))]
 
 
+#: Frames read at once where a run is analysed in its own process.
+HERE_CHUNK = 16
 #: A run of fewer particle-frames (frames x particles) than this is analysed in its own process: a
 #: worker takes ~1.5 s to start (Python, NumPy, SciPy, Warp; a CUDA context more), where the frames
 #: of a few hundred particles take milliseconds each.
@@ -401,7 +407,7 @@ def late_verdict(run_dir, min_members: int = 50, device: str | None = None, work
     only (what ``resume --until-settled`` asks after each extension); writes nothing.  ``workers``:
     as for :func:`analyse_run`."""
     trajectory = RunFolder(run_dir).trajectory
-    data = read_trajectory(trajectory)
+    data = read_trajectory(trajectory, particle_frames=[])  # the frames are read a share at a time
     target_mass = float(data["static"]["mass"][data["static"]["pile_id"] == 0].sum())
     G = data["parameters"].get("spec", {}).get("params", {}).get("G")
     late = late_window(data["time"]).tolist()
@@ -419,7 +425,9 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
     started = time.perf_counter()
     run_dir = Path(run_dir)
     trajectory = RunFolder(run_dir).trajectory
-    data = read_trajectory(trajectory)
+    # The first and the last frame's particles here (the scales, the final state); the frames
+    # analysed are read a share at a time.
+    data = read_trajectory(trajectory, particle_frames=[0, -1])
     static = data["static"]
     spec = data["parameters"].get("spec", {})
     G = spec.get("params", {}).get("G")
