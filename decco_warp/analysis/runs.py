@@ -323,8 +323,8 @@ def _padded(rows: list[np.ndarray]) -> np.ndarray:
     return out
 
 
-def _analyse_frames(data: dict, frames: list[int], target_mass: float, min_members: int, G, device, progress=None,
-                    trajectory=None, workers: int = 1) -> tuple[dict, dict, dict]:  # fmt: skip
+def _analyse_frames(data: dict, trajectory, frames: list[int], target_mass: float, min_members: int, G, device,
+                    progress=None, workers: int = 1) -> tuple[dict, dict, dict]:  # fmt: skip
     """The /frames series and the /catalogue of the frames ``frames`` of the file ``trajectory``
     (``data``: its steps, times and particles' constants), and the last frame's full result
     (:func:`analyse_snapshot`), the frames read a share at a time; ``workers`` > 1: analysed in that
@@ -367,7 +367,7 @@ def _analysed_here(trajectory, frames: list[int], target_mass: float, min_member
 
 def _analyse_chunk(frames: list[int], trajectory: str, target_mass: float, min_members: int, G, device) -> list[dict]:
     """:func:`analyse_snapshot` of the frames ``frames`` of the trajectory file ``trajectory``, read
-    here: an analysis worker's share (:func:`_analyse_frames`)."""
+    here: a worker's share, or a read's worth of a run analysed in its own process (:func:`_analyse_frames`)."""
     particles, static = read_frames(trajectory, frames)
     data = {"particles": particles, "static": static}
     return [analyse_snapshot(snapshot_state(data, k), target_mass, min_members, G, device) for k in range(len(frames))]
@@ -412,7 +412,7 @@ def late_verdict(run_dir, min_members: int = 50, device: str | None = None, work
     G = data["parameters"].get("spec", {}).get("params", {}).get("G")
     late = late_window(data["time"]).tolist()
     workers = frame_workers(len(late), len(data["static"]["mass"]), workers, device)
-    frames, _, _ = _analyse_frames(data, late, target_mass, min_members, G, device, trajectory=trajectory, workers=workers)
+    frames, _, _ = _analyse_frames(data, trajectory, late, target_mass, min_members, G, device, workers=workers)
     late = late_statistics(frames, target_mass, start=float(data["time"][0]))
     return {"steps": int(data["step"][-1]), "time": float(data["time"][-1]), **late}
 
@@ -438,7 +438,7 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
         frames.append(len(data["step"]) - 1)
 
     workers = frame_workers(len(frames), len(static["mass"]), workers, device)
-    series, catalogue, final = _analyse_frames(data, frames, target_mass, min_members, G, device, progress, trajectory, workers)
+    series, catalogue, final = _analyse_frames(data, trajectory, frames, target_mass, min_members, G, device, progress, workers)
 
     obs = data["observables"]
     # Trajectories written before decco-warp 0.2 have no deepest_overlap series.
