@@ -1286,7 +1286,7 @@ def sweep(
         None, "--workers", help="Local workers (default: one per GPU, else 2); more than GPUs share them in turn."
     ),
     analysis_workers: Optional[int] = typer.Option(
-        None, "--analysis-workers", help="Processes analysing finished runs here (default: this machine's cores)."
+        None, "--analysis-workers", help="Processes analysing finished runs here (default: the cores this process may use: $DECCO_CORES, else its CPU affinity)."
     ),
     only: Optional[List[str]] = typer.Option(
         None, "--only", help="Run only the runs whose names match this glob, e.g. '*eta6' (repeatable); complete runs stay in the table."

@@ -170,12 +170,11 @@ def collect(settings: dict, runs: list[dict], analysis_workers: int | None = Non
     (in processes, each on the device :func:`~decco_warp.sweep.analysis_device` picks), each told to
     ``on_row``.  Returns the rows of the runs finished (made, failed or skipped) and, for each run
     not finished (no task made it, or its task stopped), a line saying where it stands."""
-    import os
-
     from .device import local_gpus
+    from .processes import usable_cores
 
     recorded = array_folder(settings) / "rows"
-    analyses = sweeps.Analyses(analysis_workers or max(1, os.cpu_count() or 1), local_gpus())
+    analyses = sweeps.Analyses(analysis_workers or usable_cores(), local_gpus())
     rows: list[dict | None] = [None] * len(runs)
     pending, missing = {}, []
     try:

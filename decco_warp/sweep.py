@@ -805,7 +805,7 @@ def run_sweep(
     note = on_note or (lambda line: None)
     client, cluster, gpus, simulating = _workers_for(scheduler, workers, gpus, note)
     # Analysis runs here, beside the workers, in fresh processes (its density on the GPU that stepped the run).
-    analyses = Analyses(analysis_workers or max(1, (os.cpu_count() or 1) - (0 if gpus > 0 else simulating)), local_gpus())
+    analyses = Analyses(analysis_workers or max(1, usable_cores() - (0 if gpus > 0 else simulating)), local_gpus())
     rows: list[dict | None] = [None] * len(runs)
     pending: dict[Future, tuple[int, dict]] = {}
     stopped: list[dict] = []  # the rows of runs that a stop left part-way (or not started)
