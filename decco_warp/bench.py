@@ -294,7 +294,8 @@ def law_rows(sizes, kinds, device, precision, budget, steps, solvers, layouts, e
     """The rows of one contact law, in order, as each is measured: per size and test system, the
     default all-pairs layout (beside the one-thread-per-particle baseline) and ``layouts``, the tree,
     ensembles of ``ensembles`` systems (against one at a time), and gravity every K of ``clocks``
-    (against K = 1 with the same solver), and the default layout at K = 1 and each K of ``clocks``
+    (against K = 1 with the same solver; with ``ensembles``, each ensemble at each K too, against one
+    system at that K: K > 1 changes what fills the GPU), and the default layout at K = 1 and each K of ``clocks``
     with ``particle_blocks`` threads a block for the kernels of one thread a particle (against
     layouts.PARTICLE_BLOCK); each comparison is added to the row's layout text."""
     for size, kind in itertools.product(sizes, kinds):
@@ -303,8 +304,9 @@ def law_rows(sizes, kinds, device, precision, budget, steps, solvers, layouts, e
         runs = [(solver, layout, 1, 1, None) for solver, layout in runs]
         runs += [("all-pairs", None, k, 1, None) for k in ensembles]
         runs += [(solver, None, 1, every, None) for every in clocks for solver in solvers]
+        runs += [("all-pairs", None, k, every, None) for every in clocks for k in ensembles] if "all-pairs" in solvers else []
         runs += [(solver, None, 1, every, block) for block in particle_blocks for every in [1, *clocks] for solver in solvers]
-        alone, every_step, default_block = None, {}, {}
+        alone, every_step, default_block = {}, {}, {}
         for solver, layout, systems, every, block in runs:
             first = (solver, layout, systems, every, block) == runs[0]
             row = bench_size(
@@ -322,13 +324,14 @@ def law_rows(sizes, kinds, device, precision, budget, steps, solvers, layouts, e
                 continue
             if systems == 1 and layout is None and every == 1:
                 every_step[solver] = row
-                alone = row if solver == "all-pairs" else alone
-            if systems > 1 and alone is not None:
-                row.layout += f": {row.step_pairs_per_s / alone.step_pairs_per_s:.2f}x one at a time"
-            if solver == "tree" and every == 1 and alone is not None:  # the tree in its own terms: its time against all-pairs'
-                row.versus_all_pairs = alone.step_seconds / row.step_seconds
+            if systems == 1 and layout is None and solver == "all-pairs":
+                alone[every] = row  # one system at this clock: what an ensemble at that clock is against
+            if systems > 1 and every in alone:
+                row.layout += f": {row.step_pairs_per_s / alone[every].step_pairs_per_s:.2f}x one at a time"
+            if solver == "tree" and every == 1 and 1 in alone:  # the tree in its own terms: its time against all-pairs'
+                row.versus_all_pairs = alone[1].step_seconds / row.step_seconds
                 row.layout += f": {row.versus_all_pairs:.2f}x the all-pairs step"
-            if every > 1:  # against gravity every step with the same solver, and how often the list was built
+            if every > 1 and systems == 1:  # against gravity every step with the same solver, and how often the list was built
                 row.versus_every_step = every_step[solver].step_seconds / row.step_seconds
                 row.layout += f": {row.versus_every_step:.2f}x the K = 1 step, {row.list_builds_per_step:.3g} list builds a step"
             yield row

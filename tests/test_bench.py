@@ -153,6 +153,22 @@ def test_bench_times_gravity_on_its_own_clock_beside_the_k1_step(tmp_path):
         assert len(result.stderr.strip().splitlines()) == 1
 
 
+def test_bench_times_ensembles_at_each_clock_against_one_system_at_that_clock(tmp_path):
+    """``--ensemble 2 --gravity-every 5``: the ensemble at K = 1 against one system at K = 1, and at
+    K = 5 against one system at K = 5 (what fills the GPU changes with K)."""
+    out = tmp_path / "bench.json"
+    result = cli("bench", "--device", "cpu", "--n", "150", "--seconds", "0.02", "--steps", "5", "--system", "piles",
+                 "--ensemble", "2", "--gravity-every", "5", "--json", str(out))  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    rows = json.loads(out.read_text())["rows"]
+    assert [(r["systems"], r["gravity_every"]) for r in rows] == [(1, 1), (2, 1), (1, 5), (2, 5)]
+    for one, together in ((rows[0], rows[1]), (rows[2], rows[3])):
+        ratio = together["step_pairs_per_s"] / one["step_pairs_per_s"]
+        assert "2 systems together" in together["layout"] and f": {ratio:.2f}x one at a time" in together["layout"]
+        assert np.isclose(together["step_pairs_per_s"], 2 * 150**2 / together["step_seconds"])
+    assert "K = 1 step" not in rows[3]["layout"]  # an ensemble's ratio is to one system at its own clock
+
+
 def test_bench_times_the_per_particle_block_beside_the_default(tmp_path):
     """``--particle-blocks 32`` with ``--gravity-every 5``: rows at K = 1 and K = 5 with 32 threads a
     block for the kernels of one thread a particle, each with its ratio to the default row of its K;
