@@ -61,11 +61,14 @@ def unpack_depth(record: int) -> tuple[float, int]:
 # A law with springs per pair (kernels/pair.py LAWS_WITH_SPRINGS) reads, for each pair it meets, the
 # springs of the step before from the particle's own rows (found by the partner's index: carried
 # whatever the candidate lists were rebuilt to, as long as the pair touched then), and writes the
-# springs now into the next rows, contact after contact; a pair that no longer touches is not
-# written, so that its springs are dropped.  Both particles of a pair keep a copy: each evaluates
-# the pair from its lower index with the same arguments (kernels/pair.py ssdem_contact), so the two
-# copies stay the same bits, and no thread writes another particle's rows.  ``commit_springs``
-# then makes the next rows the current ones (decco_warp/arrays.py ContactHistory).
+# springs now into the next rows, in an order fixed whatever the scheduling: the contact pass (one
+# lane a particle or several) and the reference kernel as the row of the contact's rank among the
+# particle's, in increasing partner; the fused layout's lanes one lane's after another's (a scan of
+# their counts).  A pair that no longer touches is not written, so that its springs are dropped.
+# Both particles of a pair keep a copy: each evaluates the pair from its lower index with the same
+# arguments (kernels/pair.py ssdem_contact), so the two copies stay the same bits, and no thread
+# writes another particle's rows.  ``commit_springs`` then makes the next rows the current ones
+# (decco_warp/arrays.py ContactHistory).
 
 
 @wp.struct
