@@ -66,15 +66,14 @@ class ContactPass:
     particles a block of CONTACT_LANES lanes each on a GPU (kernels/contacts.py ``contact_pass``: one
     thread per particle would leave most of the GPU idle, a few warps per SM at paper sizes); one
     lane on the CPU, or the GPU's blocks with Warp's CPU blocks on (tests check the lanes' reduction
-    so).  With ``accumulate`` the contact force is added to gravity's in state.force, else written
-    there alone."""
+    so).  A law with springs takes the same lanes: each contact's row is its rank in the list, so the
+    rows are those of one lane.  With ``accumulate`` the contact force is added to gravity's in
+    state.force, else written there alone."""
 
     def __init__(self, model: ModelArrays, accumulate: bool):
-        self.model = model
+        self.model, self.accumulate = model, accumulate
         blocks = _on_cuda(model.device) or wp.config.enable_cpu_blocks
         self.lanes, self.particles = (CONTACT_LANES, CONTACT_PARTICLES) if blocks else (1, 1)
-        if model.params.keeps_springs:  # one lane a particle writes its contacts' springs in order
-            self.lanes, self.particles = 1, self.lanes * self.particles
         self.kernel = contact_pass(model.params.law, self.lanes, self.particles, accumulate)
 
     def launch(self, state: StateArrays, finder: ContactFinder) -> None:

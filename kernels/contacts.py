@@ -61,11 +61,14 @@ def unpack_depth(record: int) -> tuple[float, int]:
 # A law with springs per pair (kernels/pair.py LAWS_WITH_SPRINGS) reads, for each pair it meets, the
 # springs of the step before from the particle's own rows (found by the partner's index: carried
 # whatever the candidate lists were rebuilt to, as long as the pair touched then), and writes the
-# springs now into the next rows, contact after contact; a pair that no longer touches is not
-# written, so that its springs are dropped.  Both particles of a pair keep a copy: each evaluates
-# the pair from its lower index with the same arguments (kernels/pair.py ssdem_contact), so the two
-# copies stay the same bits, and no thread writes another particle's rows.  ``commit_springs``
-# then makes the next rows the current ones (decco_warp/arrays.py ContactHistory).
+# springs now into the next rows, in an order fixed whatever the scheduling: the contact pass (one
+# lane a particle or several) and the reference kernel as the row of the contact's rank among the
+# particle's, in increasing partner; the fused layout's lanes one lane's after another's (a scan of
+# their counts).  A pair that no longer touches is not written, so that its springs are dropped.
+# Both particles of a pair keep a copy: each evaluates the pair from its lower index with the same
+# arguments (kernels/pair.py ssdem_contact), so the two copies stay the same bits, and no thread
+# writes another particle's rows.  ``commit_springs`` then makes the next rows the current ones
+# (decco_warp/arrays.py ContactHistory).
 
 
 @wp.struct
@@ -82,17 +85,35 @@ class PairHistory:
 
 
 @wp.func
-def springs_before(history: PairHistory, i: int, j: int):
-    """(found, springs) of the pair (i, j) in i's rows: found when they touched at the evaluation before."""
+def springs_at(history: PairHistory, i: int, row: int) -> PairSprings:
+    """The springs of i's row ``row``."""
+    springs = PairSprings()
+    springs.spring = history.spring[i, row]
+    springs.normal = history.normal[i, row]
+    springs.rolling = history.rolling[i, row]
+    springs.twist = history.twist[i, row]
+    return springs
+
+
+@wp.func
+def springs_before(history: PairHistory, i: int, j: int, hint: int):
+    """(found, springs) of the pair (i, j) in i's rows: found when they touched at the evaluation before.
+
+    ``hint``: the row the pair is written to now, looked at first, then every row.  Rows are written
+    in a fixed order (by the contact pass, one lane a particle or several, and the reference kernel in
+    increasing partner: a pair's row is its rank among i's contacts; by the fused layout's lanes one
+    lane's after another's), so the hint is the pair's row of the evaluation before unless a contact
+    that comes before it in that order formed or broke since: one look in place of a scan of half the
+    rows on average (99 % of the lookups in the shipped pile sheared, its lists rebuilt every few
+    steps).  A particle holds a partner once, so the springs found do not depend on the hint, only the
+    cost of finding them."""
     rows = wp.min(int(history.count[i]), history.partner.shape[1])
+    if hint < rows:
+        if int(history.partner[i, hint]) == j:
+            return True, springs_at(history, i, hint)
     for row in range(rows):
         if int(history.partner[i, row]) == j:
-            springs = PairSprings()
-            springs.spring = history.spring[i, row]
-            springs.normal = history.normal[i, row]
-            springs.rolling = history.rolling[i, row]
-            springs.twist = history.twist[i, row]
-            return True, springs
+            return True, springs_at(history, i, row)
     return False, PairSprings()
 
 
@@ -178,7 +199,7 @@ def contact_function(law: str):
         if d2 > wp.float64(0.0) and in_contact(d2, radius_in[i], radius_in[j]):
             note_depth(deepest_out, i, j, d2, radius_in[i], radius_in[j])
             if wp.static(springs):
-                found, before = springs_before(history_in, i, j)
+                found, before = springs_before(history_in, i, j, row)
                 # The pair from its lower index p, one call with the same arguments on either side.
                 p = wp.min(i, j)
                 q = wp.max(i, j)
@@ -326,16 +347,23 @@ def contact_pass(law: str = "paper", lanes: int = 1, particles: int = 1, accumul
     sum does not depend on scheduling (one lane: in increasing j).  After an overflow of the list,
     lane 0 looks at every j of the system in turn.  Writes ``torque_out`` and the ledger's
     ``channels_out`` (when it has rows) whole; with ``accumulate`` adds the contact force to
-    ``force_inout`` (gravity's), without (gravity on its own clock) writes it there alone.  A law
-    with springs takes one lane a particle, which writes its contacts' rows in order (``history_out``).
+    ``force_inout`` (gravity's), without (gravity on its own clock) writes it there alone.
+
+    A law with springs (``history_out``) takes the same lanes.  Its lanes walk the list in rounds,
+    slot ``round * lanes + lane`` in each; each lane first tests its slot (``touches``, the contact
+    evaluation's own test), and a scan of those tests over the block gives each contact its rank
+    among i's contacts in list order, which is its row: the rows a particle writes are then those
+    of one lane, in the same order (increasing partner), whatever the lanes and the scheduling.
+    The rank also points the springs' lookup at the pair's row of the evaluation before
+    (:func:`springs_before`).  Past the list's width lane 0 goes on in increasing j, as one lane does,
+    so that which contacts overflow the rows is the same too.
 
     Why groups of lanes: a particle lists ~8 candidates (~30 in a squeezed pile), so a warp of 32
     lanes a particle leaves most lanes idle and spends its time in a 32-lane reduction of 15
     float64 values; 8 lanes keep each lane busy and a warp serves four particles."""
-    if law in LAWS_WITH_SPRINGS and lanes != 1:
-        raise ValueError(f"the contact pass of a law with springs ({law}) takes one lane a particle; got {lanes}")
     contact_channels = contact_function(law)
     add_contact = contact_sum_function(law)
+    springs = law in LAWS_WITH_SPRINGS
 
     @wp.kernel(module="unique", enable_backward=False)
     def contact_pass_kernel(
@@ -356,7 +384,7 @@ def contact_pass(law: str = "paper", lanes: int = 1, particles: int = 1, accumul
         torque_out: wp.array(dtype=wp.vec3d),
         channels_out: wp.array2d(dtype=wp.vec3d),
         deepest_inout: wp.array(dtype=wp.int64),  # raised to each contact's depth (note_depth), or empty
-        history_out: PairHistory,  # the contacts' springs now (a law with springs)
+        history_out: PairHistory,  # the contacts' springs now, in increasing partner (a law with springs)
     ):
         block, thread = wp.tid()
         group = thread // wp.static(lanes)
@@ -369,14 +397,43 @@ def contact_pass(law: str = "paper", lanes: int = 1, particles: int = 1, accumul
             noted = int(candidate_count_in[i])
             listed = noted <= candidates_in.shape[1]
         mine = ContactRows()
-        rows = int(0)  # i's contacts met (one lane a particle where rows are kept)
-        for slot in range(lane, wp.where(listed, noted, 0), wp.static(lanes)):
-            spring, sliding, sliding_torque, rolling_force, rolling_torque, touching = contact_channels(
-                model, i, candidates_in[i, slot], radius_in, mass_in, position_in, velocity_in, omega_in, history_in, rows,
-                history_out, deepest_inout,
-            )  # fmt: skip
-            mine += wp.matrix_from_rows(spring, sliding, sliding_torque, rolling_force, rolling_torque)
-            rows += touching
+        rows = int(0)  # i's contacts met (where rows are kept: every lane of i's group holds their count)
+        if wp.static(springs):
+            walk = wp.where(listed, noted, 0)
+            # Rounds of a slot a lane, as many as the block's longest list needs: the scans below are
+            # the block's, so that every lane of the block takes part in each (a particle with fewer,
+            # or none, with nothing).
+            rounds = (int(wp.tile_max(wp.tile(walk))[0]) + wp.static(lanes) - 1) // wp.static(lanes)
+            for r in range(rounds):
+                slot = r * wp.static(lanes) + lane
+                j = int(0)
+                touching = int(0)
+                if slot < walk:
+                    j = int(candidates_in[i, slot])
+                    if touches(i, j, radius_in, position_in):
+                        touching = 1
+                # This contact's rank among i's: i's contacts of the rounds before, and of this round
+                # those of the lanes before this one (the block's scan less the groups before i's).
+                tests = wp.tile(touching)
+                before = int(wp.untile(wp.tile_scan_exclusive(tests)))
+                per_group = wp.tile_sum(wp.tile_reshape(tests, shape=(wp.static(particles), wp.static(lanes))), axis=1)
+                for g in range(group):
+                    before -= int(per_group[g])
+                if slot < walk:
+                    spring, sliding, sliding_torque, rolling_force, rolling_torque, met = contact_channels(
+                        model, i, j, radius_in, mass_in, position_in, velocity_in, omega_in, history_in, rows + before,
+                        history_out, deepest_inout,
+                    )  # fmt: skip
+                    mine += wp.matrix_from_rows(spring, sliding, sliding_torque, rolling_force, rolling_torque)
+                rows += int(per_group[group])
+        else:
+            for slot in range(lane, wp.where(listed, noted, 0), wp.static(lanes)):
+                spring, sliding, sliding_torque, rolling_force, rolling_torque, touching = contact_channels(
+                    model, i, candidates_in[i, slot], radius_in, mass_in, position_in, velocity_in, omega_in, history_in, rows,
+                    history_out, deepest_inout,
+                )  # fmt: skip
+                mine += wp.matrix_from_rows(spring, sliding, sliding_torque, rolling_force, rolling_torque)
+                rows += touching
         per_lane = wp.tile_reshape(wp.tile(mine, preserve_type=True), shape=(wp.static(particles), wp.static(lanes)))
         sums = wp.tile_sum(per_lane, axis=1)
         if lane == 0 and i < candidate_count_in.shape[0]:

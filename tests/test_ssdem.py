@@ -271,6 +271,153 @@ def test_the_gpu_layouts_keep_the_springs_lane_by_lane_on_the_cpu(tmp_path):
     assert done.returncode == 0 and "SAME" in done.stdout, (done.stdout + done.stderr)[-3000:]
 
 
+
+LANES_AGAINST_ONE_LANE = """
+import sys, warnings
+from dataclasses import replace
+import numpy as np, warp as wp
+wp.config.enable_cpu_blocks = True  # the contact pass's 8 lanes a particle, 4 particles a block, as on a GPU
+wp.config.kernel_cache_dir = sys.argv[1]
+sys.path.insert(0, sys.argv[2])
+import decco_warp as dw
+from decco_warp import contact_finders, forces
+from decco_warp.arrays import pair_history
+from decco_warp.ensemble import Ensemble
+from decco_warp.io import load_pile
+from decco_warp.kernels.contacts import CANDIDATES, contact_pass
+from decco_warp.plan import builtin_pile
+from scenes import contact_cluster, crowded_sphere
+warnings.simplefilter("ignore", UserWarning)  # (the check below reads arrays between launches: no graph)
+params = dw.Params(contact_law="ssdem", mu_s=0.3, mu_r=0.05, mu_t=0.3, eps_t=0.5, restitution=0.8)
+seen = dict(evaluations=0, contacts=0, longest=0, list_overflows=0, history_overflows=0, worst=0.0)
+lanes_pass = forces.ContactPass.launch
+
+def against_one_lane(self, state, finder):
+    # The pass of one lane a particle on the same inputs, into arrays of its own; then the lanes' own.
+    assert (self.lanes, self.particles) == (8, 4)
+    m, h = self.model, state.history
+    force, deepest = wp.clone(state.force), wp.clone(state.deepest_contact)
+    torque, channels = wp.zeros_like(state.torque), wp.zeros_like(state.channels)
+    one = pair_history(m.count, h.width, m.device)
+    wp.launch_tiled(contact_pass(m.params.law, 1, 1, self.accumulate), dim=[m.count], block_dim=1,
+                    inputs=[m.contact, m.ranges, m.radius, m.mass, *state.contact_inputs(), finder.candidate_count, finder.candidates],
+                    outputs=[force, torque, channels, deepest, one], device=m.device)
+    lanes_pass(self, state, finder)
+    count, width = one.count.numpy(), h.width
+    assert np.array_equal(h.current.count.numpy(), count)
+    kept = np.arange(width)[None, :] < np.minimum(count, width)[:, None]
+    for name in ("partner", "spring", "normal", "rolling", "twist"):  # the same rows, in the same order
+        assert np.array_equal(getattr(h.current, name).numpy()[kept], getattr(one, name).numpy()[kept]), name
+    assert np.array_equal(state.deepest_contact.numpy(), deepest.numpy())
+    for got, want in ((state.force, force), (state.torque, torque), (state.channels, channels)):
+        error = np.abs(got.numpy() - want.numpy()).max() / np.abs(want.numpy()).max()
+        assert error <= 1e-13, error
+        seen["worst"] = max(seen["worst"], error)
+    noted = finder.candidate_count.numpy()
+    listed = noted <= finder.candidates.shape[1]
+    seen["evaluations"] += 1
+    seen["contacts"] += int(count.sum())
+    seen["longest"] = max(seen["longest"], int(noted[listed].max()))
+    seen["list_overflows"] += int((~listed).sum())
+    seen["history_overflows"] += int((count > width).sum())
+
+# The shipped pile (lists of up to ~30) in a shear flow, its neighbour lists rebuilt every few steps;
+# the Newton layout's and the tree's passes (gravity's force accumulated); a sphere touched by more
+# than a list holds (its list and its rows overflow).
+forces.ContactPass.launch = against_one_lane
+pile = load_pile(builtin_pile("target"))
+y = pile.positions[:, 1] - pile.positions[:, 1].mean()
+flow = np.zeros_like(pile.velocities)
+flow[:, 0] = contact_finders.SKIN_FRACTION * 7.5e5 * 0.3 * y / np.abs(y).max()
+sheared = replace(pile, velocities=pile.velocities + flow)
+contact_finders.SKIN_FRACTION *= 0.1
+builds = 0
+for options, steps in (({"scheme": dw.Scheme(gravity_every=5)}, 200), ({"layout": dw.Layout(1, 4, newton=True)}, 20),
+                       ({"scheme": dw.Scheme(gravity="tree")}, 20)):
+    sim = dw.Simulation(sheared, params, device="cpu", ledger=True, allow_unstable=True, **options)
+    sim.step(steps)
+    builds = max(builds, sim.neighbour_list_builds() or 0)
+sim = dw.Simulation(crowded_sphere(CANDIDATES + 6), params, device="cpu", ledger=True, allow_unstable=True, scheme=dw.Scheme(gravity_every=3))
+sim.step(30)
+print("evaluations", seen["evaluations"], "contacts", seen["contacts"], "longest", seen["longest"], "list_overflows",
+      seen["list_overflows"], "history_overflows", seen["history_overflows"], "builds", builds, "worst", seen["worst"])
+
+# With the lanes alone: a resumed run and an ensemble's systems, bit for bit.
+forces.ContactPass.launch = lanes_pass
+contact_finders.SKIN_FRACTION *= 10.0
+scheme = dw.Scheme(gravity_every=5)
+def arrays(snapshot):
+    # (A list's slots past its count hold whatever an earlier build or load left there, not the same
+    # in an ensemble as alone, with one lane too; nothing reads them: compared up to the counts.)
+    kept = np.arange(snapshot["neighbour_list"].shape[1])[None, :] < snapshot["neighbour_count"][:, None]
+    listed = np.where(kept, snapshot["neighbour_list"], -1)
+    return {key: listed if key == "neighbour_list" else value for key, value in snapshot.items() if isinstance(value, np.ndarray)}
+def same(a, b):
+    return a.keys() == b.keys() and all(np.array_equal(value, b[key]) for key, value in a.items())
+straight = dw.Simulation(sheared, params, device="cpu", ledger=True, allow_unstable=True, scheme=scheme)
+straight.step(100)
+first = dw.Simulation(sheared, params, device="cpu", ledger=True, allow_unstable=True, scheme=scheme)
+first.step(40)
+second = dw.Simulation.from_snapshot(sheared, params, first.snapshot(), device="cpu", scheme=scheme)
+second.step(60)
+resumed = same(arrays(straight.snapshot()), arrays(second.snapshot()))
+states = [contact_cluster(23, seed=0, speed=1e3), sheared, contact_cluster(31, seed=1, speed=1e3)]
+members = [dw.Simulation(s, params, device="cpu", ledger=True, allow_unstable=True, scheme=scheme) for s in states]
+for member in members:
+    member.step(10)
+alone = [dw.Simulation.from_snapshot(s, params, member.snapshot(), device="cpu", scheme=scheme) for s, member in zip(states, members)]
+ensemble = Ensemble(members)
+ensemble.step(60)
+together = True
+for view, sim in zip(ensemble.views, alone):
+    sim.step(60)
+    together &= same(arrays(view.snapshot()), arrays(sim.snapshot()))
+print("resumed", resumed, "ensemble", together, "rows", int(straight.snapshot()["contact_count"].sum()))
+"""
+
+
+@pytest.fixture(scope="module")
+def lanes_against_one_lane(tmp_path_factory):
+    """LANES_AGAINST_ONE_LANE's two lines of verdicts (a fresh interpreter: Warp's CPU blocks on)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    cache, tests = str(tmp_path_factory.mktemp("lanes") / "cache"), str(Path(__file__).parent)
+    done = subprocess.run([sys.executable, "-c", LANES_AGAINST_ONE_LANE, cache, tests], capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, (done.stdout + done.stderr)[-3000:]
+    lines = done.stdout.strip().splitlines()
+    return [dict(zip(line.split()[::2], line.split()[1::2])) for line in lines[-2:]]
+
+
+def test_the_contact_pass_s_lanes_keep_the_rows_of_one_lane(lanes_against_one_lane):
+    """The contact pass with the GPU's lanes (8 a particle, 4 particles a block; Warp's CPU blocks), each
+    evaluation checked against the pass of one lane a particle on the same inputs: every particle's
+    contact count, and its rows (partners and springs) in the same order bit for bit; the deepest
+    contact bit for bit; force, torque and the ledger's channels within 1e-13 of the largest (the lanes
+    add a particle's contacts in another order: float64 rounding of ~30 terms, ~30 x 1.1e-16 of the
+    largest contact, which these scenes' net forces are within a few times of; measured ~4e-16).  Over
+    the neighbour lists of gravity on its own clock, rebuilt every few steps as a sheared pile's layers
+    slide (lists of up to ~30: four rounds of the lanes), the Newton layout's and the tree's lists, and
+    a sphere touched by more than a list or its rows hold (lane 0's walk over the system, the rows past
+    their width counted as one lane counts them)."""
+    seen = lanes_against_one_lane[0]
+    assert int(seen["evaluations"]) > 250 and int(seen["contacts"]) > 100_000
+    assert int(seen["longest"]) > 24  # four rounds of eight lanes
+    assert int(seen["builds"]) >= 10  # the lists rebuilt, the springs carried by partner
+    assert int(seen["list_overflows"]) > 0 and int(seen["history_overflows"]) > 0
+    assert 0 < float(seen["worst"]) <= 1e-13  # the lanes did sum otherwise: they ran
+
+
+def test_a_resumed_run_and_an_ensemble_with_the_contact_lanes_are_bit_for_bit(lanes_against_one_lane):
+    """With the contact pass's lanes (Warp's CPU blocks, as on a GPU), gravity every 5 steps: a run
+    resumed from a snapshot is the uninterrupted one, and each system of an ensemble (one of them the
+    sheared pile, lists of ~30) the run alone, every array of the snapshot (springs included) bit for bit."""
+    verdict = lanes_against_one_lane[1]
+    assert verdict["resumed"] == "True" and verdict["ensemble"] == "True", verdict
+    assert int(verdict["rows"]) > 600  # the pile's 300 grains held their contacts' springs through it
+
+
 # --- conservation and the energy ledger -------------------------------------------------------------
 
 
