@@ -131,7 +131,7 @@ class ContactHistory:
     def commit(self) -> None:
         """The rows the last contact evaluation wrote become the current ones (no-op where none are kept)."""
         if self.kept:
-            wp.launch(commit_springs, dim=self.count, inputs=[self.next], outputs=[self.current], device=self.device)
+            wp.launch(commit_springs, dim=(self.count, self.width), inputs=[self.next], outputs=[self.current], device=self.device)
 
     def overflows(self, first: int = 0, end: int | None = None) -> int:
         """Particles (of rows [first, end)) with more contacts than rows at the last evaluation: the springs
