@@ -36,6 +36,57 @@ def test_stress_shares_by_hand():
     np.testing.assert_allclose(shares, [100 * 0 / 200, 100 * 1 / 40, 100 * 2 / 10])
     # A class with no particles has no share.
     assert np.isnan(stress_shares(stress, size_class, 4)[3])
+    # By default, and by name, the measure is the paper's: the largest overlap itself.
+    np.testing.assert_array_equal(stress_shares(stress, size_class, 3, measure="overlap"), shares)
+    with pytest.raises(ValueError, match="radii"):
+        stress_shares(stress, size_class, 3, measure="per_area")
+    with pytest.raises(ValueError, match="unknown stress measure"):
+        stress_shares(stress, size_class, 3, np.ones(250), measure="force")
+
+
+def _shares_by_hand(values, size_class, classes):
+    """100 N_c,top / N_c of the top 1 % of ``values`` (ties to the lower index), counted in a loop."""
+    n = len(values)
+    top = -(-n // 100)
+    ranked = sorted(range(n), key=lambda i: (-values[i], i))[:top]
+    return np.array([100.0 * sum(size_class[i] == c for i in ranked) / np.sum(size_class == c) for c in range(classes)])
+
+
+def test_the_three_stress_measures_rank_differently_by_hand():
+    """With one spring constant the largest overlap delta ranks force, so the large grains lead; by
+    delta / R^2 (force per cross-section) the small grains can lead, by delta / R (strain) the medium
+    ones: three tops of 3 particles, each of another class, checked against shares counted by hand."""
+    # 300 particles: 200 small (R = 1), 80 medium (R = 2), 20 large (R = 4); the top 1 % is 3.
+    size_class = np.repeat([0, 1, 2], [200, 80, 20])
+    radii = np.array([1.0, 2.0, 4.0])[size_class]
+    stress = np.zeros(300)
+    stress[[280, 281, 282]] = 1.0  # large: delta 1.0, delta/R 0.25, delta/R^2 0.0625
+    stress[[200, 201, 202]] = 0.8  # medium: delta 0.8, delta/R 0.4, delta/R^2 0.2
+    stress[[0, 1, 2]] = 0.3  # small: delta 0.3, delta/R 0.3, delta/R^2 0.3
+    expected = {
+        "overlap": [0.0, 0.0, 100 * 3 / 20],
+        "strain": [0.0, 100 * 3 / 80, 0.0],
+        "per_area": [100 * 3 / 200, 0.0, 0.0],
+    }
+    powers = {"overlap": 0, "strain": 1, "per_area": 2}
+    for measure, shares in expected.items():
+        got = stress_shares(stress, size_class, 3, radii, measure=measure)
+        np.testing.assert_allclose(got, shares, err_msg=measure)
+        np.testing.assert_allclose(got, _shares_by_hand(stress / radii ** powers[measure], size_class, 3), err_msg=measure)
+    # A mixed top, and ties at the boundary to the lower index: the largest overlap is a large grain's,
+    # the next two tie between a medium grain (index 203) and a small one (index 3), both 0.5 / R^2 ...
+    stress[:] = 0.0
+    stress[[283, 203, 3]] = [4.0, 2.0, 0.5]
+    stress[4] = 0.5  # ... and a second small grain ties with the first; index 3 wins
+    # per_area: 283 -> 0.25, 203 -> 0.5, 3 -> 0.5, 4 -> 0.5: the top is 203, 3, 4 (0.5 each, by index)
+    np.testing.assert_allclose(stress_shares(stress, size_class, 3, radii, measure="per_area"), [100 * 2 / 200, 100 * 1 / 80, 0.0])
+    # strain: 283 -> 1.0, 203 -> 1.0, 3 and 4 -> 0.5: the top is 203, 283 (1.0 each), then 3
+    np.testing.assert_allclose(stress_shares(stress, size_class, 3, radii, measure="strain"), [100 * 1 / 200, 100 * 1 / 80, 100 * 1 / 20])
+    # overlap: 283, 203, then 3 (ties with 4 at 0.5)
+    np.testing.assert_allclose(stress_shares(stress, size_class, 3, radii), [100 * 1 / 200, 100 * 1 / 80, 100 * 1 / 20])
+    for measure, power in powers.items():
+        np.testing.assert_allclose(stress_shares(stress, size_class, 3, radii, measure=measure),
+                                   _shares_by_hand(stress / radii**power, size_class, 3), err_msg=measure)  # fmt: skip
 
 
 def test_particle_size_change_by_hand():
