@@ -308,6 +308,57 @@ def test_a_summary_is_refreshed_from_analysis_h5_alone(sweep, tmp_path):
         assert after[key] == (pytest.approx(value, rel=1e-12) if isinstance(value, float) else value), key
 
 
+def test_a_trajectory_without_the_newer_stress_shares_is_analysed_with_them_from_its_stress(tmp_path, monkeypatch):
+    """A run written before stress_share_per_area and stress_share_strain were recorded (deleted
+    here) is analysed with them, computed from each frame's recorded stress and the radii: the
+    numbers the run records today.  Resumed, such a run gains the series with NaN for its earlier
+    frames; the analysis fills those frames from their stress and keeps those recorded since (the
+    stress read 3 frames at a time here, so that the reads come in several chunks)."""
+    import h5py
+
+    from decco_warp import spec as specs
+    from decco_warp.analysis import runs
+    from decco_warp.analysis.runs import analyse_run
+    from decco_warp.run import resume_run, start_run
+
+    monkeypatch.setattr(runs, "STRESS_CHUNK", 3)
+
+    def run(name, steps):
+        spec = specs.resolve_spec({"run": {"name": name, "out": str(tmp_path), "device": "cpu", "steps": steps,
+                                           "output_every": 50, "checkpoint_every": 100}})  # fmt: skip
+        start_run(spec)
+        return tmp_path / name
+
+    newer = ("stress_share_per_area", "stress_share_strain")
+    today, old = run("today", 300), run("old", 150)
+    recorded = dw.read_trajectory(today / "trajectory.h5")
+    shares = {name: recorded.observables[name] for name in ("stress_share", *newer)}
+    assert not np.array_equal(shares["stress_share"], shares["stress_share_per_area"])  # they rank differently here
+    stress, radii, classes = recorded.particles["stress"], recorded.static["radius"], recorded.static["species"]
+    for name, measure in (("stress_share_per_area", "per_area"), ("stress_share_strain", "strain")):
+        np.testing.assert_array_equal(shares[name], [stress_shares(row, classes, 3, radii, measure=measure) for row in stress])
+    analysis = analyse_run(today, min_members=20, workers=1)
+    for name, value in shares.items():
+        np.testing.assert_array_equal(analysis[name]["value"], value, err_msg=name)
+        np.testing.assert_array_equal(analysis[name]["time"], recorded.time, err_msg=name)
+
+    with h5py.File(old / "trajectory.h5", "r+") as f:
+        for name in newer:
+            del f[f"observables/{name}"]
+    analysed = analyse_run(old, min_members=20, workers=1)
+    for name, value in shares.items():
+        np.testing.assert_array_equal(analysed[name]["value"], value[:4], err_msg=name)
+    assert read_analysis(old / "analysis.h5")["stress_share_strain"]["value"].shape == (4, 3)
+
+    resume_run(old, steps=300)
+    data = dw.read_trajectory(old / "trajectory.h5")
+    for name in newer:
+        assert np.isnan(data.observables[name][:4]).all() and not np.isnan(data.observables[name][4:]).any()
+    analysed = analyse_run(old, min_members=20, workers=1)
+    for name, value in shares.items():
+        np.testing.assert_array_equal(analysed[name]["value"], value, err_msg=name)
+
+
 def test_analyze_of_a_set_of_runs_makes_the_cross_run_table_and_figures(sweep):
     out, _ = sweep
     rows = (out / "summary.csv").read_text().splitlines()
