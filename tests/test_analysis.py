@@ -188,8 +188,18 @@ def test_analyze_writes_analysis_and_figures_that_show_its_data(sweep):
     lines = line_data(RUN_FIGURES["conservation"](analysis))  # on a log axis: an exact 0 drawn at the floor
     np.testing.assert_array_equal(lines[0][1], np.maximum(analysis["conservation"]["momentum_drift"], DRIFT_FLOOR))
     np.testing.assert_array_equal(lines[1][1], np.maximum(analysis["conservation"]["angular_momentum_drift"], DRIFT_FLOOR))
-    lines = line_data(RUN_FIGURES["stress_shares"](analysis))
-    np.testing.assert_array_equal(lines[0][1], analysis["stress_share"]["value"][:, 0])
+    # A panel for each stress measure, the paper's first: each class's series, then its value at t = 0.
+    fig = RUN_FIGURES["stress_shares"](analysis)
+    assert len(fig.axes) == 3
+    for ax, name in zip(fig.axes, ("stress_share", "stress_share_per_area", "stress_share_strain")):
+        for k in range(3):
+            np.testing.assert_array_equal(ax.lines[2 * k].get_ydata(), analysis[name]["value"][:, k], err_msg=name)
+            np.testing.assert_array_equal(ax.lines[2 * k + 1].get_ydata(), [analysis[name]["value"][0, k]] * 2, err_msg=name)
+    # An analysis kept before the last two were recorded draws the paper's alone.
+    older = {key: value for key, value in analysis.items() if key not in ("stress_share_per_area", "stress_share_strain")}
+    fig = RUN_FIGURES["stress_shares"](older)
+    assert len(fig.axes) == 1
+    np.testing.assert_array_equal(line_data(fig)[0][1], analysis["stress_share"]["value"][:, 0])
     energy = analysis["energy"]
     lines = line_data(RUN_FIGURES["energy"](analysis))
     np.testing.assert_array_equal(lines[0][1], energy["kinetic_translational"] + energy["kinetic_rotational"])
@@ -584,8 +594,8 @@ def test_the_runs_of_a_set_share_their_time_axis(sweep, monkeypatch):
     limits = {}
     monkeypatch.setattr(figures, "save", lambda fig, folder, name: limits.setdefault(name, [ax.get_xlim() for ax in fig.axes]) and [])
     figures.draw_run(read_analysis(out / "eta1" / "analysis.h5"), out / "eta1", end_time=7200.0)
-    for name in ("conservation", "stress_shares", "energy"):
-        assert limits[name] == [(0.0, 2.0)], name
+    for name, panels in (("conservation", 1), ("stress_shares", 3), ("energy", 1)):
+        assert limits[name] == [(0.0, 2.0)] * panels, name
     assert limits["clusters"] != [(0.0, 2.0)]
 
 
