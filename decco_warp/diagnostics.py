@@ -1,7 +1,7 @@
 """Conserved and dissipated quantities of a state (float64, host side).
 
 :func:`diagnostics` serves the public API; :func:`observables` adds what a run
-records at each output (energy ledger, stress shares).  Both take per-particle
+records at each output (energy ledger, stress shares by three measures).  Both take per-particle
 pair sums computed on the device by the engine.
 """
 
@@ -114,18 +114,46 @@ def ledger_closure(observables: dict, start_energy: float, scale: float):
     return (total - start_energy) / scale
 
 
-def stress_shares(max_overlap: np.ndarray, size_class: np.ndarray, classes: int) -> np.ndarray:
+#: The measures a particle's stress is ranked by (:func:`stress_shares`): the power of its radius
+#: R that its largest overlap delta is divided by.  "overlap" is the paper's (sect. 4.1): delta
+#: itself, which with one spring constant is proportional to the largest normal force k_in delta,
+#: so it ranks force (a large grain, with more and wider contacts, ranks high); "per_area" is
+#: delta / R^2, proportional to that force over the grain's cross-section, k_in delta / (pi R^2):
+#: a stress; "strain" is delta / R, the contact's strain.
+STRESS_MEASURES = {"overlap": 0, "per_area": 2, "strain": 1}
+
+#: Each frame's stress-share observable (run.py, docs/data.md) and the measure it ranks by.
+STRESS_SHARE_OBSERVABLES = {"stress_share": "overlap", "stress_share_per_area": "per_area", "stress_share_strain": "strain"}
+
+
+def stress_shares(max_overlap: np.ndarray, size_class: np.ndarray, classes: int, radii: np.ndarray | None = None,
+                  measure: str = "overlap") -> np.ndarray:  # fmt: skip
     """100 N_c,top / N_c for each size class c, the top being the 1 % most stressed particles.
 
-    A particle's stress is its largest overlap (docs/model.md); the top holds
-    ceil(1 % of N) particles, ties broken by index so the result is deterministic.
-    A value of 1 everywhere means stress is shared evenly.  Classes with no
+    A particle's stress is ranked by ``measure`` (:data:`STRESS_MEASURES`, docs/model.md): its
+    largest overlap delta over its contacts (``max_overlap``, the paper's, "overlap"), delta / R^2
+    ("per_area": proportional to its largest normal force per cross-section area, k_in delta /
+    (pi R^2), for one spring constant) or delta / R ("strain"), R its radius (``radii``, needed by
+    the last two).  The top holds ceil(1 % of N) particles, ties broken by index so the result is
+    deterministic.  A value of 1 everywhere means stress is shared evenly.  Classes with no
     particles give NaN.
     """
-    n = max_overlap.shape[0]
+    if measure not in STRESS_MEASURES:
+        raise ValueError(f"unknown stress measure {measure!r} (one of {', '.join(STRESS_MEASURES)})")
+    power = STRESS_MEASURES[measure]
+    if power and radii is None:
+        raise ValueError(f"the stress measure {measure!r} needs the particles' radii")
+    stress = max_overlap / radii**power if power else max_overlap
+    n = stress.shape[0]
     top = math.ceil(TOP_STRESS_FRACTION * n)
-    order = np.lexsort((np.arange(n), -max_overlap))[:top]
+    order = np.lexsort((np.arange(n), -stress))[:top]
     counts = np.bincount(size_class, minlength=classes)[:classes].astype(float)
     top_counts = np.bincount(size_class[order], minlength=classes)[:classes].astype(float)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(counts > 0, 100.0 * top_counts / counts, np.nan)
+
+
+def stress_share_observables(max_overlap: np.ndarray, radii: np.ndarray, size_class: np.ndarray, classes: int) -> dict:
+    """Each of :data:`STRESS_SHARE_OBSERVABLES` of one frame: name -> :func:`stress_shares` (classes,)."""
+    return {name: stress_shares(max_overlap, size_class, classes, radii, measure)
+            for name, measure in STRESS_SHARE_OBSERVABLES.items()}  # fmt: skip

@@ -36,6 +36,7 @@ import numpy as np
 from ._version import __version__
 from .checks import InputError, check_particles, check_pile
 from .durable import WRITE_ERRNOS, abandon, as_os_error, atomic_h5, check_space, complaints_held, first_line, pause_point, write_point
+from .diagnostics import STRESS_SHARE_OBSERVABLES
 from .kernels.channels import HELD_ENERGIES, LEDGER_ENTRIES
 from .repair import HDF5_SIGNATURE, clear_write_flags
 from .state import State
@@ -199,7 +200,7 @@ OBSERVABLE_UNITS = {
     "max_overlap": "cm",
     "deepest_overlap": "1 (of the smaller radius of the pair)",
     "deepest_overlap_pair": "particle index",
-    "stress_share": "1 (100 N_top / N per size class)",
+    **{name: "1 (100 N_top / N per size class)" for name in STRESS_SHARE_OBSERVABLES},
 }
 
 

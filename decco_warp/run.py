@@ -18,7 +18,7 @@ import numpy as np
 
 from . import spec as specs
 from .checks import MAX_REST_OVERLAP, InputError, check_destination
-from .diagnostics import energy_ledger, energy_scale, ledger_closure, stress_shares
+from .diagnostics import energy_ledger, energy_scale, ledger_closure, stress_share_observables
 from .durable import describe_write_error, pause_point, write_atomic, write_point
 from .folder import RunFolder, missing
 from .io import BackgroundFrames, FileFormatError, Trajectory, read_checkpoint, read_frame, write_checkpoint
@@ -129,7 +129,8 @@ def record(sim: Simulation, size_classes: int) -> tuple[dict, dict]:
         "max_overlap": d["max_overlap"],
         "deepest_overlap": d["deepest_overlap"],
         "deepest_overlap_pair": d["deepest_overlap_pair"],
-        "stress_share": stress_shares(pairs["max_overlap"], state.size_class, size_classes),
+        # The top 1 % by largest overlap (the paper's Fig. 8), by overlap / R^2 and by overlap / R.
+        **stress_share_observables(pairs["max_overlap"], state.radii, state.size_class, size_classes),
     }
     return particles, observables
 

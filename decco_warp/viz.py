@@ -14,8 +14,11 @@ and ``sim_time``):
                                exactly as in trajectory.h5
     conservation/momentum_drift, conservation/angular_momentum_drift
                                Scalars: relative drift of |p| and |L| since the first frame
-    stress_share/class_<k>     Scalars: paper Fig. 8 share of the top 1 % by stress, per size class
-                               (0 = smallest; the series is named by its radius)
+    stress_share/class_<k>     Scalars: paper Fig. 8 share of the top 1 % by stress (largest overlap),
+                               per size class (0 = smallest; the series is named by its radius)
+    stress_share_per_area/class_<k>, stress_share_strain/class_<k>
+                               Scalars: the same by largest overlap / R^2 and by overlap / R (a
+                               trajectory without them: computed from its frame's stress and radii)
 """
 
 from __future__ import annotations
@@ -51,6 +54,13 @@ ENERGY_SERIES = {
     "integration_error": (127, 127, 127),
 }
 CONTACT_SERIES = {"number_of_contacts": (31, 119, 180), "max_overlap": (214, 39, 40)}
+#: The stress shares' views (a tab each), by trajectory observable: with one spring constant the
+#: paper's largest overlap ranks force; overlap / R^2 ranks force per area, overlap / R strain.
+STRESS_SHARE_VIEWS = {
+    "stress_share": "stress share by overlap (Fig. 8)",
+    "stress_share_per_area": "by overlap / R^2",
+    "stress_share_strain": "by overlap / R",
+}
 
 
 def import_rerun():
@@ -103,7 +113,8 @@ class RerunLogger:
             grpc = self.rec.serve_grpc()
             rr.serve_web_viewer(connect_to=grpc, open_browser=False)
             self.url = grpc
-        self.radii = np.asarray(static["radius"]) / KM
+        self.radii_cm = np.asarray(static["radius"])
+        self.radii = self.radii_cm / KM
         self.species = np.asarray(static["species"])
         self.pile_id = np.asarray(static["pile_id"])
         self.mass = np.asarray(static["mass"])
@@ -123,12 +134,13 @@ class RerunLogger:
             self.rec.log(f"observables/{name}", rr.SeriesLines(names=name.replace("_", " "), colors=[colour]), static=True)
         for name, colour in (("momentum_drift", (31, 119, 180)), ("angular_momentum_drift", (214, 39, 40))):
             self.rec.log(f"conservation/{name}", rr.SeriesLines(names=name.replace("_", " "), colors=[colour]), static=True)
-        for k in range(classes):
-            self.rec.log(
-                f"stress_share/class_{k}",
-                rr.SeriesLines(names=f"{labels[k]} top-1 % share", colors=[SIZE_COLOURS[k % len(SIZE_COLOURS)]]),
-                static=True,
-            )
+        for name in STRESS_SHARE_VIEWS:
+            for k in range(classes):
+                self.rec.log(
+                    f"{name}/class_{k}",
+                    rr.SeriesLines(names=f"{labels[k]} top-1 % share", colors=[SIZE_COLOURS[k % len(SIZE_COLOURS)]]),
+                    static=True,
+                )
         energy = [f"observables/{name}" for name in ENERGY_SERIES]
         self.rec.send_blueprint(
             rrb.Blueprint(
@@ -137,7 +149,7 @@ class RerunLogger:
                     rrb.Vertical(
                         rrb.TimeSeriesView(name="energy [erg]", origin="/", contents=energy),
                         rrb.TimeSeriesView(name="conservation", origin="/conservation"),
-                        rrb.TimeSeriesView(name="stress share (Fig. 8)", origin="/stress_share"),
+                        rrb.Tabs(*(rrb.TimeSeriesView(name=title, origin=f"/{name}") for name, title in STRESS_SHARE_VIEWS.items())),
                         rrb.TimeSeriesView(
                             name="contacts", origin="/", contents=[f"observables/{n}" for n in CONTACT_SERIES]
                         ),
@@ -170,10 +182,24 @@ class RerunLogger:
         for name in (*ENERGY_SERIES, *CONTACT_SERIES):
             rec.log(f"observables/{name}", rr.Scalars(float(observables[name])))
         self._log_drift(observables, particles)
-        shares = np.asarray(observables["stress_share"])
-        for k, value in enumerate(shares):
-            if np.isfinite(value):
-                rec.log(f"stress_share/class_{k}", rr.Scalars(float(value)))
+        for name, shares in self._stress_shares(particles, observables).items():
+            for k, value in enumerate(shares):
+                if np.isfinite(value):
+                    rec.log(f"{name}/class_{k}", rr.Scalars(float(value)))
+
+    def _stress_shares(self, particles: dict, observables: dict) -> dict:
+        """Each of STRESS_SHARE_VIEWS' shares of a frame: as recorded, else (a trajectory written
+        before it was recorded, or its frames before a resume added it) of the frame's stress and radii."""
+        from .diagnostics import STRESS_SHARE_OBSERVABLES, stress_shares
+
+        classes = len(observables["stress_share"]) if "stress_share" in observables else int(self.species.max()) + 1
+        shares = {}
+        for name in STRESS_SHARE_VIEWS:
+            value = np.asarray(observables[name]) if name in observables else None
+            if value is None or np.isnan(value).all():
+                value = stress_shares(np.asarray(particles["stress"]), self.species, classes, self.radii_cm, STRESS_SHARE_OBSERVABLES[name])
+            shares[name] = value
+        return shares
 
     def set_reference(self, particles: dict, observables: dict) -> None:
         """Measure the drifts from this frame (the run's first), with its momentum scales."""

@@ -36,6 +36,57 @@ def test_stress_shares_by_hand():
     np.testing.assert_allclose(shares, [100 * 0 / 200, 100 * 1 / 40, 100 * 2 / 10])
     # A class with no particles has no share.
     assert np.isnan(stress_shares(stress, size_class, 4)[3])
+    # By default, and by name, the measure is the paper's: the largest overlap itself.
+    np.testing.assert_array_equal(stress_shares(stress, size_class, 3, measure="overlap"), shares)
+    with pytest.raises(ValueError, match="radii"):
+        stress_shares(stress, size_class, 3, measure="per_area")
+    with pytest.raises(ValueError, match="unknown stress measure"):
+        stress_shares(stress, size_class, 3, np.ones(250), measure="force")
+
+
+def _shares_by_hand(values, size_class, classes):
+    """100 N_c,top / N_c of the top 1 % of ``values`` (ties to the lower index), counted in a loop."""
+    n = len(values)
+    top = -(-n // 100)
+    ranked = sorted(range(n), key=lambda i: (-values[i], i))[:top]
+    return np.array([100.0 * sum(size_class[i] == c for i in ranked) / np.sum(size_class == c) for c in range(classes)])
+
+
+def test_the_three_stress_measures_rank_differently_by_hand():
+    """With one spring constant the largest overlap delta ranks force, so the large grains lead; by
+    delta / R^2 (force per cross-section) the small grains can lead, by delta / R (strain) the medium
+    ones: three tops of 3 particles, each of another class, checked against shares counted by hand."""
+    # 300 particles: 200 small (R = 1), 80 medium (R = 2), 20 large (R = 4); the top 1 % is 3.
+    size_class = np.repeat([0, 1, 2], [200, 80, 20])
+    radii = np.array([1.0, 2.0, 4.0])[size_class]
+    stress = np.zeros(300)
+    stress[[280, 281, 282]] = 1.0  # large: delta 1.0, delta/R 0.25, delta/R^2 0.0625
+    stress[[200, 201, 202]] = 0.8  # medium: delta 0.8, delta/R 0.4, delta/R^2 0.2
+    stress[[0, 1, 2]] = 0.3  # small: delta 0.3, delta/R 0.3, delta/R^2 0.3
+    expected = {
+        "overlap": [0.0, 0.0, 100 * 3 / 20],
+        "strain": [0.0, 100 * 3 / 80, 0.0],
+        "per_area": [100 * 3 / 200, 0.0, 0.0],
+    }
+    powers = {"overlap": 0, "strain": 1, "per_area": 2}
+    for measure, shares in expected.items():
+        got = stress_shares(stress, size_class, 3, radii, measure=measure)
+        np.testing.assert_allclose(got, shares, err_msg=measure)
+        np.testing.assert_allclose(got, _shares_by_hand(stress / radii ** powers[measure], size_class, 3), err_msg=measure)
+    # A mixed top, and ties at the boundary to the lower index: the largest overlap is a large grain's,
+    # the next two tie between a medium grain (index 203) and a small one (index 3), both 0.5 / R^2 ...
+    stress[:] = 0.0
+    stress[[283, 203, 3]] = [4.0, 2.0, 0.5]
+    stress[4] = 0.5  # ... and a second small grain ties with the first; index 3 wins
+    # per_area: 283 -> 0.25, 203 -> 0.5, 3 -> 0.5, 4 -> 0.5: the top is 203, 3, 4 (0.5 each, by index)
+    np.testing.assert_allclose(stress_shares(stress, size_class, 3, radii, measure="per_area"), [100 * 2 / 200, 100 * 1 / 80, 0.0])
+    # strain: 283 -> 1.0, 203 -> 1.0, 3 and 4 -> 0.5: the top is 203, 283 (1.0 each), then 3
+    np.testing.assert_allclose(stress_shares(stress, size_class, 3, radii, measure="strain"), [100 * 1 / 200, 100 * 1 / 80, 100 * 1 / 20])
+    # overlap: 283, 203, then 3 (ties with 4 at 0.5)
+    np.testing.assert_allclose(stress_shares(stress, size_class, 3, radii), [100 * 1 / 200, 100 * 1 / 80, 100 * 1 / 20])
+    for measure, power in powers.items():
+        np.testing.assert_allclose(stress_shares(stress, size_class, 3, radii, measure=measure),
+                                   _shares_by_hand(stress / radii**power, size_class, 3), err_msg=measure)  # fmt: skip
 
 
 def test_particle_size_change_by_hand():
@@ -137,8 +188,18 @@ def test_analyze_writes_analysis_and_figures_that_show_its_data(sweep):
     lines = line_data(RUN_FIGURES["conservation"](analysis))  # on a log axis: an exact 0 drawn at the floor
     np.testing.assert_array_equal(lines[0][1], np.maximum(analysis["conservation"]["momentum_drift"], DRIFT_FLOOR))
     np.testing.assert_array_equal(lines[1][1], np.maximum(analysis["conservation"]["angular_momentum_drift"], DRIFT_FLOOR))
-    lines = line_data(RUN_FIGURES["stress_shares"](analysis))
-    np.testing.assert_array_equal(lines[0][1], analysis["stress_share"]["value"][:, 0])
+    # A panel for each stress measure, the paper's first: each class's series, then its value at t = 0.
+    fig = RUN_FIGURES["stress_shares"](analysis)
+    assert len(fig.axes) == 3
+    for ax, name in zip(fig.axes, ("stress_share", "stress_share_per_area", "stress_share_strain")):
+        for k in range(3):
+            np.testing.assert_array_equal(ax.lines[2 * k].get_ydata(), analysis[name]["value"][:, k], err_msg=name)
+            np.testing.assert_array_equal(ax.lines[2 * k + 1].get_ydata(), [analysis[name]["value"][0, k]] * 2, err_msg=name)
+    # An analysis kept before the last two were recorded draws the paper's alone.
+    older = {key: value for key, value in analysis.items() if key not in ("stress_share_per_area", "stress_share_strain")}
+    fig = RUN_FIGURES["stress_shares"](older)
+    assert len(fig.axes) == 1
+    np.testing.assert_array_equal(line_data(fig)[0][1], analysis["stress_share"]["value"][:, 0])
     energy = analysis["energy"]
     lines = line_data(RUN_FIGURES["energy"](analysis))
     np.testing.assert_array_equal(lines[0][1], energy["kinetic_translational"] + energy["kinetic_rotational"])
@@ -255,6 +316,57 @@ def test_a_summary_is_refreshed_from_analysis_h5_alone(sweep, tmp_path):
     assert _strict((kept / "summary.json").read_text()) == after
     for key, value in before.items():
         assert after[key] == (pytest.approx(value, rel=1e-12) if isinstance(value, float) else value), key
+
+
+def test_a_trajectory_without_the_newer_stress_shares_is_analysed_with_them_from_its_stress(tmp_path, monkeypatch):
+    """A run written before stress_share_per_area and stress_share_strain were recorded (deleted
+    here) is analysed with them, computed from each frame's recorded stress and the radii: the
+    numbers the run records today.  Resumed, such a run gains the series with NaN for its earlier
+    frames; the analysis fills those frames from their stress and keeps those recorded since (the
+    stress read 3 frames at a time here, so that the reads come in several chunks)."""
+    import h5py
+
+    from decco_warp import spec as specs
+    from decco_warp.analysis import runs
+    from decco_warp.analysis.runs import analyse_run
+    from decco_warp.run import resume_run, start_run
+
+    monkeypatch.setattr(runs, "STRESS_CHUNK", 3)
+
+    def run(name, steps):
+        spec = specs.resolve_spec({"run": {"name": name, "out": str(tmp_path), "device": "cpu", "steps": steps,
+                                           "output_every": 50, "checkpoint_every": 100}})  # fmt: skip
+        start_run(spec)
+        return tmp_path / name
+
+    newer = ("stress_share_per_area", "stress_share_strain")
+    today, old = run("today", 300), run("old", 150)
+    recorded = dw.read_trajectory(today / "trajectory.h5")
+    shares = {name: recorded.observables[name] for name in ("stress_share", *newer)}
+    assert not np.array_equal(shares["stress_share"], shares["stress_share_per_area"])  # they rank differently here
+    stress, radii, classes = recorded.particles["stress"], recorded.static["radius"], recorded.static["species"]
+    for name, measure in (("stress_share_per_area", "per_area"), ("stress_share_strain", "strain")):
+        np.testing.assert_array_equal(shares[name], [stress_shares(row, classes, 3, radii, measure=measure) for row in stress])
+    analysis = analyse_run(today, min_members=20, workers=1)
+    for name, value in shares.items():
+        np.testing.assert_array_equal(analysis[name]["value"], value, err_msg=name)
+        np.testing.assert_array_equal(analysis[name]["time"], recorded.time, err_msg=name)
+
+    with h5py.File(old / "trajectory.h5", "r+") as f:
+        for name in newer:
+            del f[f"observables/{name}"]
+    analysed = analyse_run(old, min_members=20, workers=1)
+    for name, value in shares.items():
+        np.testing.assert_array_equal(analysed[name]["value"], value[:4], err_msg=name)
+    assert read_analysis(old / "analysis.h5")["stress_share_strain"]["value"].shape == (4, 3)
+
+    resume_run(old, steps=300)
+    data = dw.read_trajectory(old / "trajectory.h5")
+    for name in newer:
+        assert np.isnan(data.observables[name][:4]).all() and not np.isnan(data.observables[name][4:]).any()
+    analysed = analyse_run(old, min_members=20, workers=1)
+    for name, value in shares.items():
+        np.testing.assert_array_equal(analysed[name]["value"], value, err_msg=name)
 
 
 def test_analyze_of_a_set_of_runs_makes_the_cross_run_table_and_figures(sweep):
@@ -482,8 +594,8 @@ def test_the_runs_of_a_set_share_their_time_axis(sweep, monkeypatch):
     limits = {}
     monkeypatch.setattr(figures, "save", lambda fig, folder, name: limits.setdefault(name, [ax.get_xlim() for ax in fig.axes]) and [])
     figures.draw_run(read_analysis(out / "eta1" / "analysis.h5"), out / "eta1", end_time=7200.0)
-    for name in ("conservation", "stress_shares", "energy"):
-        assert limits[name] == [(0.0, 2.0)], name
+    for name, panels in (("conservation", 1), ("stress_shares", 3), ("energy", 1)):
+        assert limits[name] == [(0.0, 2.0)] * panels, name
     assert limits["clusters"] != [(0.0, 2.0)]
 
 

@@ -77,10 +77,12 @@ def test_trajectory_follows_h5md_and_round_trips(finished):
             "kinetic_translational", "kinetic_rotational", "potential", "elastic", "total_energy",
             "dissipated_sliding", "dissipated_rolling", "dissipated_hysteresis", "integration_error",
             "momentum", "angular_momentum", "number_of_contacts", "max_overlap", "stress_share",
-            "deepest_overlap", "deepest_overlap_pair",
+            "stress_share_per_area", "stress_share_strain", "deepest_overlap", "deepest_overlap_pair",
         }
         assert set(f["observables"]) == expected
-        assert f["observables/stress_share/value"].shape == (7, 3)
+        for name in ("stress_share", "stress_share_per_area", "stress_share_strain"):
+            assert f[f"observables/{name}/value"].shape == (7, 3), name
+            assert f[f"observables/{name}/value"].attrs["unit"] == "1 (100 N_top / N per size class)", name
         assert f["parameters/spec/collision"].attrs["eta"] == spec["collision"]["eta"]
         assert f["parameters/collision"].attrs["cross_potential"] < 0
     data = dw.read_trajectory(run_dir / "trajectory.h5")
@@ -105,6 +107,30 @@ def test_observables_match_the_recorded_particles(finished):
     np.testing.assert_allclose(books, obs["total_energy"][0], rtol=1e-10)
     p_scale = np.abs(masses[:, None] * data["particles"]["velocity"][0]).sum()
     assert np.abs(obs["momentum"] - obs["momentum"][0]).max() < 1e-6 * p_scale
+
+
+def test_stress_shares_of_each_frame_rank_its_recorded_stress_by_each_measure(finished):
+    """Each frame's three stress shares are stress_shares of that frame's recorded ``stress`` (the
+    largest overlap) and the radii, by overlap, overlap / R^2 and overlap / R; by hand for one frame."""
+    import math
+
+    from decco_warp.diagnostics import stress_shares
+
+    run_dir, _ = finished
+    data = dw.read_trajectory(run_dir / "trajectory.h5")
+    radii, classes = data["static"]["radius"], data["static"]["species"]
+    obs, stress = data["observables"], data["particles"]["stress"]
+    assert (stress[-1] > 0).sum() > math.ceil(0.01 * len(radii))  # contacts enough to fill the top 1 %
+    for name, measure in (("stress_share", "overlap"), ("stress_share_per_area", "per_area"), ("stress_share_strain", "strain")):
+        assert obs[name].shape == (7, 3), name
+        for k in range(7):
+            np.testing.assert_array_equal(obs[name][k], stress_shares(stress[k], classes, 3, radii, measure=measure), err_msg=name)
+    # The last frame by hand: the top 1 % of each measure, counted per class.
+    top = math.ceil(0.01 * len(radii))
+    counts = np.bincount(classes, minlength=3)
+    for name, power in (("stress_share", 0), ("stress_share_per_area", 2), ("stress_share_strain", 1)):
+        ranked = np.argsort(-(stress[-1] / radii**power), kind="stable")[:top]
+        np.testing.assert_allclose(obs[name][-1], 100.0 * np.bincount(classes[ranked], minlength=3) / counts, err_msg=name)
 
 
 def _frames(run_dir):

@@ -505,6 +505,14 @@ def test_a_run_with_springs_records_their_energy_closes_its_books_and_resumes_bi
     assert (obs["elastic_tangential"][1:] > 0).all() and (obs["elastic_rolling"][1:] > 0).all()
     books = obs["total_energy"] + obs["dissipated_sliding"] + obs["dissipated_rolling"] + obs["dissipated_hysteresis"] + obs["integration_error"]
     np.testing.assert_allclose(books, obs["total_energy"][0], rtol=1e-10)
+    # The stress shares, by each measure, are of the recorded largest overlaps, whatever the law.
+    from decco_warp.diagnostics import STRESS_SHARE_OBSERVABLES, stress_shares
+
+    radii, classes, stress = frames["static"]["radius"], frames["static"]["species"], frames["particles"]["stress"]
+    assert (stress[1:].max(axis=1) > 0).all()
+    for name, measure in STRESS_SHARE_OBSERVABLES.items():
+        shares = [stress_shares(stress[k], classes, obs[name].shape[1], radii, measure=measure) for k in range(len(stress))]
+        np.testing.assert_array_equal(obs[name], shares, err_msg=name)
 
 
 # --- benchmarks (Chung & Ooi 2011 style; analytic answers of docs/ssdem-design.md sect. 13) ----------

@@ -71,8 +71,12 @@ def test_live_recording_has_the_particles_and_the_hdf5_observables(recorded):
         steps, values = _series(temporal, f"/observables/{name}")
         assert steps.tolist() == data["step"].tolist()
         np.testing.assert_array_equal(values, data["observables"][name].astype(float))
-    steps, share = _series(temporal, "/stress_share/class_2")
-    np.testing.assert_array_equal(share, data["observables"]["stress_share"][:, 2])
+    for name in ("stress_share", "stress_share_per_area", "stress_share_strain"):
+        for k in range(3):
+            if np.isfinite(data["observables"][name][:, k]).all():
+                steps, share = _series(temporal, f"/{name}/class_{k}")
+                assert steps.tolist() == data["step"].tolist(), name
+                np.testing.assert_array_equal(share, data["observables"][name][:, k], err_msg=name)
     assert "AnnotationContext:context" in static["/particles/by_size"]
     assert static["/observables/potential"]["SeriesLines:names"] == [["potential"]]
     assert set(temporal) >= {"/piles/target", "/piles/projectile/velocity", "/conservation/momentum_drift"}
@@ -88,6 +92,30 @@ def test_replay_is_equivalent_to_the_live_recording(recorded):
             a, b = live[entity][column], again[entity][column]
             order_a, order_b = np.argsort(live[entity]["step"]), np.argsort(again[entity]["step"])
             assert [a[i] for i in order_a] == [b[i] for i in order_b], (entity, column)
+
+
+def test_a_replay_of_a_trajectory_without_the_newer_stress_shares_computes_them(recorded, tmp_path):
+    """`view` of a trajectory written before stress_share_per_area and stress_share_strain were
+    recorded (deleted here) logs them from each frame's stress and radii: the live recording's series."""
+    import shutil
+
+    import h5py
+
+    run_dir = tmp_path / "old"
+    shutil.copytree(recorded[0], run_dir)
+    with h5py.File(run_dir / "trajectory.h5", "r+") as f:
+        del f["observables/stress_share_per_area"], f["observables/stress_share_strain"]
+    result = cli("view", str(run_dir), "--save", str(tmp_path / "old.rrd"))
+    assert result.returncode == 0, result.stderr
+    old, _ = read_recording(tmp_path / "old.rrd")
+    live, _ = read_recording(recorded[0] / "recording.rrd")
+    data = dw.read_trajectory(recorded[0] / "trajectory.h5")
+    for name in ("stress_share_per_area", "stress_share_strain"):
+        for k in range(3):
+            entity = f"/{name}/class_{k}"
+            assert (entity in old) == (entity in live) == bool(np.isfinite(data["observables"][name][:, k]).all()), entity
+            if entity in live:
+                np.testing.assert_array_equal(_series(old, entity)[1], _series(live, entity)[1], err_msg=entity)
 
 
 def test_rerun_is_not_imported_unless_asked(tmp_path):

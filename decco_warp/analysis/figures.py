@@ -103,24 +103,39 @@ def plot_conservation(analysis: dict):
     return fig
 
 
+#: The stress shares a run's figure compares, a panel each where the analysis has them (one kept
+#: before decco-warp recorded the last two has the first only): analysis group -> panel title.
+STRESS_SHARE_PANELS = {
+    "stress_share": "by largest overlap delta (the paper's;\nwith one spring constant: by force)",
+    "stress_share_per_area": "by delta / R^2\n(force per cross-section area)",
+    "stress_share_strain": "by delta / R\n(contact strain)",
+}
+
+
 def plot_stress_shares(analysis: dict):
-    """Fig. 8 style: 100 N_c,top / N_c for each size class vs time; dashed, the value at t = 0."""
-    s = analysis["stress_share"]
+    """Fig. 8 style: 100 N_c,top / N_c for each size class vs time, dashed the value at t = 0, in a
+    panel for each measure the analysis has (STRESS_SHARE_PANELS): the paper's largest overlap,
+    which with one spring constant ranks force, beside overlap / R^2 (stress) and overlap / R (strain)."""
+    panels = [name for name in STRESS_SHARE_PANELS if name in analysis]
     radii = np.unique(analysis["final"]["radius"]) if "final" in analysis else None
-    fig, ax = plt.subplots(figsize=(6.4, 4.0))
-    t = s["time"] / HOUR
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels) + 1.8 * (len(panels) == 1), 4.0), squeeze=False, sharex=True)
     colours = plt.get_cmap("tab10")
-    for k in range(s["value"].shape[1]):
-        ax.plot(t, s["value"][:, k], color=colours(k), label=_size_label(k, radii))
-        ax.axhline(s["value"][0, k], color=colours(k), linestyle="--", linewidth=0.8)
-    ax.axhline(1.0, color="0.5", linewidth=0.6)
-    ax.set_xlabel("time [h]")
-    ax.set_ylabel("100 N_top / N  (top 1 % by stress)")
+    for ax, name in zip(axes[0], panels):
+        s = analysis[name]
+        t = s["time"] / HOUR
+        for k in range(s["value"].shape[1]):
+            ax.plot(t, s["value"][:, k], color=colours(k), label=_size_label(k, radii))
+            ax.axhline(s["value"][0, k], color=colours(k), linestyle="--", linewidth=0.8)
+        ax.axhline(1.0, color="0.5", linewidth=0.6)
+        ax.set_xlabel("time [h]")
+        ax.set_title(STRESS_SHARE_PANELS[name], fontsize=9)
+    axes[0][0].set_ylabel("100 N_top / N  (top 1 % by stress)" if len(panels) == 1 else "100 N_top / N  (top 1 % by the panel's measure)")
+    axes[0][0].legend(fontsize=8)
     top = math.ceil(0.01 * analysis["final"]["label"].size) if "final" in analysis else None
     coarse = top is not None and top < COARSE_TOP
-    ax.set_title("share of the most stressed particles by size" + (f"\n(top 1 % = {top} grains: each grain moves a share by a lot)" if coarse else ""),
-                 color="C3" if coarse else "black")  # fmt: skip
-    ax.legend(fontsize=8)
+    fig.suptitle("share of the most stressed particles by size" + (f"\n(top 1 % = {top} grains: each grain moves a share by a lot)" if coarse else ""),
+                 color="C3" if coarse else "black", fontsize=10)  # fmt: skip
+    fig.tight_layout()
     return fig
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..diagnostics import energy_scale, ledger_closure
+from ..diagnostics import STRESS_SHARE_OBSERVABLES, energy_scale, ledger_closure, stress_shares
 from ..durable import json_ready, json_text, write_atomic
 from ..folder import RunFolder
 from ..io import OBSERVABLE_UNITS, read_frames, read_trajectory
@@ -456,7 +456,8 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
             "momentum_drift": np.linalg.norm(obs["momentum"] - obs["momentum"][0], axis=1) / p_scale,
             "angular_momentum_drift": np.linalg.norm(obs["angular_momentum"] - obs["angular_momentum"][0], axis=1) / l_scale,
         },
-        "stress_share": {"time": data["time"], "value": obs["stress_share"]},
+        # The top 1 % by largest overlap (the paper's Fig. 8), by overlap / R^2 and by overlap / R.
+        **{name: {"time": data["time"], "value": value} for name, value in stress_share_series(data, trajectory).items()},
         "energy": {
             "time": data["time"],
             **{name: obs[name] for name in ENERGY_SERIES},
@@ -500,6 +501,38 @@ def analyse_run(run_dir, min_members: int = 50, every: int = 1, progress=None, d
     summary["analysis_seconds"] = round(time.perf_counter() - started, 3)
     _write_results(run_dir, analysis, summary)
     return analysis
+
+
+#: Frames of per-particle stress read at once where a trajectory lacks a stress share.
+STRESS_CHUNK = 64
+
+
+def stress_share_series(data, trajectory) -> dict[str, np.ndarray]:
+    """Each of :data:`STRESS_SHARE_OBSERVABLES` at every frame (F, classes): as the trajectory
+    recorded it, and where it lacks one (written before decco-warp recorded it; or, resumed since,
+    its earlier frames, NaN) computed from the frames' per-particle ``stress`` (the largest overlap)
+    and the radii, which every decco-warp trajectory holds, read STRESS_CHUNK frames at a time."""
+    obs, static = data["observables"], data["static"]
+    frames = len(data["time"])
+    classes = obs["stress_share"].shape[1] if "stress_share" in obs else int(static["species"].max()) + 1
+    series, lacking = {}, {}
+    for name in STRESS_SHARE_OBSERVABLES:
+        if name in obs:
+            series[name] = np.array(obs[name], dtype=float)
+            missing = np.isnan(series[name]).all(axis=1)  # a frame recorded has a share for every class with particles
+        else:
+            series[name], missing = np.full((frames, classes), np.nan), np.ones(frames, dtype=bool)
+        if missing.any():
+            lacking[name] = missing
+    wanted = np.flatnonzero(np.any(list(lacking.values()), axis=0)).tolist() if lacking else []
+    for start in range(0, len(wanted), STRESS_CHUNK):
+        chunk = wanted[start : start + STRESS_CHUNK]
+        stress = read_frames(trajectory, chunk, elements=("stress",))[0]["stress"]
+        for row, frame in zip(stress, chunk):
+            for name, missing in lacking.items():
+                if missing[frame]:
+                    series[name][frame] = stress_shares(row, static["species"], classes, static["radius"], STRESS_SHARE_OBSERVABLES[name])
+    return series
 
 
 def _write_results(run_dir, analysis: dict, summary: dict) -> None:

@@ -26,6 +26,7 @@ from decco_warp.analysis.figures import (  # noqa: E402
     ETA_LABELS,
     RATIO_MARKERS,
     SIZE_LABELS,
+    STRESS_SHARE_PANELS,
     draw_points,
     draw_run,
     plot_size_change,
@@ -228,19 +229,28 @@ def size_change_statistics():
 
 
 def stress_shares():
+    """Fig. 8: a column per run (eta), a row per stress measure every run's analysis holds: the
+    paper's largest overlap (which with one spring constant ranks force), and where the runs
+    recorded them overlap / R^2 (force per cross-section area) and overlap / R (strain)."""
     found = runs("fig8")
-    fig, axes = plt.subplots(1, len(found), figsize=(4.4 * len(found), 3.8), squeeze=False, sharey=True)
-    for ax, run in zip(axes[0], found):
-        share = read_analysis(run["dir"] / "analysis.h5")["stress_share"]
-        t = share["time"] / MINUTE
-        for k in range(share["value"].shape[1]):
-            ax.plot(t[1:], share["value"][1:, k], color=f"C{k}", linewidth=0.8, label=SIZE_LABELS[k])
-            ax.axhline(share["value"][0, k], color=f"C{k}", linestyle="--", linewidth=0.8)
-        ax.set_xscale("log")
-        ax.set_xlabel("time since the start [min]")
-        ax.set_title(f"eta = {run['summary']['eta']:.3g}")
-    axes[0][0].set_ylabel("100 N_top / N  (top 1 % by stress)")
+    analyses = [read_analysis(run["dir"] / "analysis.h5") for run in found]
+    measures = [name for name in STRESS_SHARE_PANELS if all(name in analysis for analysis in analyses)]
+    fig, axes = plt.subplots(len(measures), len(found), figsize=(4.4 * len(found), 3.8 * len(measures)), squeeze=False, sharey="row")
+    for row, name in zip(axes, measures):
+        for ax, run, analysis in zip(row, found, analyses):
+            share = analysis[name]
+            t = share["time"] / MINUTE
+            for k in range(share["value"].shape[1]):
+                ax.plot(t[1:], share["value"][1:, k], color=f"C{k}", linewidth=0.8, label=SIZE_LABELS[k])
+                ax.axhline(share["value"][0, k], color=f"C{k}", linestyle="--", linewidth=0.8)
+            ax.set_xscale("log")
+            ax.set_xlabel("time since the start [min]")
+            title = f"eta = {run['summary']['eta']:.3g}"
+            ax.set_title(title if len(measures) == 1 else f"{title}, {STRESS_SHARE_PANELS[name]}", fontsize=None if len(measures) == 1 else 9)
+        row[0].set_ylabel("100 N_top / N  (top 1 % by stress)" if len(measures) == 1 else "100 N_top / N  (top 1 %)")
     axes[0][0].legend(fontsize=8)
+    if len(measures) > 1:
+        fig.tight_layout()
     return fig
 
 
