@@ -1,18 +1,19 @@
-"""Contact finders: each way of listing the pairs that may touch is one class with one interface, and
-:data:`CONTACT_FINDERS` names them.  A finder fills ``candidate_count`` and ``candidates`` (per
-particle, its candidates in increasing j, a superset of its contacts); the contact pass
-(decco_warp/forces.py) applies the contact law to them in float64.
+"""Contact finders: each way of listing the pairs that may touch is one class with one interface,
+registered by name in :data:`CONTACT_FINDERS`.  A finder fills ``candidate_count`` and
+``candidates`` (per particle, its candidates in increasing j, a superset of its contacts); the
+contact pass (decco_warp/forces.py) applies the contact law to them in float64.
 
-    finder = CONTACT_FINDERS["neighbour-list"](model)
+    finder = CONTACT_FINDERS[solver.finder](model, width, solver)   # beside a gravity solver, as forces.py does
     finder.find(state)        # lists at the current positions
     finder.refresh(state)     # (a list with a skin) rebuilt only where stale, decided on the device
     finder.arrays(), finder.load(arrays)   # what a snapshot keeps of it
 
 "sweep-bits": the Newton sweep's own candidate bits, listed by its gather (the gravity solver
-"pairs-once" fills them: finding costs nothing more); "hash-grid": the tree's hash grid of the
+"all-pairs" fills them: finding costs nothing more); "hash-grid": the tree's hash grid of the
 touching pairs at each evaluation; "neighbour-list": a cell list of the pairs within a skin, rebuilt
-when a particle has moved half the skin (gravity on its own clock).  A new finder is one class here
-and its line in :data:`CONTACT_FINDERS`.
+when a particle has moved half the skin (gravity on its own clock, and any solver that names no
+finder of its own).  A new finder is one class here (or anywhere) with the decorator
+:func:`contact_finder`; a gravity solver takes it by naming it (``GravitySolver.finder``).
 """
 
 from __future__ import annotations
@@ -22,15 +23,29 @@ import warp as wp
 
 from .arrays import ModelArrays, StateArrays
 from .errors import InputError
-from .gravity_solvers import Tree, empty_candidates
+from .gravity_solvers import GravitySolver, empty_candidates
 from .kernels.contacts import CANDIDATES
 from .kernels.neighbours import GRID_CELLS, build_neighbour_list, cell_keys, cell_ranges, lists_built
 from .kernels.pair import NEIGHBOUR_LIST_MARGIN, host_reach
 from .layouts import particle_block
 
 
+#: Every contact finder, by name (:func:`contact_finder` registers them).
+CONTACT_FINDERS: dict[str, type[ContactFinder]] = {}
+
+
+def contact_finder(finder: type[ContactFinder]) -> type[ContactFinder]:
+    """Register ``finder`` under its ``name``: a gravity solver may then name it (``GravitySolver.finder``)."""
+    if finder.name in CONTACT_FINDERS:
+        raise ValueError(f"a contact finder named {finder.name!r} is registered already")
+    CONTACT_FINDERS[finder.name] = finder
+    return finder
+
+
 class ContactFinder:
-    """What every contact finder gives: each particle's candidates, and what a snapshot keeps of them."""
+    """What every contact finder gives: each particle's candidates, and what a snapshot keeps of them.
+    Made as ``Finder(model, width, gravity)``: lists ``width`` wide, beside the gravity solver
+    ``gravity`` (for a finder that lists from its work; the others ignore it)."""
 
     name = ""
     graph_conditionals = False
@@ -39,7 +54,7 @@ class ContactFinder:
     """Whether its lists hold every touching pair at the current positions without a new search
     (a list with a skin, checked at every drift): a frame's observables then read them as they are."""
 
-    def __init__(self, model: ModelArrays, width: int):
+    def __init__(self, model: ModelArrays, width: int, gravity: GravitySolver | None = None):
         self.model = model
         self.candidate_count, self.candidates = empty_candidates(model.count, model.device, width)
 
@@ -69,22 +84,29 @@ class ContactFinder:
         return False
 
 
+@contact_finder
 class SweepBits(ContactFinder):
     """The Newton sweep's candidate bits, listed by its gather in increasing j: the gravity solver
-    ("pairs-once", made with these arrays) fills them as it sums gravity, so finding costs nothing more."""
+    ("all-pairs", made ``listing``) fills its arrays as it sums gravity, so finding costs nothing more."""
 
     name = "sweep-bits"
 
+    def __init__(self, model: ModelArrays, width: int, gravity: GravitySolver):
+        self.model = model
+        self.candidate_count, self.candidates = gravity.candidate_count, gravity.candidates
 
+
+@contact_finder
 class HashGrid(ContactFinder):
     """Each particle's neighbours within (R_i + R_j)(1 + 1e-4), from the tree's hash grid (built with
-    the tree at each evaluation): kernels/tree.py ``grid_candidates``."""
+    the tree at each evaluation, placed in its box): kernels/tree.py ``grid_candidates``.  Beside a
+    solver that holds a gravity_tree.GravityTree as ``tree`` ("tree")."""
 
     name = "hash-grid"
 
-    def __init__(self, model: ModelArrays, width: int, tree: Tree):
+    def __init__(self, model: ModelArrays, width: int, gravity: GravitySolver):
         super().__init__(model, width)
-        self.tree = tree.tree
+        self.tree = gravity.tree
 
     def find(self, state: StateArrays) -> None:
         m = self.model
@@ -110,6 +132,7 @@ def neighbour_arrays(reference: np.ndarray, count: np.ndarray, listed: np.ndarra
     return {"neighbour_reference": reference.copy(), "neighbour_count": count.copy(), "neighbour_list": listed[:, :width].copy()}
 
 
+@contact_finder
 class NeighbourList(ContactFinder):
     """Each particle's neighbours within R_i + R_j + skin, in increasing j (kernels/neighbours.py); a
     system's lists are rebuilt on the device once any of its particles has moved skin / 2 since their
@@ -126,7 +149,7 @@ class NeighbourList(ContactFinder):
     graph_conditionals = True  # the rebuild: wp.capture_if
     current = True  # every drift checks the lists against the positions
 
-    def __init__(self, model: ModelArrays, width: int = CANDIDATES):
+    def __init__(self, model: ModelArrays, width: int = CANDIDATES, gravity: GravitySolver | None = None):
         super().__init__(model, width)
         device, count = model.device, model.count
         systems = len(model.systems)
@@ -223,7 +246,3 @@ class NeighbourList(ContactFinder):
         self.stale.zero_()
         self.stale_system.zero_()
         return True
-
-
-#: Every contact finder, by name.
-CONTACT_FINDERS = {finder.name: finder for finder in (SweepBits, HashGrid, NeighbourList)}

@@ -4,7 +4,7 @@ The engine holds the arrays (decco_warp/arrays.py: the model's constants and the
 composes, from its :class:`~decco_warp.scheme.Scheme`, a force path (decco_warp/forces.py: a gravity
 solver, a contact finder and the contact pass, or one kernel doing both) and an integrator
 (decco_warp/integrators.py: one clock, or two).  It chooses them in one place
-(``scheme.force_path``), then only delegates: the public objects
+(``forces.force_path``), then only delegates: the public objects
 (:class:`~decco_warp.simulation.Simulation`, :func:`~decco_warp.simulation.compute_forces`,
 :func:`~decco_warp.diagnostics.diagnostics`) are built on it.  Beside its parts, this module is the
 only one that launches kernels (the packing of the bodies, and the cluster finder's smoothed density
@@ -20,7 +20,7 @@ import warp as wp
 
 from .arrays import PAIR_OBSERVABLES, ModelArrays, StateArrays, system_sizes
 from .device import resolve_device
-from .forces import FORCE_PATHS
+from .forces import force_path
 from .gravity_solvers import empty_candidates
 from .integrators import check_steps, integrator_for
 from .kernels import observables
@@ -28,7 +28,7 @@ from .kernels.channels import WORK_CHANNELS
 from .kernels.contacts import CANDIDATES, unpack_depth
 from .layouts import Layout
 from .params import Params
-from .scheme import Scheme, choose_scheme, force_path
+from .scheme import Scheme, choose_scheme
 from .state import State
 from .errors import InputError
 
@@ -66,8 +66,8 @@ class Engine:
         # lists hold, or as it has others in its system.
         rows = max(1, min(self.model.candidate_width, largest - 1)) if params.keeps_springs else 0
         self.state = StateArrays(state, self.device, ledger, rows)
-        # The parts, chosen in one place (scheme.force_path; the integrator by the clocks).
-        self.path = FORCE_PATHS[force_path(self.scheme)](self.model, self.state, self.scheme)
+        # The parts, chosen in one place (forces.force_path; the integrator by the clocks).
+        self.path = force_path(self.scheme)(self.model, self.state, self.scheme)
         self.integrator = integrator_for(self.scheme)(self.model, self.state, self.path, self.scheme)
 
     # -- what others read of it ----------------------------------------------------

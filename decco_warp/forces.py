@@ -5,16 +5,19 @@ the "fused" layout), or a gravity solver (decco_warp/gravity_solvers.py), a cont
 (decco_warp/contact_finders.py) and the :class:`ContactPass`, which applies the contact law to the
 finder's candidates in float64:
 
-    path = FORCE_PATHS[force_path(scheme)](model, state, scheme)   # as Engine does (scheme.py's switch)
+    path = force_path(scheme)(model, state, scheme)   # as Engine does
     path.evaluate()        # state.force, torque, channels, deepest_contact (bodies packed first)
     path.contacts()        # gravity on its own clock: the contacts of an inner step
     path.gravity_step()    # and gravity, into path.gravity_force
     path.observables(outputs)
 
-"newton": gravity "pairs-once", whose gather lists the candidates ("sweep-bits"); "tree": gravity
-"tree" and its "hash-grid"; "clocked" (gravity every K steps): gravity "pairs-once" (listing none)
-or "tree" into its own array, the contacts from a "neighbour-list".  A new composition is one class
-here and its line in :data:`FORCE_PATHS`.
+Each path says which schemes it serves (``serves``), and :func:`force_path` takes the first in
+:data:`FORCE_PATHS` that does.  "solver" (gravity and contacts on one clock) composes the scheme's
+gravity solver, whatever its name, with the finder its class names: "all-pairs" with its own
+"sweep-bits" (the Newton layout), "tree" with its "hash-grid"; "clocked" (gravity every K steps)
+composes it, listing nothing, with a "neighbour-list".  So a new solver or finder is a class and its
+registration there, and no path here changes; a new composition is one class here and its place in
+:data:`FORCE_PATHS`.
 """
 
 from __future__ import annotations
@@ -23,15 +26,15 @@ import numpy as np
 import warp as wp
 
 from .arrays import ModelArrays, StateArrays
-from .contact_finders import ContactFinder, HashGrid, NeighbourList, SweepBits
+from .contact_finders import CONTACT_FINDERS, ContactFinder, NeighbourList
 from .errors import InputError
-from .gravity_solvers import GravitySolver, PairsOnce, Tree
+from .gravity_solvers import GRAVITY_SOLVERS, GravitySolver, packed_bodies
 from .kernels import observables as observable_kernels
-from .kernels.bodies import BODY_TYPES, PACK_KERNELS
+from .kernels.bodies import PACK_KERNELS
 from .kernels.contacts import contact_pass
 from .kernels.fused import pair_forces_tiled
 from .kernels.reference import pair_forces_reference
-from .layouts import NEWTON_MAX, particle_block
+from .layouts import particle_block
 from .scheme import Scheme
 
 #: Threads per particle of the observables kernel on a GPU.
@@ -54,11 +57,6 @@ def tiled_blocks(starts: np.ndarray, ends: np.ndarray, per_block: int) -> np.nda
 
 def _on_cuda(device: str) -> bool:
     return device.startswith("cuda")
-
-
-def packed_bodies(model: ModelArrays, scheme: Scheme, count: int) -> wp.array:
-    """Packed bodies (kernels/bodies.py) for an all-pairs sweep, refreshed before each (count 0: none)."""
-    return wp.zeros(count, dtype=BODY_TYPES[scheme.precision], device=model.device)
 
 
 class ContactPass:
@@ -98,9 +96,21 @@ class ForcePath:
     finder: ContactFinder | None = None
     gravity: GravitySolver | None = None
 
+    @staticmethod
+    def serves(scheme: Scheme) -> bool:
+        """Whether this path computes the forces of ``scheme`` (:func:`force_path` asks the paths in order)."""
+        raise NotImplementedError
+
     def __init__(self, model: ModelArrays, state: StateArrays, scheme: Scheme):
         self.model, self.state, self.scheme = model, state, scheme
         self.body = packed_bodies(model, scheme, 0)
+
+    def _solver(self, listing: bool) -> GravitySolver:
+        """The scheme's gravity solver (its packed bodies become the path's)."""
+        solver = GRAVITY_SOLVERS[self.scheme.gravity](self.model, self.scheme, listing)
+        if solver.body is not None:
+            self.body = solver.body
+        return solver
 
     @property
     def graph_conditionals(self) -> bool:
@@ -175,20 +185,19 @@ class ForcePath:
         """Called after the state's arrays were loaded from ``snapshot``."""
 
 
-def _check_cpu_blocks(model: ModelArrays, scheme: Scheme, newton: bool) -> None:
-    # (Warp's CPU blocks, wp.config.enable_cpu_blocks, run every lane: tests use them to check the
-    # GPU layouts' reductions on a CPU; the Newton layout's lane shuffles exist on a GPU only.)
-    if not _on_cuda(model.device) and scheme.layout.block_dim != 1 and (newton or not wp.config.enable_cpu_blocks):
-        raise InputError("on the CPU a layout's block_dim must be 1 (Warp runs one thread per block)")
-
-
 class ReferenceForces(ForcePath):
     """One thread per particle, a plain loop over every j of its system (kernels/reference.py): the
     tests' yardstick, the bench's baseline and diagnostics' all-pairs engine (it never builds a tree)."""
 
     name = "reference"
 
+    @staticmethod
+    def serves(scheme: Scheme) -> bool:
+        return scheme.force_kernel == "reference"
+
     def __init__(self, model: ModelArrays, state: StateArrays, scheme: Scheme):
+        if scheme.gravity_every > 1:
+            raise InputError("the reference kernel evaluates gravity with every force: it steps with gravity_every = 1 only")
         super().__init__(model, state, scheme)
         self.kernel = pair_forces_reference(scheme.precision, model.params.law)
 
@@ -205,9 +214,16 @@ class FusedForces(ForcePath):
 
     name = "fused"
 
+    @staticmethod
+    def serves(scheme: Scheme) -> bool:
+        return scheme.clocks == 1 and scheme.gravity == "all-pairs" and not scheme.layout.newton
+
     def __init__(self, model: ModelArrays, state: StateArrays, scheme: Scheme):
         super().__init__(model, state, scheme)
-        _check_cpu_blocks(model, scheme, newton=False)
+        # (Warp's CPU blocks, wp.config.enable_cpu_blocks, run every lane: tests use them to check the
+        # GPU layouts' reductions on a CPU.)
+        if not _on_cuda(model.device) and scheme.layout.block_dim != 1 and not wp.config.enable_cpu_blocks:
+            raise InputError("on the CPU a layout's block_dim must be 1 (Warp runs one thread per block)")
         self.body = packed_bodies(model, scheme, model.count)
         layout = scheme.layout
         self.blocks = wp.array(tiled_blocks(model.starts, model.ends, layout.particles_per_block), dtype=wp.vec4i, device=model.device)
@@ -230,36 +246,23 @@ class FusedForces(ForcePath):
         s.history.commit()
 
 
-class NewtonForces(ForcePath):
-    """The Newton layout: gravity "pairs-once", its gather listing the candidates ("sweep-bits"), then
-    the contact pass over them, added to gravity's force."""
+class SolverForces(ForcePath):
+    """Gravity and contacts on one clock, from parts: the scheme's gravity solver, the contact finder
+    its class names listing the candidates ("all-pairs": its own "sweep-bits", in the Newton layout;
+    "tree": its "hash-grid"), then the contact pass over them, added to gravity's force.  Where the
+    solver has its own potential (the tree), frames too cost O(N log N): the potential from it, the
+    contact observables from the finder's candidates."""
 
-    name = "newton"
+    name = "solver"
 
-    def __init__(self, model: ModelArrays, state: StateArrays, scheme: Scheme):
-        super().__init__(model, state, scheme)
-        _check_cpu_blocks(model, scheme, newton=True)
-        self.finder = SweepBits(model, model.candidate_width)
-        self.body = packed_bodies(model, scheme, model.count)
-        self.gravity = PairsOnce(model, scheme, scheme.layout, self.body, self.finder.candidate_count, self.finder.candidates)
-        self.contact_pass = ContactPass(model, accumulate=True)
-
-    def evaluate(self) -> None:
-        self.gravity.evaluate(self.state, self.state.force)
-        self.contact_pass.launch(self.state, self.finder)
-
-
-class TreeForces(ForcePath):
-    """The tree path: gravity "tree", contacts from its "hash-grid" candidates, added to gravity's
-    force.  Frames too cost O(N log N): the potential from the tree, the contact observables from the
-    grid's candidates."""
-
-    name = "tree"
+    @staticmethod
+    def serves(scheme: Scheme) -> bool:
+        return scheme.clocks == 1
 
     def __init__(self, model: ModelArrays, state: StateArrays, scheme: Scheme):
         super().__init__(model, state, scheme)
-        self.gravity = Tree(model, scheme)
-        self.finder = HashGrid(model, model.candidate_width, self.gravity)
+        self.gravity = self._solver(listing=True)
+        self.finder = CONTACT_FINDERS[self.gravity.finder](model, model.candidate_width, self.gravity)
         self.contact_pass = ContactPass(model, accumulate=True)
 
     def evaluate(self) -> None:
@@ -270,25 +273,19 @@ class TreeForces(ForcePath):
 
 class ClockedForces(ForcePath):
     """Gravity on its own clock (``Scheme.gravity_every`` K > 1; docs/model.md): gravity every K steps into its
-    own array (gravity "pairs-once", listing nothing, or "tree"), the contacts every step from a
-    "neighbour-list".  The integrator (decco_warp/integrators.py ``TwoClocks``) kicks each on its clock."""
+    own array (the scheme's solver, listing nothing: "all-pairs" in the Newton sweep, or "tree"), the
+    contacts every step from a "neighbour-list", whatever the solver (the integrator checks its skin
+    at every drift).  The integrator (decco_warp/integrators.py ``TwoClocks``) kicks each on its clock."""
 
     name = "clocked"
 
+    @staticmethod
+    def serves(scheme: Scheme) -> bool:
+        return scheme.clocks > 1
+
     def __init__(self, model: ModelArrays, state: StateArrays, scheme: Scheme):
         super().__init__(model, state, scheme)
-        if scheme.gravity == "tree":
-            self.gravity = Tree(model, scheme)
-        else:
-            largest = int(model.systems.max())
-            if _on_cuda(model.device) and largest > NEWTON_MAX:
-                raise InputError(
-                    f"gravity_every > 1 sums all-pairs gravity with the Newton sweep, which holds systems of up to "
-                    f"{NEWTON_MAX} particles; this one has {largest}: use gravity = \"tree\""
-                )
-            layout = scheme.newton_sweep(largest, model.device)
-            self.body = packed_bodies(model, scheme, model.count)
-            self.gravity = PairsOnce(model, scheme, layout, self.body)
+        self.gravity = self._solver(listing=False)
         self.gravity_force = wp.zeros(model.count, dtype=wp.vec3d, device=model.device)
         """Gravity at the positions of the last outer step [dyne]."""
         self.finder = NeighbourList(model, model.candidate_width)
@@ -324,5 +321,13 @@ class ClockedForces(ForcePath):
         return self.state.force.numpy() + self.gravity_force.numpy()
 
 
-#: Every force path, by name (scheme.py's ``force_path`` chooses).
-FORCE_PATHS = {path.name: path for path in (ReferenceForces, FusedForces, NewtonForces, TreeForces, ClockedForces)}
+#: Every force path, in the order :func:`force_path` asks them: the first that serves a scheme computes it.
+FORCE_PATHS = (ReferenceForces, FusedForces, SolverForces, ClockedForces)
+
+
+def force_path(scheme: Scheme) -> type[ForcePath]:
+    """The one switch from a scheme to the composition of parts that computes its forces: the first
+    path of :data:`FORCE_PATHS` that serves it ("reference" or "fused": one kernel, gravity and
+    contacts; "solver": the scheme's gravity solver and its finder; "clocked": gravity every K steps,
+    contacts every step from a neighbour list)."""
+    return next(path for path in FORCE_PATHS if path.serves(scheme))

@@ -4,9 +4,10 @@
 :class:`Scheme` says how the engine evaluates it: the precision of the all-pairs sweep, the gravity
 solver (every pair, or a tree with its opening angle), the clock (gravity every K steps), the force
 kernels' layout, and whether the plain reference kernel steps it.  :func:`choose_scheme` reads the
-thresholds that choose by size and device (the tree from N, the Newton layout's reach) in one place,
-and :func:`force_path` is the one switch from a scheme to the parts that compute its forces
-(decco_warp/forces.py composes them).  Plain data: no launches.
+thresholds that choose by size and device (the tree from N, the Newton layout's reach) in one place.
+A scheme names its gravity solver among those registered (decco_warp/gravity_solvers.py); the force
+paths that compute its forces say which schemes they serve (decco_warp/forces.py ``force_path``).
+Plain data: no launches.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import numbers
 from dataclasses import dataclass, replace
 
 from .errors import InputError
+from .gravity_solvers import GRAVITY_SOLVERS
 from .kernels.bodies import PRECISIONS
 from .layouts import Layout, choose_layout, newton_layout
 from .params import Range, require_number
@@ -23,9 +25,9 @@ from .params import Range, require_number
 #: one-thread-per-particle "reference" kernel (the tests' yardstick, the bench's baseline).
 FORCE_KERNELS = ("tiled", "reference")
 
-#: Gravity solvers: "all-pairs" sums every pair (exact, O(N^2)); "tree" walks a radix tree with
-#: monopole + quadrupole nodes (O(N log N), error set by theta_open; contacts from a hash grid).
-GRAVITY_SOLVERS = ("all-pairs", "tree")
+# Gravity solvers (GRAVITY_SOLVERS, by name, as gravity_solvers.py registers them): "all-pairs" sums
+# every pair (exact, O(N^2)); "tree" walks a radix tree with monopole + quadrupole nodes (O(N log N),
+# error set by theta_open; contacts from a hash grid).
 #: What a specification or the CLI may ask for: a solver, or "auto" (:func:`choose_gravity`).
 GRAVITY_CHOICES = (*GRAVITY_SOLVERS, "auto")
 
@@ -77,7 +79,7 @@ class Scheme:
     precision: str = "mixed"
     """Arithmetic of the all-pairs sweep: "mixed" (float32 gravity on float64 separations) or "float64"."""
     gravity: str = "all-pairs"
-    """Gravity solver, one of GRAVITY_SOLVERS: "all-pairs" (every pair) or "tree" (Barnes-Hut)."""
+    """Gravity solver, a name in GRAVITY_SOLVERS: "all-pairs" (every pair), "tree" (Barnes-Hut), or another registered there."""
     theta_open: float = 0.4
     """The tree's opening angle: a node is used whole beyond size / theta_open (plus its centre's
     offset); 0.4 keeps the rms relative gravity error on settled piles below 1e-3 (tests/test_tree.py)."""
@@ -149,19 +151,3 @@ def choose_scheme(largest: int, device: str, asked: Scheme | None = None, **choi
     asked for, the device's own for that size (layouts.choose_layout)."""
     scheme = replace(asked or Scheme(), **{name: value for name, value in choices.items() if value is not None})
     return scheme if scheme.layout is not None else replace(scheme, layout=choose_layout(largest, device))
-
-
-def force_path(scheme: Scheme) -> str:
-    """The one switch: which composition of parts computes a scheme's forces (decco_warp/forces.py
-    FORCE_PATHS): "reference" or "fused" (one kernel: gravity and contacts), "newton" (each pair's
-    gravity once, listing candidates for the contact pass), "tree" (the tree's gravity, a hash
-    grid's candidates) or "clocked" (gravity every K steps, contacts every step from a neighbour list)."""
-    if scheme.force_kernel == "reference":
-        if scheme.gravity_every > 1:
-            raise InputError("the reference kernel evaluates gravity with every force: it steps with gravity_every = 1 only")
-        return "reference"
-    if scheme.gravity_every > 1:
-        return "clocked"
-    if scheme.gravity == "tree":
-        return "tree"
-    return "newton" if scheme.layout.newton else "fused"

@@ -329,3 +329,84 @@ def test_the_newton_gathers_rows_loaded_ahead_leave_the_forces_unchanged(monkeyp
             got[ahead] = (engine.force.numpy().copy(), engine.candidate_count.numpy().copy())
         for ahead in (8, 5):
             assert np.array_equal(got[ahead][0], got[16][0]) and np.array_equal(got[ahead][1], got[16][1]), (precision, ahead)
+
+
+@pytest.fixture
+def tree_by_another_name():
+    """A toy gravity solver, added as any new one is: one class and its registration.  It sums the
+    tree's gravity with the tree's own launches (gravity_tree.py) and has no potential of its own (frames
+    sum it over all pairs); it lists its contacts with the finder its class names.  Unregistered after
+    the test, so that no other test sees it."""
+    from decco_warp.gravity_solvers import GRAVITY_SOLVERS, GravitySolver, gravity_solver
+    from decco_warp.gravity_tree import GravityTree
+
+    @gravity_solver
+    class TreeByAnotherName(GravitySolver):
+        name = "tree-by-another-name"
+        finder = "hash-grid"  # the grid is placed in the box of the tree's build: it reads self.tree
+        graph_conditionals = True  # the tree's moments loop on the device
+
+        def __init__(self, model, scheme, listing=False):
+            self.model, self.theta_open = model, scheme.theta_open
+            self.tree = GravityTree(model.count, model.device, scheme.precision)
+
+        def evaluate(self, state, force_out):
+            m = self.model
+            self.tree.build(state.position, m.mass)
+            self.tree.gravity(m.params.G, self.theta_open, m.mass, force_out)
+
+    try:
+        yield TreeByAnotherName
+    finally:
+        del GRAVITY_SOLVERS[TreeByAnotherName.name]
+
+
+@pytest.mark.parametrize(("finder", "gravity_every"), [("hash-grid", 1), ("neighbour-list", 1), ("hash-grid", 5)])
+def test_a_registered_gravity_solver_is_named_by_a_scheme_and_moves_as_the_tree_bit_for_bit(
+    tree_by_another_name, finder, gravity_every, monkeypatch
+):
+    """The solver seam: a scheme names the toy solver, the engine composes it with the contact finder
+    its class names (gravity on its own clock: with the neighbour list), and the motion, ledger and
+    deepest contacts are the tree path's bit for bit: the same launches for gravity, and candidates
+    in increasing j whichever finder lists them (on the CPU's one lane a particle, the neighbour
+    list's candidates that touch nothing add exact zeros)."""
+    from decco_warp.contact_finders import CONTACT_FINDERS
+
+    toy = tree_by_another_name
+    monkeypatch.setattr(toy, "finder", finder)
+    state = contact_cluster(200, seed=5, speed=1e3)
+
+    def run(gravity):
+        scheme = dw.Scheme(gravity=gravity, gravity_every=gravity_every)
+        sim = dw.Simulation(state, dw.Params(), device="cpu", ledger=True, allow_unstable=True, scheme=scheme)
+        sim.step(40)
+        return sim
+
+    mine, tree = run(toy.name), run("tree")
+    assert type(mine.engine.path.gravity) is toy
+    assert type(mine.engine.path.finder) is CONTACT_FINDERS[finder if gravity_every == 1 else "neighbour-list"]
+    assert mine.diagnostics()["number_of_contacts"] > state.n / 2
+    got, want = mine.snapshot(), tree.snapshot()
+    for key in ("positions", "velocities", "omegas", "force", "torque", "channels", "work", "deepest_contact"):
+        np.testing.assert_array_equal(got[key], want[key], err_msg=key)
+
+
+def test_a_scheme_names_only_registered_gravity_solvers_each_name_once(tree_by_another_name):
+    """An unknown solver is refused in one line listing those registered (an InputError: the CLI's
+    exit code for bad input); a second solver under a name taken is refused at its registration."""
+    from decco_warp.errors import InputError
+    from decco_warp.gravity_solvers import GravitySolver, gravity_solver
+
+    assert dw.Scheme(gravity=tree_by_another_name.name).gravity == tree_by_another_name.name
+    with pytest.raises(InputError, match="^gravity must be one of all-pairs, tree, tree-by-another-name; got 'barnes-hut'$"):
+        dw.Scheme(gravity="barnes-hut")
+    with pytest.raises(ValueError, match="a gravity solver named 'tree' is registered already"):
+        gravity_solver(type("AnotherTree", (GravitySolver,), {"name": "tree"}))
+
+
+def test_a_scheme_refuses_an_unknown_gravity_solver_by_the_built_in_names():
+    """Without a registration of its own (the toy's is undone after its tests) a scheme lists the built-in solvers."""
+    from decco_warp.errors import InputError
+
+    with pytest.raises(InputError, match="^gravity must be one of all-pairs, tree; got 'tree-by-another-name'$"):
+        dw.Scheme(gravity="tree-by-another-name")
