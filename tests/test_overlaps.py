@@ -158,8 +158,8 @@ def test_the_record_holds_the_deepest_contact_of_every_step_since_it_was_taken(d
     """Taken every step, the record is that step's deepest contact by NumPy (to its 6e-8
     quantisation); taken every 8 steps, it is the deepest of those 8 (same pair)."""
     options = dict(ENGINES[engine])
-    if engine == "newton" and device.startswith("cuda"):  # a Newton block is one warp there
-        options["layout"] = dw.Layout(block_dim=32, particles_per_block=2, newton=True)
+    if engine == "newton" and device.startswith("cuda"):  # a Newton block is one warp there, each lane keeping two particles
+        options["layout"] = dw.Layout(block_dim=32, particles_per_block=64, newton=True)
     params, scheme = dw.Params(dt=0.01), dw.Scheme(gravity=options.pop("gravity", "all-pairs"))
     state = overlapping_cloud(150, seed=7, fill=0.9)
     every_step = dw.Simulation(state, params, device=device, allow_unstable=True, scheme=scheme, **options)
