@@ -68,6 +68,10 @@ AUTO_ENSEMBLE = 8
 #: 1.25x at 10 000 (a sweep: 4 runs of 10 000 in 505 s against ~668 s one at a time), 1.14x at
 #: 16 384 and 1.09x at 20 000, as one system fills more of the GPU.  Larger runs go alone.
 ENSEMBLE_MAX_PARTICLES = 20_000
+#: The same with gravity on its own clock (K > 1), where a step leaves less work to fill the GPU:
+#: 25 000-particle piles at K = 10 step 1.16x as fast 2 together and 1.22x 4 together (bench,
+#: one H200, 2026-11-27), where at K = 1 they gain 1.05x and 1.07x.
+ENSEMBLE_MAX_PARTICLES_CLOCKED = 25_000
 SUMMARY_FIELDS = [
     "run", "status", "reason", "n_particles", "mass_ratio", "target_mass", "theta_deg", "eta", "speed", "spin_kind", "realization",
     "orientation_seed", "target_pile", "projectile_pile",
@@ -300,7 +304,8 @@ def ensemble_groups(prepared, max_particles: int | None = None) -> list[list[int
     """The indices of ``prepared`` runs (PreparedRun, or None for one not to step) as the groups
     :func:`simulate_batch` steps together, in order of first member: runs that would be stepped
     alone with the same kernels (Params, precision, layout, step), all-pairs only (the tree steps
-    one system at a time), and with ``max_particles`` of the same particle count, up to that many."""
+    one system at a time), and with ``max_particles`` of the same particle count, up to that many
+    (up to ENSEMBLE_MAX_PARTICLES_CLOCKED where gravity has its own clock)."""
     groups: dict[tuple, list[int]] = {}
     for k, run in enumerate(prepared):
         if run is not None:
@@ -308,7 +313,8 @@ def ensemble_groups(prepared, max_particles: int | None = None) -> list[list[int
             key = (plan.params, plan.scheme, run.sim.step_count) if plan.scheme.gravity == "all-pairs" else (k,)
             if max_particles is not None:
                 count = plan.state.n
-                key = (*key, count) if count <= max_particles else (k,)
+                cap = max_particles if plan.scheme.clocks == 1 else max(max_particles, ENSEMBLE_MAX_PARTICLES_CLOCKED)
+                key = (*key, count) if count <= cap else (k,)
             groups.setdefault(key, []).append(k)
     return list(groups.values())
 

@@ -367,21 +367,25 @@ def test_ensemble_auto_packs_small_runs_on_a_gpu_only_and_alike_in_size(tmp_path
 
 def test_auto_ensembles_group_runs_of_10000_particles_and_keep_larger_ones_alone():
     """simulate_batch's groups under ensemble = "auto" (ensemble_groups on stand-ins for prepared
-    runs, nothing stepped): the paper's 10 000-particle runs go together, one count per group."""
+    runs, nothing stepped): the paper's 10 000-particle runs go together, one count per group; with
+    gravity on its own clock, the R = 4 runs' 25 000 too."""
     from types import SimpleNamespace
 
     from decco_warp.params import Params
     from decco_warp.scheme import Scheme
     from decco_warp.sweep import ensemble_groups, ensemble_plan
 
-    def run(n, gravity="all-pairs"):
-        plan = SimpleNamespace(params=Params(), scheme=Scheme(gravity=gravity), state=SimpleNamespace(n=n))
+    def run(n, gravity="all-pairs", every=1):
+        plan = SimpleNamespace(params=Params(), scheme=Scheme(gravity=gravity, gravity_every=every), state=SimpleNamespace(n=n))
         return SimpleNamespace(plan=plan, sim=SimpleNamespace(step_count=0))
 
     cap = ensemble_plan("auto", 1, runs=8)[1]
     batch = [run(10_000), run(6_250), run(10_000), None, run(20_000), run(20_001), run(20_000), run(20_001), run(10_000, "tree")]
     assert ensemble_groups(batch, cap) == [[0, 2], [1], [4, 6], [5], [7], [8]]
     assert ensemble_groups(batch, None) == [[0, 1, 2, 4, 5, 6, 7], [8]]
+    # With gravity on its own clock a step fills less of the GPU: 25 000-particle runs go together too.
+    clocked = [run(25_000, every=10), run(25_000), run(25_000, every=10), run(25_001, every=10), run(25_000)]
+    assert ensemble_groups(clocked, cap) == [[0, 2], [1], [3], [4]]
 
 
 def test_shipped_large_pile_list_and_collision_are_valid():
