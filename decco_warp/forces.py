@@ -196,7 +196,7 @@ class ReferenceForces(ForcePath):
         return scheme.force_kernel == "reference"
 
     def __init__(self, model: ModelArrays, state: StateArrays, scheme: Scheme):
-        if scheme.gravity_every > 1:
+        if scheme.clocks > 1:
             raise InputError("the reference kernel evaluates gravity with every force: it steps with gravity_every = 1 only")
         super().__init__(model, state, scheme)
         self.kernel = pair_forces_reference(scheme.precision, model.params.law)
