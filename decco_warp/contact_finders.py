@@ -23,7 +23,7 @@ import warp as wp
 
 from .arrays import ModelArrays, StateArrays
 from .errors import InputError
-from .gravity_solvers import GravitySolver, empty_candidates
+from .gravity_solvers import GravitySolver, empty_candidates, registrar
 from .kernels.contacts import CANDIDATES
 from .kernels.neighbours import GRID_CELLS, build_neighbour_list, cell_keys, cell_ranges, lists_built
 from .kernels.pair import NEIGHBOUR_LIST_MARGIN, host_reach
@@ -34,12 +34,8 @@ from .layouts import particle_block
 CONTACT_FINDERS: dict[str, type[ContactFinder]] = {}
 
 
-def contact_finder(finder: type[ContactFinder]) -> type[ContactFinder]:
-    """Register ``finder`` under its ``name``: a gravity solver may then name it (``GravitySolver.finder``)."""
-    if finder.name in CONTACT_FINDERS:
-        raise ValueError(f"a contact finder named {finder.name!r} is registered already")
-    CONTACT_FINDERS[finder.name] = finder
-    return finder
+#: Register a finder under its ``name``: a gravity solver may then name it (``GravitySolver.finder``).
+contact_finder = registrar(CONTACT_FINDERS, "contact finder")
 
 
 class ContactFinder:

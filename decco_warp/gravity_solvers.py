@@ -62,12 +62,20 @@ def packed_bodies(model: ModelArrays, scheme, count: int) -> wp.array:
 GRAVITY_SOLVERS: dict[str, type[GravitySolver]] = {}
 
 
-def gravity_solver(solver: type[GravitySolver]) -> type[GravitySolver]:
-    """Register ``solver`` under its ``name``: a :class:`~decco_warp.scheme.Scheme` may then name it."""
-    if solver.name in GRAVITY_SOLVERS:
-        raise ValueError(f"a gravity solver named {solver.name!r} is registered already")
-    GRAVITY_SOLVERS[solver.name] = solver
-    return solver
+def registrar(table: dict, what: str):
+    """A class decorator that registers a class in ``table`` under its ``name``, once."""
+
+    def register(cls):
+        if cls.name in table:
+            raise ValueError(f"a {what} named {cls.name!r} is registered already")
+        table[cls.name] = cls
+        return cls
+
+    return register
+
+
+#: Register a solver under its ``name``: a :class:`~decco_warp.scheme.Scheme` may then name it.
+gravity_solver = registrar(GRAVITY_SOLVERS, "gravity solver")
 
 
 class GravitySolver:
