@@ -3,6 +3,10 @@
     python runs/results/figures.py          # from the repository root; writes docs/figures/validation-*.png
     python runs/results/figures.py --runs   # also each run's own figures and each experiment's
                                             # cross-run figures, in place (not committed)
+    python runs/results/figures.py validation-stress-shares validation-overlaps   # only these
+
+Named figures (FIGURES' names, without .png) are drawn alone: those whose runs changed, the others
+left as they are.
 
 Reads only what the sweeps kept (summary.json and analysis.h5 of each run) and the paper's piles.
 """
@@ -235,16 +239,20 @@ def stress_shares():
     found = runs("fig8")
     analyses = [read_analysis(run["dir"] / "analysis.h5") for run in found]
     measures = [name for name in STRESS_SHARE_PANELS if all(name in analysis for analysis in analyses)]
-    fig, axes = plt.subplots(len(measures), len(found), figsize=(4.4 * len(found), 3.8 * len(measures)), squeeze=False, sharey="row")
-    for row, name in zip(axes, measures):
+    size = (4.4, 3.8) if len(measures) == 1 else (3.6, 2.6)  # a frame every 40 s: dense lines, kept small
+    fig, axes = plt.subplots(len(measures), len(found), figsize=(size[0] * len(found), size[1] * len(measures)), squeeze=False,
+                             sharex=True, sharey="row")  # fmt: skip
+    for i, (row, name) in enumerate(zip(axes, measures)):
         for ax, run, analysis in zip(row, found, analyses):
             share = analysis[name]
             t = share["time"] / MINUTE
             for k in range(share["value"].shape[1]):
                 ax.plot(t[1:], share["value"][1:, k], color=f"C{k}", linewidth=0.8, label=SIZE_LABELS[k])
                 ax.axhline(share["value"][0, k], color=f"C{k}", linestyle="--", linewidth=0.8)
+            ax.axhline(1.0, color="0.5", linewidth=0.6)  # an even share
             ax.set_xscale("log")
-            ax.set_xlabel("time since the start [min]")
+            if i == len(measures) - 1:
+                ax.set_xlabel("time since the start [min]")
             title = f"eta = {run['summary']['eta']:.3g}"
             ax.set_title(title if len(measures) == 1 else f"{title}, {STRESS_SHARE_PANELS[name]}", fontsize=None if len(measures) == 1 else 9)
         row[0].set_ylabel("100 N_top / N  (top 1 % by stress)" if len(measures) == 1 else "100 N_top / N  (top 1 %)")
@@ -270,20 +278,21 @@ def conservation():
 
 def overlaps():
     fig, ax = plt.subplots(figsize=(5.0, 4.0))
-    sets = [("fig8", None, "Fig. 8 runs (a frame every 1 000 steps)")]
+    sets = [("fig8", None, "Fig. 8 runs (the deepest of every step)")]
     sets += [("fig3", ratio, f"Fig. 3, m_p/m_t = {label} (every 5 000)") for ratio, label in RATIOS]
     for sweep, ratio, title in sets:
         s = [r["summary"] for r in runs(sweep, ratio)]
         marker = "o" if sweep == "fig8" else "s"
         if s:
-            ax.plot([x["predicted_overlap"] for x in s], [x["deepest_overlap"] for x in s], marker, label=title)
+            ax.plot([x["predicted_overlap"] for x in s], [x["deepest_overlap"] for x in s], marker, label=title,
+                    zorder=3 if sweep == "fig8" else 2)  # fmt: skip
     line = np.array([0.1, 4.0])
     ax.plot(line, line, color="0.5", linewidth=0.8, label="measured = predicted")
     ax.plot(line, 0.1 * line, color="0.5", linestyle=":", linewidth=0.8, label="1/10 of predicted")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("predicted deepest overlap (fraction of the smallest radius)")
-    ax.set_ylabel("deepest overlap seen at the frames")
+    ax.set_ylabel("deepest overlap recorded")
     ax.legend(fontsize=8)
     return fig
 
@@ -364,22 +373,31 @@ def run_figures() -> None:
         print(f"drew {folder.relative_to(ROOT)}: {len(found)} runs")
 
 
+#: docs/figures' validation figures: name -> what draws it (from the committed runs).
+FIGURES = {
+    "validation-largest-fragment": lambda: largest_fragment("eta_self"),
+    "validation-largest-fragment-eta-all": lambda: largest_fragment("eta_all"),
+    "validation-size-change": size_change,
+    "validation-spins": spins,
+    "validation-spin-statistics": spin_statistics,
+    "validation-size-change-statistics": size_change_statistics,
+    "validation-stress-shares": stress_shares,
+    "validation-conservation": conservation,
+    "validation-overlaps": overlaps,
+    "validation-resolution": resolution,
+}
+
+
 def main() -> None:
-    if "--runs" in sys.argv[1:]:
+    args = sys.argv[1:]
+    names = [a for a in args if not a.startswith("--")]
+    unknown = [name for name in names if name not in FIGURES]
+    if unknown:
+        sys.exit(f"no figure {', '.join(unknown)} (one of {', '.join(FIGURES)})")
+    if "--runs" in args:
         run_figures()
-    for name, fig in [
-        ("validation-largest-fragment", largest_fragment("eta_self")),
-        ("validation-largest-fragment-eta-all", largest_fragment("eta_all")),
-        ("validation-size-change", size_change()),
-        ("validation-spins", spins()),
-        ("validation-spin-statistics", spin_statistics()),
-        ("validation-size-change-statistics", size_change_statistics()),
-        ("validation-stress-shares", stress_shares()),
-        ("validation-conservation", conservation()),
-        ("validation-overlaps", overlaps()),
-        ("validation-resolution", resolution()),
-    ]:
-        path = save(fig, OUT, name)[0]
+    for name in names or FIGURES:
+        path = save(FIGURES[name](), OUT, name)[0]
         path.with_suffix(".pdf").unlink()
         print(f"wrote {path.relative_to(ROOT)}")
 
