@@ -140,11 +140,12 @@ def main() -> None:
 
     print("\nShells a pile against the share of the depth part over all runs (Fieller's 95 % interval), and the")
     print("sorting part's size-blind noise (the median run's null_sd, points per particle)")
-    grains = min(run["piles"][1].n for run in runs)
+    piles = {id(pile): pile for run in runs for pile in run["piles"]}.values()
     for shells, split in splits.items():
+        grains = min(np.bincount(depth_shells(p.positions, p.masses, shells), minlength=shells).min() for p in piles)
         share = _share([s.depth for s in split], [s.total for s in split])
         share_mass = _share([s.depth_mass_weighted for s in split], [s.total_mass_weighted for s in split])
-        print(f"  {shells:3d} shells (>= {grains // shells:4d} grains a shell): per particle {share:22s} by mass {share_mass:22s} "
+        print(f"  {shells:3d} shells (>= {grains:4d} grains a shell): per particle {share:22s} by mass {share_mass:22s} "
               f"null sd {np.median([s.null_sd for s in split]):.2f}")  # fmt: skip
 
 
