@@ -157,3 +157,22 @@ def stress_share_observables(max_overlap: np.ndarray, radii: np.ndarray, size_cl
     """Each of :data:`STRESS_SHARE_OBSERVABLES` of one frame: name -> :func:`stress_shares` (classes,)."""
     return {name: stress_shares(max_overlap, size_class, classes, radii, measure)
             for name, measure in STRESS_SHARE_OBSERVABLES.items()}  # fmt: skip
+
+
+def stress_share_classes(observables: dict, species: np.ndarray) -> int:
+    """The size classes a run's stress shares count: as it recorded them, else its particles'."""
+    return np.shape(observables["stress_share"])[-1] if "stress_share" in observables else int(np.max(species)) + 1
+
+
+def recorded_stress_shares(recorded: dict, stress: np.ndarray, radii: np.ndarray, size_class: np.ndarray, classes: int) -> dict:
+    """One frame's :data:`STRESS_SHARE_OBSERVABLES`: each as the frame recorded it (``recorded``,
+    name -> (classes,)), or where it did not (absent: written before decco-warp recorded it; NaN in
+    every class: a frame before a resume added it) of the frame's per-particle ``stress`` (its
+    largest overlap) and the radii, which every trajectory holds."""
+    shares = {}
+    for name, measure in STRESS_SHARE_OBSERVABLES.items():
+        value = recorded.get(name)
+        if value is None or np.isnan(value).all():
+            value = stress_shares(stress, size_class, classes, radii, measure)
+        shares[name] = np.asarray(value)
+    return shares

@@ -188,18 +188,14 @@ class RerunLogger:
                     rec.log(f"{name}/class_{k}", rr.Scalars(float(value)))
 
     def _stress_shares(self, particles: dict, observables: dict) -> dict:
-        """Each of STRESS_SHARE_VIEWS' shares of a frame: as recorded, else (a trajectory written
-        before it was recorded, or its frames before a resume added it) of the frame's stress and radii."""
-        from .diagnostics import STRESS_SHARE_OBSERVABLES, stress_shares
+        """Each of STRESS_SHARE_VIEWS' shares of a frame, as recorded or of its stress and radii
+        (diagnostics.recorded_stress_shares)."""
+        from .diagnostics import recorded_stress_shares, stress_share_classes
 
-        classes = len(observables["stress_share"]) if "stress_share" in observables else int(self.species.max()) + 1
-        shares = {}
-        for name in STRESS_SHARE_VIEWS:
-            value = np.asarray(observables[name]) if name in observables else None
-            if value is None or np.isnan(value).all():
-                value = stress_shares(np.asarray(particles["stress"]), self.species, classes, self.radii_cm, STRESS_SHARE_OBSERVABLES[name])
-            shares[name] = value
-        return shares
+        recorded = {name: np.asarray(observables[name]) for name in STRESS_SHARE_VIEWS if name in observables}
+        classes = stress_share_classes(observables, self.species)
+        shares = recorded_stress_shares(recorded, np.asarray(particles["stress"]), self.radii_cm, self.species, classes)
+        return {name: shares[name] for name in STRESS_SHARE_VIEWS}
 
     def set_reference(self, particles: dict, observables: dict) -> None:
         """Measure the drifts from this frame (the run's first), with its momentum scales."""

@@ -12,7 +12,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..diagnostics import STRESS_SHARE_OBSERVABLES, energy_scale, ledger_closure, stress_shares
+from ..diagnostics import STRESS_SHARE_OBSERVABLES, energy_scale, ledger_closure, recorded_stress_shares, stress_share_classes
 from ..durable import json_ready, json_text, write_atomic
 from ..folder import RunFolder
 from ..io import OBSERVABLE_UNITS, read_frames, read_trajectory
@@ -508,30 +508,21 @@ STRESS_CHUNK = 64
 
 
 def stress_share_series(data, trajectory) -> dict[str, np.ndarray]:
-    """Each of :data:`STRESS_SHARE_OBSERVABLES` at every frame (F, classes): as the trajectory
-    recorded it, and where it lacks one (written before decco-warp recorded it; or, resumed since,
-    its earlier frames, NaN) computed from the frames' per-particle ``stress`` (the largest overlap)
-    and the radii, which every decco-warp trajectory holds, read STRESS_CHUNK frames at a time."""
+    """Each of :data:`STRESS_SHARE_OBSERVABLES` at every frame (F, classes), by
+    :func:`recorded_stress_shares`: the per-particle stress of only the frames that lack one is read,
+    STRESS_CHUNK frames at a time."""
     obs, static = data["observables"], data["static"]
     frames = len(data["time"])
-    classes = obs["stress_share"].shape[1] if "stress_share" in obs else int(static["species"].max()) + 1
-    series, lacking = {}, {}
-    for name in STRESS_SHARE_OBSERVABLES:
-        if name in obs:
-            series[name] = np.array(obs[name], dtype=float)
-            missing = np.isnan(series[name]).all(axis=1)  # a frame recorded has a share for every class with particles
-        else:
-            series[name], missing = np.full((frames, classes), np.nan), np.ones(frames, dtype=bool)
-        if missing.any():
-            lacking[name] = missing
-    wanted = np.flatnonzero(np.any(list(lacking.values()), axis=0)).tolist() if lacking else []
+    classes = stress_share_classes(obs, static["species"])
+    series = {name: np.array(obs[name], dtype=float) if name in obs else np.full((frames, classes), np.nan) for name in STRESS_SHARE_OBSERVABLES}
+    wanted = np.flatnonzero(np.any([np.isnan(value).all(axis=1) for value in series.values()], axis=0)).tolist()
     for start in range(0, len(wanted), STRESS_CHUNK):
         chunk = wanted[start : start + STRESS_CHUNK]
         stress = read_frames(trajectory, chunk, elements=("stress",))[0]["stress"]
         for row, frame in zip(stress, chunk):
-            for name, missing in lacking.items():
-                if missing[frame]:
-                    series[name][frame] = stress_shares(row, static["species"], classes, static["radius"], STRESS_SHARE_OBSERVABLES[name])
+            recorded = {name: value[frame] for name, value in series.items()}
+            for name, value in recorded_stress_shares(recorded, row, static["radius"], static["species"], classes).items():
+                series[name][frame] = value
     return series
 
 
