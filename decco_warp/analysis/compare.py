@@ -340,13 +340,18 @@ def _mean_difference(a, b, axis=-1):
     return np.mean(a, axis=axis) - np.mean(b, axis=axis)
 
 
+def t_half_width(values: np.ndarray, confidence: float = CONFIDENCE) -> float:
+    """The half-width of Student's t ``confidence`` interval of the mean of ``values`` (>= 2)."""
+    return float(stats.t.ppf(0.5 + confidence / 2, values.size - 1) * values.std(ddof=1) / math.sqrt(values.size))
+
+
 def mean_interval(values: np.ndarray, confidence: float = CONFIDENCE, resamples: int = RESAMPLES) -> tuple[float | None, float | None, str | None]:
     """(low, high, method) of the ``confidence`` interval of the mean of ``values``: Student's t
     below BOOTSTRAP_FROM values, the bootstrap from there; (None, None, None) for one value."""
     if values.size < 2:
         return None, None, None
     if values.size < BOOTSTRAP_FROM:
-        half = stats.t.ppf(0.5 + confidence / 2, values.size - 1) * values.std(ddof=1) / math.sqrt(values.size)
+        half = t_half_width(values, confidence)
         return float(values.mean() - half), float(values.mean() + half), "t"
     return (*bootstrap_interval((values,), confidence, resamples), "bootstrap")
 

@@ -24,6 +24,7 @@ import numpy as np
 from scipy import stats
 
 from ..checks import InputError
+from .compare import t_half_width
 from .runs import _percent_change, mass_weighted_size_change, particle_size_change
 
 
@@ -108,8 +109,7 @@ def t_interval(values, confidence: float = 0.95) -> tuple[float, float]:
     values = np.asarray(values, dtype=float)
     if values.size < 2:
         raise InputError("t_interval needs two values or more")
-    half = stats.t.ppf(0.5 + confidence / 2, values.size - 1) * values.std(ddof=1) / math.sqrt(values.size)
-    return float(values.mean()), float(half)
+    return float(values.mean()), t_half_width(values, confidence)
 
 
 def ratio_interval(numerators, denominators, confidence: float = 0.95) -> tuple[float, float | None, float | None]:
