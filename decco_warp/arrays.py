@@ -116,22 +116,49 @@ class ContactHistory:
     ``current`` holds the last contact evaluation's, which the next reads while writing ``next``;
     :meth:`commit` then makes those current.  Keyed by partner, a contact's springs are carried
     across any rebuild of the candidate lists; a pair that stops touching is dropped.  ``width``
-    rows a particle (0: none kept, the arrays empty)."""
+    rows a particle (0: none kept, the arrays empty).
+
+    The two are one pair of buffers whose roles swap at each commit (no copy: the copy was a sixth of
+    an ssdem step at K = 10).  ``current`` and ``next`` are therefore looked up at each use, never
+    kept: a launch takes them as they are when it is made.  A recorded graph (simulation.py) holds
+    the buffers its launches were recorded with, so it must begin and end with the roles it was
+    recorded with: :attr:`flipped` says which way round they are, :meth:`settle` turns them."""
 
     def __init__(self, count: int, width: int, device: str):
         self.count, self.width, self.device = count, width, device
         rows = count if width > 0 else 0
-        self.current = pair_history(rows, width, device)
-        self.next = pair_history(rows, width, device)
+        self._buffers = (pair_history(rows, width, device), pair_history(rows, width, device))
+        self.flipped = False
+        """Whether the second buffer is the current one."""
+
+    @property
+    def current(self) -> PairHistory:
+        """The rows of the last contact evaluation (what the next one reads)."""
+        return self._buffers[self.flipped]
+
+    @property
+    def next(self) -> PairHistory:
+        """The rows the next contact evaluation writes."""
+        return self._buffers[not self.flipped]
 
     @property
     def kept(self) -> bool:
         return self.width > 0
 
     def commit(self) -> None:
-        """The rows the last contact evaluation wrote become the current ones (no-op where none are kept)."""
+        """The rows the last contact evaluation wrote become the current ones: the buffers swap roles
+        (no-op where none are kept).  The rows of ``next`` are then those of two evaluations ago, past
+        each particle's count never read (the evaluation writes every count and the rows below it)."""
         if self.kept:
-            wp.launch(commit_springs, dim=(self.count, self.width), inputs=[self.next], outputs=[self.current], device=self.device)
+            self.flipped = not self.flipped
+
+    def settle(self, flipped: bool) -> None:
+        """Turn the roles to ``flipped`` (a recorded graph's), the current rows copied into the other
+        buffer if they are the other way round (one launch of ``commit_springs``): the same rows,
+        the same bits, in the buffer the graph reads."""
+        if self.kept and self.flipped != flipped:
+            wp.launch(commit_springs, dim=(self.count, self.width), inputs=[self.current], outputs=[self.next], device=self.device)
+            self.flipped = flipped
 
     def overflows(self, first: int = 0, end: int | None = None) -> int:
         """Particles (of rows [first, end)) with more contacts than rows at the last evaluation: the springs

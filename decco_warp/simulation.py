@@ -69,6 +69,7 @@ class Simulation:
         self._time_origin = state.time - state.step * params.dt
         self._step = state.step
         self._graph = None
+        self._graph_flipped = False  # the contact history's roles the graph was recorded with
         self._graph_steps = graph_steps(self.step_multiple)
         # A loop or branch decided on the device (the tree's levels) is a conditional graph node on
         # CUDA (driver and toolkit 12.4+); without them steps are launched one by one, which gives
@@ -151,6 +152,9 @@ class Simulation:
             graph = self._step_graph()
             if graph is None:
                 break
+            # The graph reads the contact history's buffers in the roles they had when it was recorded
+            # (after an odd count of steps launched one by one they are the other way round: one copy).
+            self.engine.state.history.settle(self._graph_flipped)
             wp.capture_launch(graph)
             n -= self._graph_steps
             self._step += self._graph_steps
@@ -165,14 +169,22 @@ class Simulation:
         """The recorded block of steps, recorded at the first call; None if recording failed (a
         recording only records: nothing was stepped, and steps go on one launch at a time)."""
         if self._graph is None:
+            # Each contact evaluation swaps the contact history's buffers in Python (arrays.ContactHistory),
+            # so the recorded launches alternate them as stepping does; the graph, replayed with no
+            # Python between, must leave the roles as it found them: after an odd count of evaluations
+            # (e.g. K = 7, 49 steps) it ends with one copy that turns them back.
+            history = self.engine.state.history
+            flipped = history.flipped
             try:
                 with wp.ScopedCapture(device=self.engine.device) as capture:
                     self.engine.advance(self._graph_steps)
+                    history.settle(flipped)
             except Exception as error:  # e.g. a driver without conditional graph nodes for the tree
+                history.flipped = flipped  # nothing ran: the roles are those before the recording
                 warnings.warn(f"steps are launched one by one: recording them in a graph failed ({error})", stacklevel=3)
                 self._record = False
                 return None
-            self._graph = capture.graph
+            self._graph, self._graph_flipped = capture.graph, flipped
         return self._graph
 
     @property
