@@ -187,6 +187,93 @@ def test_a_resumed_run_with_springs_is_the_uninterrupted_one_bit_for_bit(scheme,
     assert a["contact_count"].sum() > state.n  # contacts held their springs across the restart
 
 
+#: (gravity_every, simulation.GRAPH_STEPS or None for its own, Simulation keywords): recorded blocks of
+#: an even count of contact evaluations (8, 6) and an odd one (7, 9, and 49 at K = 7 by default).
+GRAPH_CASES = {
+    "one-clock-8": (1, 8, {}),
+    "one-clock-7": (1, 7, {}),
+    "reference-7": (1, 7, {"force_kernel": "reference"}),
+    "newton-7": (1, 7, {"layout": "newton"}),
+    "gravity-every-2-6": (2, 7, {}),
+    "gravity-every-3-9": (3, 9, {}),
+    "gravity-every-7-49": (7, None, {}),
+}
+
+
+def _snapshots_equal(a: dict, b: dict) -> None:
+    assert a.keys() == b.keys() and "contact_spring" in a
+    for key, value in a.items():
+        assert np.array_equal(value, b[key]), key
+
+
+@pytest.mark.parametrize("case", sorted(GRAPH_CASES))
+def test_recorded_graphs_keep_the_springs_as_steps_one_at_a_time(case, monkeypatch):
+    """The contact history's two buffers swap roles at each contact evaluation (arrays.ContactHistory),
+    in Python, so a recorded graph holds the buffers of the roles it was recorded with.  Blocks of an
+    even and an odd count of evaluations, replayed after an even and an odd count of steps launched
+    one by one, give every array of the snapshot (positions, velocities, spins, forces, the ledger,
+    the springs) bit for bit as the same steps taken an outer step at a time, outside any graph."""
+    from decco_warp import simulation
+    from decco_warp.arrays import ContactHistory
+    from decco_warp.layouts import newton_layout
+
+    every, graph_steps, options = GRAPH_CASES[case]
+    if options.get("layout") == "newton":
+        options = {"layout": newton_layout("cpu")}
+    state = _clump(40, seed=9)
+    params = dw.Params(**SSDEM)
+    scheme = dw.Scheme(gravity_every=every)
+    alone = dw.Simulation(state, params, device="cpu", ledger=True, scheme=scheme, **options)
+    assert alone._graph_steps > every  # (its outer steps are never a recorded block)
+    if graph_steps is not None:
+        monkeypatch.setattr(simulation, "GRAPH_STEPS", graph_steps)
+    recorded = dw.Simulation(state, params, device="cpu", ledger=True, scheme=scheme, **options)
+    block = recorded._graph_steps
+    turned = []  # per ContactHistory.settle: whether it copied the rows (the roles were the other way)
+    settle = ContactHistory.settle
+
+    def noted_settle(self, flipped):
+        turned.append(self.flipped != flipped)
+        settle(self, flipped)
+
+    monkeypatch.setattr(ContactHistory, "settle", noted_settle)
+    # An outer step, blocks with one left over, one block, three outer steps, two blocks.
+    for steps in (every, 2 * block + every, block, 3 * every, 2 * block, every):
+        recorded.step(steps)
+        for _ in range(steps // every):
+            alone.step(every)
+        _snapshots_equal(alone.snapshot(), recorded.snapshot())
+    assert recorded._graph is not None and alone._graph is None
+    # The recording ends with a copy for an odd block; a replay after an odd count of evaluations
+    # outside it copies (an even K takes none: each outer step is an even count).
+    assert turned[0] == (block % 2 == 1) and any(turned[1:]) == (every % 2 == 1)
+    assert recorded.snapshot()["contact_count"].sum() > 0  # contacts held springs to the end
+
+
+def test_a_recording_that_fails_leaves_the_springs_where_they_were():
+    """A graph capture that fails after some of its launches were recorded (the contact history's
+    roles swapped in Python at each) stepped nothing: the steps then go on one by one from the same rows."""
+    state = _clump(40, seed=9)
+    params = dw.Params(**SSDEM)
+    alone = dw.Simulation(state, params, device="cpu")
+    refused = dw.Simulation(state, params, device="cpu")
+    advance = refused.engine.advance
+
+    def fails_while_recording(steps):
+        if steps == refused._graph_steps:  # the recording: three steps' launches recorded, then an error
+            advance(3)
+            raise RuntimeError("the graph was refused")
+        advance(steps)
+
+    refused.engine.advance = fails_while_recording
+    with pytest.warns(UserWarning, match="launched one by one.*refused"):
+        refused.step(refused._graph_steps + 1)
+    assert refused._graph is None
+    for _ in range(refused._graph_steps + 1):
+        alone.step(1)
+    _snapshots_equal(alone.snapshot(), refused.snapshot())
+
+
 def test_a_snapshot_without_the_history_is_refused_for_the_law_with_springs():
     state = _clump()
     params = dw.Params(**SSDEM)
