@@ -67,8 +67,9 @@ def unpack_depth(record: int) -> tuple[float, int]:
 # their counts).  A pair that no longer touches is not written, so that its springs are dropped.
 # Both particles of a pair keep a copy: each evaluates the pair from its lower index with the same
 # arguments (kernels/pair.py ssdem_contact), so the two copies stay the same bits, and no thread
-# writes another particle's rows.  ``commit_springs`` then makes the next rows the current ones
-# (decco_warp/arrays.py ContactHistory).
+# writes another particle's rows.  The two sets of rows then swap roles (decco_warp/arrays.py
+# ContactHistory.commit, no launch); ``commit_springs`` copies one into the other only where a
+# recorded graph needs the rows back in the buffer it was recorded with (ContactHistory.settle).
 
 
 @wp.struct
@@ -150,7 +151,7 @@ def commit_springs(
     # Out:
     history_out: PairHistory,
 ):
-    """The rows of the last contact evaluation become the current ones: a thread a row (launch over
+    """Copy one contact history's rows into another (ContactHistory.settle): a thread a row (launch over
     (particles, rows)), so that neighbouring threads copy neighbouring rows of one particle (one
     thread a particle walking its rows read and wrote memory a row's width apart: 8x the time)."""
     i, row = wp.tid()
