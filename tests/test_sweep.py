@@ -403,7 +403,8 @@ def test_shipped_large_pile_list_and_collision_are_valid():
 @pytest.mark.parametrize(
     "folder, sweeps, overrides",
     [("fig3", ["fig3_validation", "realizations"], None), ("fig8", ["fig8_stress"], None), ("fig9", ["fig9_spin"], None), ("causes", ["size_change_causes"], None),
-     ("spin_friction", ["spin_friction"], None), ("fig9_statistics", ["fig9_statistics"], None), ("fig6_statistics", ["fig6_statistics"], None),
+     ("spin_friction", ["spin_friction"], None), ("fig9_statistics", ["fig9_statistics"], None), ("fig9_zero_slip", ["fig9_statistics"], None),
+     ("fig9_decco_code", ["fig9_decco_code"], None), ("fig6_statistics", ["fig6_statistics"], None),
      ("fig6_clock", ["fig6_clock"], None), ("resolution", ["resolution"], {"resolution": 0.25}),
      ("resolution/x4", ["resolution_auto"], {"resolution": 4.0}),
      ("resolution_paper_contacts", ["resolution_paper_contacts"], {"resolution": 0.25}),

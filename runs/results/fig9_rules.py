@@ -1,0 +1,84 @@
+"""Fig. 9 at eta 6 under three friction rules (docs/validation.md, "Fig. 9: spin"): the committed
+campaign made before sliding friction's zero-slip rule (fig9_statistics/), the same set-ups rerun
+with it (fig9_zero_slip/), and DECCO's pair forces as its code computes them (fig9_decco_code/).
+
+    python runs/results/fig9_rules.py          # from the repository root, on any machine (CPU)
+
+For each rule: each kind of spin's m_lf/m_t minus no spin's, with Dunnett's 95 % intervals (the
+three kinds against one control together, as `decco-warp compare --by spin_kind --at eta` gives
+them). Then the rules against each other, run by run: every set-up (its piles, orientation seed
+and spins) is made under each rule, so the difference is taken per set-up and its mean given with
+Student's t 95 % interval (paired: the set-up's own chance cancels).
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from decco_warp.analysis.compare import dunnett_intervals, t_half_width, welch_interval
+
+RESULTS = Path(__file__).resolve().parent
+RULES = {  # folder: what made it
+    "fig9_statistics": "before the zero-slip rule",
+    "fig9_zero_slip": "the paper law today (zero-slip rule)",
+    "fig9_decco_code": "decco-code (DECCO's code)",
+}
+KINDS = ("parallel", "perpendicular", "anti-parallel")
+ETA = 6.0
+METRIC = "largest_mass_ratio"
+
+
+def runs_of(folder: str) -> dict[str, dict]:
+    """{run name: summary row} of a folder's summary.csv at eta 6."""
+    rows = csv.DictReader((RESULTS / folder / "summary.csv").open())
+    return {row["run"]: row for row in rows if abs(float(row["eta"]) - ETA) < 1e-6}
+
+
+def by_kind(runs: dict[str, dict]) -> dict[str, np.ndarray]:
+    kinds: dict[str, list[float]] = {}
+    for row in runs.values():
+        kinds.setdefault(row["spin_kind"], []).append(float(row[METRIC]))
+    return {kind: np.array(values) for kind, values in kinds.items()}
+
+
+def main() -> None:
+    rules = {folder: runs_of(folder) for folder in RULES}
+    print(f"m_lf/m_t at eta {ETA:g}, each kind of spin minus no spin (Dunnett, 95 % together)")
+    print(f"{'rule':40s} {'none':>13s}  " + "  ".join(f"{kind:>30s}" for kind in KINDS))
+    for folder, runs in rules.items():
+        kinds = by_kind(runs)
+        control = kinds["none"]
+        cells = []
+        for kind, (low, high, _) in zip(KINDS, dunnett_intervals([kinds[k] for k in KINDS], control)):
+            difference = kinds[kind].mean() - control.mean()
+            cells.append(f"{difference:+.3f} ({low:+.3f} to {high:+.3f}){' *' if high < 0 or low > 0 else '  '}")
+        print(f"{RULES[folder]:40s} {control.mean():.3f} (n {control.size})  " + "  ".join(f"{c:>30s}" for c in cells))
+    print("  * resolved: the interval excludes 0")
+
+    print(f"\nrule against rule, set-up by set-up (mean of the paired differences, t 95 %)")
+    for new, old in (("fig9_zero_slip", "fig9_statistics"), ("fig9_decco_code", "fig9_zero_slip")):
+        a, b = rules[new], rules[old]
+        twins = sorted(set(a) & set(b))
+        if len(twins) != len(a) or len(twins) != len(b):
+            raise SystemExit(f"{new} and {old} do not hold the same set-ups ({len(a)}, {len(b)}, {len(twins)} in both)")
+        print(f"{RULES[new]} minus {RULES[old]}:")
+        paired = {}
+        for kind in ("none", *KINDS, "all"):
+            names = [name for name in twins if kind == "all" or a[name]["spin_kind"] == kind]
+            differences = paired[kind] = np.array([float(a[name][METRIC]) - float(b[name][METRIC]) for name in names])
+            half = t_half_width(differences)
+            print(f"  {kind:14s} n {differences.size:2d}  {differences.mean():+.4f}  ({differences.mean() - half:+.4f} to "
+                  f"{differences.mean() + half:+.4f}), std {differences.std(ddof=1):.4f}")
+        # How the rule changes a kind's effect (its difference to no spin): its paired differences
+        # against no spin's, Welch's 95 %.
+        for kind in KINDS:
+            low, high = welch_interval(paired[kind], paired["none"])
+            print(f"  {kind:14s} effect of spin, {RULES[new]} minus {RULES[old]}: "
+                  f"{paired[kind].mean() - paired['none'].mean():+.4f} ({low:+.4f} to {high:+.4f})")
+
+
+if __name__ == "__main__":
+    main()
