@@ -969,7 +969,7 @@ def extract(
 @app.command()
 def compare(
     paths: List[Path] = typer.Argument(..., help="Run folders, folders of run folders (their summary.json), or sweeps' summary.csv files."),
-    by: str = typer.Option(..., "--by", help="The column whose groups are compared, e.g. spin_kind."),
+    by: str = typer.Option(..., "--by", help="The column whose groups are compared, e.g. spin_kind; folder: the sweep folder each run was read from."),
     metric: str = typer.Option(..., "--metric", help="The numeric column compared, e.g. largest_mass_ratio [its own units]."),
     at: Optional[str] = typer.Option(None, "--at", help="Compare at each value of this column too, e.g. eta (numbers equal to 6 significant digits are one point)."),
     reference: Optional[str] = typer.Option(
@@ -997,8 +997,8 @@ def compare(
         help="Keep only the runs with one of these values in COLUMN (repeatable, every column must match; numbers within 1 %), e.g. --where mass_ratio=1 --where eta=3,6."
     ),
     paired: bool = typer.Option(
-        False, "--paired", help="Pair each run with its twin in the reference group (the run that agrees in the set-up, eta, spin_kind, realization, "
-        "orientation_seed and the piles: all but --by) and give the mean of the twins' differences with Student's t interval on them (pairs - 1 dof), "
+        False, "--paired", help="Pair each run with its twin in the reference group (the run that agrees in the set-up, eta, the spins, realization, "
+        "orientation_seed and the piles, where both record them: all but --by; by folder, its name too) and give the mean of the twins' differences with Student's t interval on them (pairs - 1 dof), "
         "their count and correlation r; runs without a twin are named and left out, a group of fewer than 2 pairs is refused. One group against "
         "the reference per point, or --per-comparison."
     ),

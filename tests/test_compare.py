@@ -271,6 +271,57 @@ def test_twins_agree_in_every_pairing_column_and_the_rest_are_named_or_refused()
         cmp.compare(rows, "gravity_every", "largest_mass_ratio", against=0.0, paired=True)
 
 
+def test_twins_are_matched_on_their_spin_axes_and_not_on_a_column_one_side_does_not_record():
+    """A kind of spin holds two axis pairs: their runs of one realization are two set-ups, paired each
+    with its own twin by the axes. A pairing column that one group's runs do not record (an older
+    summary without restitution) matches nothing, as the set-up check treats it, and the pairs line
+    names it; one that both record still parts runs (the axes)."""
+    rows = []
+    for law, values in (("paper", [0.50, 0.60, 0.70, 0.80]), ("decco-code", [0.45, 0.56, 0.64, 0.77])):
+        for k, value in enumerate(values):
+            axes = ("+z", "+z") if k % 2 == 0 else ("+x", "+x")
+            rows.append({"run": f"{law}_{axes[0]}_r{k // 2}", "spin_kind": "parallel", "eta": 6.0, **SETUP, "contact_law": law,
+                         "target_spin": 0.5, "projectile_spin": 0.5, "target_spin_axis": axes[0], "projectile_spin_axis": axes[1],
+                         "realization": k // 2, "largest_mass_ratio": value, "status": "ok"})  # fmt: skip
+    rows[4] = {**rows[4], "restitution": 0.9}  # the decco-code runs record restitution, the paper runs do not
+    for row in rows[5:]:
+        row["restitution"] = 0.9
+    result = cmp.compare(rows, "contact_law", "largest_mass_ratio", reference="paper", paired=True)
+    (d,) = result.points[0].differences
+    assert d.pairs == 4 and d.difference == pytest.approx(np.mean([-0.05, -0.04, -0.06, -0.03]))
+    (line,) = [line for line in result.lines() if line.startswith("pairs:")]
+    assert line == "pairs: 4 twins; every run has its twin; not matched on restitution (recorded by one side's runs only)"
+    rows[6] = {**rows[6], "target_spin_axis": "+y"}  # decco-code's +z r1 now has no twin, and paper's +z r1 none either
+    result = cmp.compare(rows, "contact_law", "largest_mass_ratio", reference="paper", paired=True)
+    assert result.points[0].differences[0].pairs == 3 and len(result.unpaired) == 2
+
+
+def test_one_sweep_file_run_twice_pairs_by_folder_and_run_name(tmp_path):
+    """The committed Fig. 9 campaign at eta 6 before sliding friction's zero-slip rule and the same
+    sweep file rerun with it: no set-up column tells them apart, the folder does (--by folder), and
+    twins are runs of one name. Each kind's paired difference is scipy.stats.ttest_rel's on the
+    runs that the csv module reads from the two summary.csv files and matches by name."""
+    from pathlib import Path
+
+    root = Path(__file__).parent.parent / "runs" / "results"
+    tables = [root / "fig9_statistics" / "summary.csv", root / "fig9_zero_slip" / "summary.csv"]
+    made = cli_here("compare", *map(str, tables), "--by", "folder", "--reference", "fig9_statistics", "--metric", "largest_mass_ratio",
+                    "--at", "spin_kind", "--where", "eta=6", "--paired", "--json", str(tmp_path / "paired.json"))  # fmt: skip
+    assert made.returncode == 0, made.stderr
+    assert "pairs: 39 twins; every run has its twin; not matched on restitution" in made.stdout
+    before, after = ({row["run"]: row for row in csv.DictReader(path.open(newline="")) if abs(float(row["eta"]) - 6) < 0.01} for path in tables)
+    assert sorted(before) == sorted(after) and len(before) == 39
+    table = json.loads((tmp_path / "paired.json").read_text())
+    for point in table["points"]:
+        names = [name for name, row in after.items() if row["spin_kind"] == point["at"]]
+        new, old = (np.array([float(side[name]["largest_mass_ratio"]) for name in names]) for side in (after, before))
+        (d,) = point["differences"]
+        interval = stats.ttest_rel(new, old).confidence_interval()
+        assert d["group"] == "fig9_zero_slip" and d["pairs"] == len(names) in (9, 10)
+        assert d["difference"] == pytest.approx((new - old).mean(), rel=1e-12)
+        assert (d["low"], d["high"]) == pytest.approx((interval.low, interval.high), rel=1e-12)
+
+
 def test_welch_interval_by_hand():
     a, b = np.array([1.0, 2.0, 3.0]), np.array([2.0, 4.0, 6.0, 8.0])
     # Variances of the means 1/3 and 5/3: se^2 = 2; Welch-Satterthwaite dof 4 / (1/18 + 25/27).

@@ -60,13 +60,21 @@ SETUP_COLUMNS = ("mass_ratio", "theta_deg", "k_in", "dt", "gravity_every", "eta_
                  "G", "rolling_friction", "contact_law", "k_t_ratio", "eps_t", "mu_s", "mu_t", "beta", "cohesion")  # fmt: skip
 #: With ``paired``, twins are two runs, one of a group and one of the reference group, that agree in
 #: each of these columns other than ``by`` (to KEY_DIGITS digits; a value missing in both agrees): the
-#: set-up, the energy, the spin, the realization and its turn of the piles, and the piles.
-PAIR_COLUMNS = (*SETUP_COLUMNS, "eta", "spin_kind", "realization", "orientation_seed", "target_pile", "projectile_pile")
+#: set-up, the energy, the spins (a kind holds several axis pairs), the realization and its turn of
+#: the piles, and the piles.
+PAIR_COLUMNS = (*SETUP_COLUMNS, "eta", "spin_kind", "target_spin", "projectile_spin", "target_spin_axis", "projectile_spin_axis",
+                "realization", "orientation_seed", "target_pile", "projectile_pile")  # fmt: skip
+#: The column each row gets from where it was read, unless it has one: the name of the sweep's folder
+#: (a summary.csv's folder, or the folder of the run folders given), so that twins of two campaigns
+#: that no set-up column tells apart (one sweep file run by two versions of the code, say) can be
+#: compared as groups: ``--by folder --paired``.
+FOLDER = "folder"
 
 
 def pair_columns(by: str, at: str | None) -> list[str]:
-    """The columns in which twins agree: PAIR_COLUMNS but ``by`` and ``at``."""
-    return [c for c in PAIR_COLUMNS if c not in (by, at)]
+    """The columns in which twins agree: PAIR_COLUMNS but ``by`` and ``at``; by FOLDER (one sweep
+    file's runs in two folders) the run's name too, which names its set-up in both."""
+    return [c for c in PAIR_COLUMNS if c not in (by, at)] + (["run"] if by == FOLDER else [])
 
 
 #: The group that ``spin_kind`` is compared against by default, where present.
@@ -110,13 +118,15 @@ class UnpairedRuns(CompareError):
 def read_rows(paths) -> list[dict]:
     """The summary rows under ``paths``: each a run folder (its summary.json), a folder of run
     folders (theirs), or a sweep's summary.csv (its rows; blank cells are None, numbers floats).
-    A run read twice (a sweep's folder and its summary.csv, say) is refused: it would count twice."""
+    A run read twice (a sweep's folder and its summary.csv, say) is refused: it would count twice.
+    Each row without a ``folder`` column gets its sweep folder's name there (FOLDER)."""
     rows, origin = [], {}
     for path in map(Path, paths):
         for identity, where, row in _rows_of(path):
             if identity in origin:
                 raise CompareError(f"run {row.get('run', identity)} is read twice ({origin[identity]} and {where}): give each run once")
             origin[identity] = where
+            row.setdefault(FOLDER, identity.parent.name)
             rows.append(row)
     if not rows:
         raise CompareError(f"no summaries in {', '.join(map(str, paths))}")
@@ -480,6 +490,9 @@ class Comparison:
     per_comparison: bool = False  #: each difference its own interval, never Dunnett's simultaneous ones
     paired: bool = False  #: each difference the mean of its twins' differences (PAIR_COLUMNS)
     unpaired: list = field(default_factory=list)  #: with ``paired``: the runs left out without a twin, "RUN (BY VALUE)"
+    #: with ``paired``: the pairing columns that one side's runs record and the other's do not (older
+    #: summaries lack some), so that twins were not matched on them
+    unrecorded: list = field(default_factory=list)
 
     @property
     def pair_columns(self) -> list[str]:
@@ -536,7 +549,8 @@ class Comparison:
         if self.paired:
             twins = sum(d.pairs or 0 for p in self.points for d in p.differences)
             text.insert(3, f"pairs: {twins} twins; " + (f"{len(self.unpaired)} run(s) without a twin left out: {', '.join(self.unpaired)}"
-                                                        if self.unpaired else "every run has its twin"))  # fmt: skip
+                                                        if self.unpaired else "every run has its twin")
+                        + (f"; not matched on {', '.join(self.unrecorded)} (recorded by one side's runs only)" if self.unrecorded else ""))  # fmt: skip
         pairing = ["pairs", "r"] if self.paired else []
         resolve = "pairs to resolve" if self.paired else "runs to resolve"
         columns = [self.by, "n", "mean", "std", "diff", f"{level} interval", "method", *pairing, "detectable", resolve, "verdict"]
@@ -685,7 +699,7 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
         if reference not in groups:
             raise CompareError(f"--reference {label(reference)}: no such {by} among the runs; they have: {', '.join(map(label, groups))}")
 
-    result, unpaired = [], []
+    result, unpaired, unrecorded = [], [], []
     for at_key in sorted(points, key=lambda k: _order(k) if k is not None else (0, 0.0, "")):
         point = points[at_key]
         if not allow_mixed:  # the rows compared with each other: all at the point, or each group's against a value
@@ -697,14 +711,15 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
             if not paired:
                 differences = _differences(stats_of, reference, resolve, resamples, confidence, per_comparison) if reference in point else []
             else:
-                differences = _paired_differences(point, at_key, by, at, metric, reference, resolve, resamples, confidence, per_comparison, unpaired)
+                differences = _paired_differences(point, at_key, by, at, metric, reference, resolve, resamples, confidence, per_comparison,
+                                                  unpaired, unrecorded)  # fmt: skip
         else:
             order = sorted(point, key=_order)
             stats_of = {g: _group(g, point[g], metric, resamples, confidence) for g in order}
             differences = [_against(stats_of[g], against, resolve, confidence) for g in order]
         result.append(Point(at_key, [stats_of[g] for g in order], differences))
     comparison = Comparison(metric, by, at, reference, resolve, result, len(rows), len(rows) - len(done), where, met, missing, resamples,
-                            against, confidence, per_comparison, paired, list(dict.fromkeys(unpaired)))  # fmt: skip
+                            against, confidence, per_comparison, paired, list(dict.fromkeys(unpaired)), list(dict.fromkeys(unrecorded)))  # fmt: skip
     single = comparison.single()
     if single and not allow_single:
         named = "; ".join(f"{label(g)}" + (f" at {at} {label(p)}" if at else "") for p, g in single)
@@ -759,9 +774,11 @@ def pair_runs(rows: list[dict], reference_rows: list[dict], columns) -> tuple[li
 
 
 def _paired_differences(point: dict, at_key, by: str, at: str | None, metric: str, reference, resolve: float | None, resamples: int,
-                        confidence: float, per_comparison: bool, unpaired: list) -> list[Difference]:  # fmt: skip
+                        confidence: float, per_comparison: bool, unpaired: list, unrecorded: list) -> list[Difference]:  # fmt: skip
     """Each group's paired difference to the reference at one point (``unpaired`` gets the runs
-    left without a twin, "RUN (BY VALUE)")."""
+    left without a twin, "RUN (BY VALUE)"; ``unrecorded`` the pairing columns that one side records
+    and the other does not, which twins are not matched on: as the set-up check, a value missing is
+    no disagreement)."""
     if reference not in point:
         return []
     others = sorted((g for g in point if g != reference), key=_order)
@@ -773,6 +790,9 @@ def _paired_differences(point: dict, at_key, by: str, at: str | None, metric: st
     columns = pair_columns(by, at)
     differences = []
     for g in others:
+        recorded = [{c for c in columns if any(value_key(row.get(c)) is not None for row in side)} for side in (point[g], point[reference])]
+        unrecorded += [c for c in columns if c in recorded[0] ^ recorded[1]]
+        columns = [c for c in pair_columns(by, at) if c not in recorded[0] ^ recorded[1]]
         twins, rest = pair_runs(point[g], point[reference], columns)
         named = [f"{row.get('run', '?')} ({by} {label(value_key(row[by]))})" for row in rest]
         if len(twins) < 2:
