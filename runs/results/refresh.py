@@ -3,7 +3,7 @@
     python runs/results/refresh.py            # from the repository root, on any machine (CPU)
 
 Each run folder under runs/results/ keeps analysis.h5, spec.toml and summary.json but no
-trajectory.  The set-up of every run is made again from its spec.toml (the same piles, seed and
+trajectory (a folder that keeps summaries only, without analysis.h5, is left as it is).  The set-up of every run is made again from its spec.toml (the same piles, seed and
 collision: ``plan_start`` on the CPU, nothing stepped), which gives what the summaries lacked: both
 readings of eta, the LS12 small-body law with its band and the planets' law, and the spins' motion
 at the first contact point.  The set-up is checked against the run's own record (its speed to 1e-9)
@@ -43,9 +43,13 @@ def refresh_run(run_dir: Path) -> dict:
 
 
 def refresh_experiment(folder: Path) -> None:
+    run_dirs = sorted(p.parent for p in folder.glob("*/analysis.h5"))
+    if not run_dirs:  # a folder that keeps summaries only (fig9_zero_slip/, say): nothing to recompute from
+        print(f"{folder.relative_to(ROOT)}: no analysis.h5, left as it is", flush=True)
+        return
     table = folder / "summary.csv"
     rows = {row["run"]: row for row in csv.DictReader(table.open())} if table.is_file() else {}
-    for run_dir in sorted(p.parent for p in folder.glob("*/analysis.h5")):
+    for run_dir in run_dirs:
         summary = refresh_run(run_dir)
         row = rows.setdefault(run_dir.name, {"run": run_dir.name, "status": "ok"})
         row.update({key: summary[key] for key in summary_fields() if key in summary})
