@@ -201,6 +201,34 @@ def spin_statistics():
     return fig
 
 
+#: Fig. 9 at eta 6 under three friction rules: the folder and its label (runs/results/fig9_rules.py).
+SPIN_RULES = {"fig9_statistics": "before the zero-slip rule", "fig9_zero_slip": "the paper law today (zero-slip)",
+              "fig9_decco_code": "decco-code (DECCO's code)"}  # fmt: skip
+
+
+def spin_rules():
+    """Fig. 9 at eta 6 under three friction rules: each kind's difference to no spin with Dunnett's
+    95 % intervals (the three kinds together), a marker per rule: ``decco-warp compare
+    FOLDER/summary.csv --by spin_kind --at eta --where eta=6`` for each folder of SPIN_RULES."""
+    from decco_warp.analysis.compare import compare, read_rows
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    kinds = [kind for kind in KINDS if kind != "none"]
+    for r, (folder, name) in enumerate(SPIN_RULES.items()):
+        (point,) = compare(read_rows([RESULTS / folder / "summary.csv"]), "spin_kind", "largest_mass_ratio", at="eta", where={"eta": [6.0]}).points
+        for d in point.differences:
+            x = kinds.index(d.group) + (r - 1) * 0.22
+            ax.errorbar([x], [d.difference], yerr=[[d.difference - d.low], [d.high - d.difference]], marker="os^"[r], color=f"C{r}",
+                        capsize=4, label=name if d.group == kinds[0] else None)  # fmt: skip
+    ax.axhline(0.0, color="0.6", linewidth=0.6)
+    ax.set_xticks(range(len(kinds)), kinds)
+    ax.set_ylabel("m_lf / m_t, kind minus no spin")
+    ax.set_title("Fig. 9 at eta 6 by friction rule: Dunnett's 95 % (10 runs a kind, 9 without spin)", fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
 def size_change_statistics():
     """Fig. 6 with statistics (runs/results/fig6_statistics): per mass ratio and eta the late-window
     particle-size change of each realization (dots), its mean and the mean's 95 % interval (bar), per
@@ -380,6 +408,7 @@ FIGURES = {
     "validation-size-change": size_change,
     "validation-spins": spins,
     "validation-spin-statistics": spin_statistics,
+    "validation-spin-rules": spin_rules,
     "validation-size-change-statistics": size_change_statistics,
     "validation-stress-shares": stress_shares,
     "validation-conservation": conservation,
