@@ -291,9 +291,29 @@ def test_twins_are_matched_on_their_spin_axes_and_not_on_a_column_one_side_does_
     assert d.pairs == 4 and d.difference == pytest.approx(np.mean([-0.05, -0.04, -0.06, -0.03]))
     (line,) = [line for line in result.lines() if line.startswith("pairs:")]
     assert line == "pairs: 4 twins; every run has its twin; not matched on restitution (recorded by one side's runs only)"
+    third = [{**row, "run": row["run"].replace("decco-code", "ssdem"), "contact_law": "ssdem",
+              "largest_mass_ratio": row["largest_mass_ratio"] + 0.01} for row in rows[4:]]  # fmt: skip
+    each = cmp.compare(rows + third, "contact_law", "largest_mass_ratio", reference="paper", paired=True, per_comparison=True)
+    assert [(d.group, d.pairs) for d in each.points[0].differences] == [("decco-code", 4), ("ssdem", 4)]  # each group its own columns
+    assert "restitution" not in each.pair_columns and "target_spin_axis" in each.pair_columns
     rows[6] = {**rows[6], "target_spin_axis": "+y"}  # decco-code's +z r1 now has no twin, and paper's +z r1 none either
     result = cmp.compare(rows, "contact_law", "largest_mass_ratio", reference="paper", paired=True)
     assert result.points[0].differences[0].pairs == 3 and len(result.unpaired) == 2
+
+
+def test_the_folder_column_names_each_sweep_folder_apart(tmp_path):
+    """Each row's folder is its sweep folder's name, with as many parent names as tell two folders
+    of one name apart: the same sweep file made in two places is two groups, never one."""
+    for place, values in (("v1", [1.0, 1.1]), ("v2", [1.2, 1.3])):
+        (tmp_path / place).mkdir()
+        write_runs(tmp_path / place / "fig9", fake_rows({"none": values}))
+    write_runs(tmp_path / "other", fake_rows({"none": [0.9, 0.95]}))
+    rows = cmp.read_rows([tmp_path / "v1" / "fig9" / "summary.csv", tmp_path / "v2" / "fig9", tmp_path / "other" / "summary.csv"])
+    assert sorted({row["folder"] for row in rows}) == ["other", "v1/fig9", "v2/fig9"]
+    result = cmp.compare(rows, "folder", "largest_mass_ratio", reference="v1/fig9", paired=True, per_comparison=True, allow_mixed=True)
+    assert [(d.group, d.pairs) for d in result.points[0].differences] == [("other", 2), ("v2/fig9", 2)]
+    assert cmp.folder_names([tmp_path / "a" / "x4", tmp_path / "b" / "x4", tmp_path / "c"]) == {
+        tmp_path / "a" / "x4": "a/x4", tmp_path / "b" / "x4": "b/x4", tmp_path / "c": "c"}
 
 
 def test_one_sweep_file_run_twice_pairs_by_folder_and_run_name(tmp_path):

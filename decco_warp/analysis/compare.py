@@ -126,10 +126,12 @@ def read_rows(paths) -> list[dict]:
             if identity in origin:
                 raise CompareError(f"run {row.get('run', identity)} is read twice ({origin[identity]} and {where}): give each run once")
             origin[identity] = where
-            row.setdefault(FOLDER, identity.parent.name)
             rows.append(row)
     if not rows:
         raise CompareError(f"no summaries in {', '.join(map(str, paths))}")
+    names = folder_names({identity.parent for identity in origin})
+    for identity, row in zip(origin, rows):
+        row.setdefault(FOLDER, names[identity.parent])
     seen = {}
     for row in rows:  # two runs of one set-up under two names: one outcome that would count twice
         signature = tuple(row.get(column) for column in OUTCOME_COLUMNS)
@@ -142,6 +144,21 @@ def read_rows(paths) -> list[dict]:
                 )
             seen[signature] = row.get("run")
     return rows
+
+
+def folder_names(folders) -> dict[Path, str]:
+    """{folder: its name in the ``folder`` column}: its last path component, or as many of its last
+    components as tell it from the others (runs/results/resolution/x4 and runs/results/qstar_rd/x4
+    are resolution/x4 and qstar_rd/x4), so that two folders are never one group."""
+    folders = sorted(set(folders))
+    depth = {folder: 1 for folder in folders}
+    while True:
+        names = {folder: "/".join(folder.parts[-depth[folder]:]) for folder in folders}
+        clash = [folder for folder in folders if list(names.values()).count(names[folder]) > 1]
+        if not clash:
+            return names
+        for folder in clash:
+            depth[folder] += 1
 
 
 #: Outcome columns that two distinct runs never share all of, to the last digit (chaotic motion).
@@ -497,8 +514,8 @@ class Comparison:
     @property
     def pair_columns(self) -> list[str]:
         """The columns in which twins agree (``paired``): PAIR_COLUMNS but ``by`` and ``at`` (a point's
-        runs share its value)."""
-        return pair_columns(self.by, self.at)
+        runs share its value), and but those one side does not record (``unrecorded``)."""
+        return [c for c in pair_columns(self.by, self.at) if c not in self.unrecorded]
 
     def as_dict(self) -> dict:
         """Plain data (numbers as floats, None where none exists), for JSON."""
@@ -787,12 +804,12 @@ def _paired_differences(point: dict, at_key, by: str, at: str | None, metric: st
         raise CompareError(f"--paired{where}: {len(others)} groups meet {label(reference)} ({', '.join(map(label, others))}); Dunnett's "
                            "simultaneous intervals are for independent groups, not pairs: pass --per-comparison for each group's paired "
                            f"interval on its own (--confidence {1 - 0.05 / len(others):.4g} keeps the {len(others)} at 95 % together, Bonferroni)")  # fmt: skip
-    columns = pair_columns(by, at)
+    every = pair_columns(by, at)
     differences = []
-    for g in others:
-        recorded = [{c for c in columns if any(value_key(row.get(c)) is not None for row in side)} for side in (point[g], point[reference])]
-        unrecorded += [c for c in columns if c in recorded[0] ^ recorded[1]]
-        columns = [c for c in pair_columns(by, at) if c not in recorded[0] ^ recorded[1]]
+    for g in others:  # each group against the reference: what the two sides both record
+        recorded = [{c for c in every if any(value_key(row.get(c)) is not None for row in side)} for side in (point[g], point[reference])]
+        unrecorded += [c for c in every if c in recorded[0] ^ recorded[1]]
+        columns = [c for c in every if c not in recorded[0] ^ recorded[1]]
         twins, rest = pair_runs(point[g], point[reference], columns)
         named = [f"{row.get('run', '?')} ({by} {label(value_key(row[by]))})" for row in rest]
         if len(twins) < 2:
