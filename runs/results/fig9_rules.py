@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from decco_warp.analysis.compare import dunnett_intervals, t_half_width, welch_interval
+from decco_warp.analysis.compare import Point, compare, read_rows, t_half_width, welch_interval
 
 RESULTS = Path(__file__).resolve().parent
 RULES = {  # folder: what made it
@@ -37,28 +37,27 @@ def runs_of(folder: str) -> dict[str, dict]:
     return {row["run"]: row for row in rows if abs(float(row["eta"]) - ETA) < 1e-6}
 
 
-def by_kind(runs: dict[str, dict]) -> dict[str, np.ndarray]:
-    kinds: dict[str, list[float]] = {}
-    for row in runs.values():
-        kinds.setdefault(row["spin_kind"], []).append(float(row[METRIC]))
-    return {kind: np.array(values) for kind, values in kinds.items()}
+def spin_effects(folder: str) -> Point:
+    """A rule's eta 6 point: each kind's m_lf/m_t minus no spin's with Dunnett's 95 % intervals, as
+    ``decco-warp compare FOLDER/summary.csv --by spin_kind --at eta --where eta=6`` gives them
+    (figures.py draws the same)."""
+    (point,) = compare(read_rows([RESULTS / folder / "summary.csv"]), "spin_kind", METRIC, at="eta", where={"eta": [ETA]}).points
+    return point
 
 
 def main() -> None:
     rules = {folder: runs_of(folder) for folder in RULES}
     print(f"m_lf/m_t at eta {ETA:g}, each kind of spin minus no spin (Dunnett, 95 % together)")
     print(f"{'rule':40s} {'none':>13s}  " + "  ".join(f"{kind:>30s}" for kind in KINDS))
-    for folder, runs in rules.items():
-        kinds = by_kind(runs)
-        control = kinds["none"]
-        cells = []
-        for kind, (low, high, _) in zip(KINDS, dunnett_intervals([kinds[k] for k in KINDS], control)):
-            difference = kinds[kind].mean() - control.mean()
-            cells.append(f"{difference:+.3f} ({low:+.3f} to {high:+.3f}){' *' if high < 0 or low > 0 else '  '}")
-        print(f"{RULES[folder]:40s} {control.mean():.3f} (n {control.size})  " + "  ".join(f"{c:>30s}" for c in cells))
+    for folder in RULES:
+        point = spin_effects(folder)
+        control = next(g for g in point.groups if g.group == "none")
+        effect = {d.group: d for d in point.differences}
+        cells = [f"{effect[k].difference:+.3f} ({effect[k].low:+.3f} to {effect[k].high:+.3f}){' *' if effect[k].resolved else '  '}" for k in KINDS]
+        print(f"{RULES[folder]:40s} {control.mean:.3f} (n {control.n})  " + "  ".join(f"{c:>30s}" for c in cells))
     print("  * resolved: the interval excludes 0")
 
-    print(f"\nrule against rule, set-up by set-up (mean of the paired differences, t 95 %)")
+    print("\nrule against rule, set-up by set-up (mean of the paired differences, t 95 %)")
     for new, old in (("fig9_zero_slip", "fig9_statistics"), ("fig9_decco_code", "fig9_zero_slip")):
         a, b = rules[new], rules[old]
         twins = sorted(set(a) & set(b))
@@ -69,7 +68,7 @@ def main() -> None:
         for kind in ("none", *KINDS, "all"):
             names = [name for name in twins if kind == "all" or a[name]["spin_kind"] == kind]
             differences = paired[kind] = np.array([float(a[name][METRIC]) - float(b[name][METRIC]) for name in names])
-            half = t_half_width(differences)
+            half = t_half_width(differences)  # Student's t at every n (the 39 too), as docs/validation.md quotes them
             print(f"  {kind:14s} n {differences.size:2d}  {differences.mean():+.4f}  ({differences.mean() - half:+.4f} to "
                   f"{differences.mean() + half:+.4f}), std {differences.std(ddof=1):.4f}")
         # How the rule changes a kind's effect (its difference to no spin): its paired differences

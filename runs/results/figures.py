@@ -201,22 +201,16 @@ def spin_statistics():
     return fig
 
 
-#: Fig. 9 at eta 6 under three friction rules: the folder and its label (runs/results/fig9_rules.py).
-SPIN_RULES = {"fig9_statistics": "before the zero-slip rule", "fig9_zero_slip": "the paper law today (zero-slip)",
-              "fig9_decco_code": "decco-code (DECCO's code)"}  # fmt: skip
-
-
 def spin_rules():
     """Fig. 9 at eta 6 under three friction rules: each kind's difference to no spin with Dunnett's
-    95 % intervals (the three kinds together), a marker per rule: ``decco-warp compare
-    FOLDER/summary.csv --by spin_kind --at eta --where eta=6`` for each folder of SPIN_RULES."""
-    from decco_warp.analysis.compare import compare, read_rows
+    95 % intervals (the three kinds together), a marker per rule: fig9_rules.py's spin_effects of
+    each folder of its RULES."""
+    from fig9_rules import RULES, spin_effects  # beside this script
 
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     kinds = [kind for kind in KINDS if kind != "none"]
-    for r, (folder, name) in enumerate(SPIN_RULES.items()):
-        (point,) = compare(read_rows([RESULTS / folder / "summary.csv"]), "spin_kind", "largest_mass_ratio", at="eta", where={"eta": [6.0]}).points
-        for d in point.differences:
+    for r, (folder, name) in enumerate(RULES.items()):
+        for d in spin_effects(folder).differences:
             x = kinds.index(d.group) + (r - 1) * 0.22
             ax.errorbar([x], [d.difference], yerr=[[d.difference - d.low], [d.high - d.difference]], marker="os^"[r], color=f"C{r}",
                         capsize=4, label=name if d.group == kinds[0] else None)  # fmt: skip
