@@ -998,12 +998,13 @@ def compare(
     ),
     paired: bool = typer.Option(
         False, "--paired", help="Pair each run with its twin in the reference group (the run that agrees in the set-up, eta, the spins, realization, "
-        "orientation_seed and the piles, where both record them: all but --by; by folder, its name too) and give the mean of the twins' differences with Student's t interval on them (pairs - 1 dof), "
+        "orientation_seed and the piles, where both record them: all but --by; by folder, its name too, and not a column that each folder holds "
+        "one value of, another than the reference's: the law a campaign was rerun under) and give the mean of the twins' differences with Student's t interval on them (pairs - 1 dof), "
         "their count and correlation r; runs without a twin are named and left out, a group of fewer than 2 pairs is refused. One group against "
         "the reference per point, or --per-comparison."
     ),
     allow_mixed: bool = typer.Option(
-        False, "--allow-mixed", help="Compare runs at one point that differ in a set-up column (mass_ratio, theta_deg, k_in, dt, gravity_every, eta_potential, n_particles, restitution, mu_k, mu_r, G, rolling_friction, contact_law, k_t_ratio, eps_t, mu_s, mu_t, beta, cohesion) other than --by and --at."
+        False, "--allow-mixed", help="Compare runs at one point that differ in a set-up column (mass_ratio, theta_deg, k_in, dt, gravity_every, eta_potential, n_particles, restitution, mu_k, mu_r, G, rolling_friction, contact_law, k_t_ratio, eps_t, mu_s, mu_t, beta, cohesion) other than --by and --at (by folder, one that each folder holds one value of is what the folders compare, no mix)."
     ),
     allow_single: bool = typer.Option(
         False, "--allow-single", help="Accept groups of one run: shown without spread or interval (without it, the table is printed and the command exits 2 naming them)."

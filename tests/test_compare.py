@@ -342,6 +342,32 @@ def test_one_sweep_file_run_twice_pairs_by_folder_and_run_name(tmp_path):
         assert (d["low"], d["high"]) == pytest.approx((interval.low, interval.high), rel=1e-12)
 
 
+def test_folders_of_two_laws_pair_across_the_law_and_name_it(tmp_path):
+    """One sweep file made under two laws (and restitutions) in two folders: each folder's runs hold
+    one law, so by folder the law is what is compared (no mix of set-ups); twins pair across it by
+    run name, and the pairs line says so. A folder whose runs hold two laws is no such campaign:
+    it is a mix unless asked, and there the law stays a pairing column, so that only runs of one
+    law find twins."""
+    paper = fake_rows({"none": [0.50, 0.60, 0.55]}, contact_law="paper", restitution=0.9)
+    decco = fake_rows({"none": [0.47, 0.58, 0.51]}, contact_law="decco-code", restitution=0.894)
+    write_runs(tmp_path / "zero_slip", paper)
+    write_runs(tmp_path / "decco_code", decco)
+    rows = cmp.read_rows([tmp_path / "zero_slip" / "summary.csv", tmp_path / "decco_code" / "summary.csv"])
+    result = cmp.compare(rows, "folder", "largest_mass_ratio", reference="zero_slip", paired=True)
+    (d,) = result.points[0].differences
+    assert d.pairs == 3 and d.difference == pytest.approx(np.mean([-0.03, -0.02, -0.04]))
+    assert sorted(result.varied) == ["contact_law", "restitution"] and "contact_law" not in result.pair_columns
+    (line,) = [line for line in result.lines() if line.startswith("pairs:")]
+    assert line.endswith("paired across restitution, contact_law (one value in each folder, another in the reference: what the folders compare)")
+    mixed = [{**row, "contact_law": "paper", "restitution": 0.9} if row["run"].endswith("r0") else row for row in decco]
+    write_runs(tmp_path / "mixed", mixed)
+    rows = cmp.read_rows([tmp_path / "zero_slip" / "summary.csv", tmp_path / "mixed" / "summary.csv"])
+    with pytest.raises(cmp.UnpairedRuns, match=r"folder mixed has 1 twin\(s\)"):
+        cmp.compare(rows, "folder", "largest_mass_ratio", reference="zero_slip", paired=True, allow_mixed=True)
+    with pytest.raises(cmp.MixedSetups, match="differ in restitution .0.894, 0.9., not only in folder"):  # unless asked, a folder of two laws is a mix
+        cmp.compare(rows, "folder", "largest_mass_ratio", reference="zero_slip")
+
+
 def test_welch_interval_by_hand():
     a, b = np.array([1.0, 2.0, 3.0]), np.array([2.0, 4.0, 6.0, 8.0])
     # Variances of the means 1/3 and 5/3: se^2 = 2; Welch-Satterthwaite dof 4 / (1/18 + 25/27).

@@ -510,12 +510,17 @@ class Comparison:
     #: with ``paired``: the pairing columns that one side's runs record and the other's do not (older
     #: summaries lack some), so that twins were not matched on them
     unrecorded: list = field(default_factory=list)
+    #: with ``paired`` by folder: the pairing columns in which each folder's runs hold one value and a
+    #: group's differs from the reference's (the law, the restitution: what the campaigns compare), so
+    #: that twins were paired across them
+    varied: list = field(default_factory=list)
 
     @property
     def pair_columns(self) -> list[str]:
         """The columns in which twins agree (``paired``): PAIR_COLUMNS but ``by`` and ``at`` (a point's
-        runs share its value), and but those one side does not record (``unrecorded``)."""
-        return [c for c in pair_columns(self.by, self.at) if c not in self.unrecorded]
+        runs share its value), and but those one side does not record (``unrecorded``) or that tell
+        the folders apart (``varied``)."""
+        return [c for c in pair_columns(self.by, self.at) if c not in self.unrecorded and c not in self.varied]
 
     def as_dict(self) -> dict:
         """Plain data (numbers as floats, None where none exists), for JSON."""
@@ -567,7 +572,9 @@ class Comparison:
             twins = sum(d.pairs or 0 for p in self.points for d in p.differences)
             text.insert(3, f"pairs: {twins} twins; " + (f"{len(self.unpaired)} run(s) without a twin left out: {', '.join(self.unpaired)}"
                                                         if self.unpaired else "every run has its twin")
-                        + (f"; not matched on {', '.join(self.unrecorded)} (recorded by one side's runs only)" if self.unrecorded else ""))  # fmt: skip
+                        + (f"; not matched on {', '.join(self.unrecorded)} (recorded by one side's runs only)" if self.unrecorded else "")
+                        + (f"; paired across {', '.join(self.varied)} (one value in each folder, another in the reference: what the folders "
+                           "compare)" if self.varied else ""))  # fmt: skip
         pairing = ["pairs", "r"] if self.paired else []
         resolve = "pairs to resolve" if self.paired else "runs to resolve"
         columns = [self.by, "n", "mean", "std", "diff", f"{level} interval", "method", *pairing, "detectable", resolve, "verdict"]
@@ -625,11 +632,19 @@ def _check_columns(rows: list[dict], columns: dict[str, str]) -> None:
 
 
 def _check_setups(point, rows: list[dict], by: str, at: str | None) -> None:
-    """Refuse rows at one point that differ in a set-up column other than ``by`` and ``at``."""
+    """Refuse rows at one point that differ in a set-up column other than ``by`` and ``at``; by
+    folder, one in which each folder's runs hold one value is what the folders compare (a campaign
+    rerun under another law), not a mix."""
     for column in SETUP_COLUMNS:
         if column in (by, at):
             continue
         seen = sorted({value_key(row.get(column)) for row in rows} - {None}, key=_order)
+        if len(seen) > 1 and by == FOLDER:
+            held: dict = {}
+            for row in rows:
+                held.setdefault(row.get(FOLDER), set()).add(value_key(row.get(column)))
+            if all(len(values - {None}) <= 1 for values in held.values()):
+                continue
         if len(seen) > 1:
             where = f" at {at} {label(point)}" if at else ""
             raise MixedSetups(
@@ -716,7 +731,7 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
         if reference not in groups:
             raise CompareError(f"--reference {label(reference)}: no such {by} among the runs; they have: {', '.join(map(label, groups))}")
 
-    result, unpaired, unrecorded = [], [], []
+    result, unpaired, unrecorded, varied = [], [], [], []
     for at_key in sorted(points, key=lambda k: _order(k) if k is not None else (0, 0.0, "")):
         point = points[at_key]
         if not allow_mixed:  # the rows compared with each other: all at the point, or each group's against a value
@@ -729,14 +744,15 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
                 differences = _differences(stats_of, reference, resolve, resamples, confidence, per_comparison) if reference in point else []
             else:
                 differences = _paired_differences(point, at_key, by, at, metric, reference, resolve, resamples, confidence, per_comparison,
-                                                  unpaired, unrecorded)  # fmt: skip
+                                                  unpaired, unrecorded, varied)  # fmt: skip
         else:
             order = sorted(point, key=_order)
             stats_of = {g: _group(g, point[g], metric, resamples, confidence) for g in order}
             differences = [_against(stats_of[g], against, resolve, confidence) for g in order]
         result.append(Point(at_key, [stats_of[g] for g in order], differences))
     comparison = Comparison(metric, by, at, reference, resolve, result, len(rows), len(rows) - len(done), where, met, missing, resamples,
-                            against, confidence, per_comparison, paired, list(dict.fromkeys(unpaired)), list(dict.fromkeys(unrecorded)))  # fmt: skip
+                            against, confidence, per_comparison, paired, list(dict.fromkeys(unpaired)), list(dict.fromkeys(unrecorded)),
+                            list(dict.fromkeys(varied)))  # fmt: skip
     single = comparison.single()
     if single and not allow_single:
         named = "; ".join(f"{label(g)}" + (f" at {at} {label(p)}" if at else "") for p, g in single)
@@ -791,11 +807,13 @@ def pair_runs(rows: list[dict], reference_rows: list[dict], columns) -> tuple[li
 
 
 def _paired_differences(point: dict, at_key, by: str, at: str | None, metric: str, reference, resolve: float | None, resamples: int,
-                        confidence: float, per_comparison: bool, unpaired: list, unrecorded: list) -> list[Difference]:  # fmt: skip
+                        confidence: float, per_comparison: bool, unpaired: list, unrecorded: list, varied: list) -> list[Difference]:  # fmt: skip
     """Each group's paired difference to the reference at one point (``unpaired`` gets the runs
     left without a twin, "RUN (BY VALUE)"; ``unrecorded`` the pairing columns that one side records
     and the other does not, which twins are not matched on: as the set-up check, a value missing is
-    no disagreement)."""
+    no disagreement; ``varied``, by folder, the columns that hold one value in each side and
+    different ones: a campaign rerun under another law or restitution pairs with the first across
+    them)."""
     if reference not in point:
         return []
     others = sorted((g for g in point if g != reference), key=_order)
@@ -810,9 +828,15 @@ def _paired_differences(point: dict, at_key, by: str, at: str | None, metric: st
         recorded = [{c for c in every if any(value_key(row.get(c)) is not None for row in side)} for side in (point[g], point[reference])]
         unrecorded += [c for c in every if c in recorded[0] ^ recorded[1]]
         columns = [c for c in every if c not in recorded[0] ^ recorded[1]]
+        if by == FOLDER:
+            values = [[{value_key(row.get(c)) for row in side} for side in (point[g], point[reference])] for c in columns]
+            across = [c for c, (mine, theirs) in zip(columns, values) if len(mine) == len(theirs) == 1 and mine != theirs and c != "run"]
+            varied += across
+            columns = [c for c in columns if c not in across]
         twins, rest = pair_runs(point[g], point[reference], columns)
         named = [f"{row.get('run', '?')} ({by} {label(value_key(row[by]))})" for row in rest]
         if len(twins) < 2:
+            named = named[:6] + ([f"and {len(named) - 6} more"] if len(named) > 6 else [])
             apart = [c for c in columns if {value_key(r.get(c)) for r in point[g]}.isdisjoint({value_key(r.get(c)) for r in point[reference]})]
             raise UnpairedRuns(f"--paired: {by} {label(g)}{where} has {len(twins)} twin(s) among the {by} {label(reference)} runs "
                                f"(twins agree in each of {', '.join(columns)})"
