@@ -1,10 +1,11 @@
-"""Fig. 9 at eta 6 under three friction rules (docs/validation.md, "Fig. 9: spin"): the committed
-campaign made before sliding friction's zero-slip rule (fig9_statistics/), the same set-ups rerun
-with it (fig9_zero_slip/), and DECCO's pair forces as its code computes them (fig9_decco_code/).
+"""Fig. 9 under three friction rules (docs/validation.md, "Fig. 9: spin"): the committed campaign
+made before sliding friction's zero-slip rule (fig9_statistics/, eta 3 and 6), the same set-ups
+rerun with it (fig9_zero_slip/, eta 3 and 6), and DECCO's pair forces as its code computes them
+(fig9_decco_code/, eta 6).
 
     python runs/results/fig9_rules.py          # from the repository root, on any machine (CPU)
 
-For each rule: each kind of spin's m_lf/m_t minus no spin's, with Dunnett's 95 % intervals (the
+For each rule and eta: each kind of spin's m_lf/m_t minus no spin's, with Dunnett's 95 % intervals (the
 three kinds against one control together, as `decco-warp compare --by spin_kind --at eta` gives
 them). Then the rules against each other, run by run: every set-up (its piles, orientation seed
 and spins) is made under each rule, so the difference is taken per set-up and its mean given with
@@ -27,57 +28,60 @@ RULES = {  # folder: what made it
     "fig9_decco_code": "decco-code (DECCO's code)",
 }
 KINDS = ("parallel", "perpendicular", "anti-parallel")
-ETA = 6.0
+ETAS = (3.0, 6.0)
 METRIC = "largest_mass_ratio"
 
 
-def runs_of(folder: str) -> dict[str, dict]:
-    """{run name: summary row} of a folder's summary.csv at eta 6."""
+def runs_of(folder: str, eta: float) -> dict[str, dict]:
+    """{run name: summary row} of a folder's summary.csv at ``eta``."""
     rows = csv.DictReader((RESULTS / folder / "summary.csv").open())
-    return {row["run"]: row for row in rows if abs(float(row["eta"]) - ETA) < 1e-6}
+    return {row["run"]: row for row in rows if abs(float(row["eta"]) - eta) < 1e-6}
 
 
-def spin_effects(folder: str) -> Point:
-    """A rule's eta 6 point: each kind's m_lf/m_t minus no spin's with Dunnett's 95 % intervals, as
-    ``decco-warp compare FOLDER/summary.csv --by spin_kind --at eta --where eta=6`` gives them
-    (figures.py draws the same)."""
-    (point,) = compare(read_rows([RESULTS / folder / "summary.csv"]), "spin_kind", METRIC, at="eta", where={"eta": [ETA]}).points
+def spin_effects(folder: str, eta: float = 6.0) -> Point:
+    """A rule's point at ``eta``: each kind's m_lf/m_t minus no spin's with Dunnett's 95 % intervals,
+    as ``decco-warp compare FOLDER/summary.csv --by spin_kind --at eta --where eta=6`` gives them
+    (figures.py draws eta 6's)."""
+    (point,) = compare(read_rows([RESULTS / folder / "summary.csv"]), "spin_kind", METRIC, at="eta", where={"eta": [eta]}).points
     return point
 
 
 def main() -> None:
-    rules = {folder: runs_of(folder) for folder in RULES}
-    print(f"m_lf/m_t at eta {ETA:g}, each kind of spin minus no spin (Dunnett, 95 % together)")
-    print(f"{'rule':40s} {'none':>13s}  " + "  ".join(f"{kind:>30s}" for kind in KINDS))
-    for folder in RULES:
-        point = spin_effects(folder)
-        control = next(g for g in point.groups if g.group == "none")
-        effect = {d.group: d for d in point.differences}
-        cells = [f"{effect[k].difference:+.3f} ({effect[k].low:+.3f} to {effect[k].high:+.3f}){' *' if effect[k].resolved else '  '}" for k in KINDS]
-        print(f"{RULES[folder]:40s} {control.mean:.3f} (n {control.n})  " + "  ".join(f"{c:>30s}" for c in cells))
-    print("  * resolved: the interval excludes 0")
+    for eta in ETAS:
+        rules = {folder: runs for folder in RULES if (runs := runs_of(folder, eta))}
+        print(f"m_lf/m_t at eta {eta:g}, each kind of spin minus no spin (Dunnett, 95 % together)")
+        print(f"{'rule':40s} {'none':>13s}  " + "  ".join(f"{kind:>30s}" for kind in KINDS))
+        for folder in rules:
+            point = spin_effects(folder, eta)
+            control = next(g for g in point.groups if g.group == "none")
+            effect = {d.group: d for d in point.differences}
+            cells = [f"{effect[k].difference:+.3f} ({effect[k].low:+.3f} to {effect[k].high:+.3f}){' *' if effect[k].resolved else '  '}" for k in KINDS]
+            print(f"{RULES[folder]:40s} {control.mean:.3f} (n {control.n})  " + "  ".join(f"{c:>30s}" for c in cells))
+        print("  * resolved: the interval excludes 0")
 
-    print("\nrule against rule, set-up by set-up (mean of the paired differences, t 95 %)")
-    for new, old in (("fig9_zero_slip", "fig9_statistics"), ("fig9_decco_code", "fig9_zero_slip")):
-        a, b = rules[new], rules[old]
-        twins = sorted(set(a) & set(b))
-        if len(twins) != len(a) or len(twins) != len(b):
-            raise SystemExit(f"{new} and {old} do not hold the same set-ups ({len(a)}, {len(b)}, {len(twins)} in both)")
-        print(f"{RULES[new]} minus {RULES[old]}:")
-        paired = {}
-        for kind in ("none", *KINDS, "all"):
-            names = [name for name in twins if kind == "all" or a[name]["spin_kind"] == kind]
-            differences = paired[kind] = np.array([float(a[name][METRIC]) - float(b[name][METRIC]) for name in names])
-            half = t_half_width(differences)  # Student's t at every n (the 39 too), as docs/validation.md quotes them
-            print(f"  {kind:14s} n {differences.size:2d}  {differences.mean():+.4f}  ({differences.mean() - half:+.4f} to "
-                  f"{differences.mean() + half:+.4f}), std {differences.std(ddof=1):.4f}")
-        # How the rule changes a kind's effect (its difference to no spin): its paired differences
-        # against no spin's, Welch's 95 %.
-        for kind in KINDS:
-            low, high = welch_interval(paired[kind], paired["none"])
-            print(f"  {kind:14s} effect of spin, {RULES[new]} minus {RULES[old]}: "
-                  f"{paired[kind].mean() - paired['none'].mean():+.4f} ({low:+.4f} to {high:+.4f})")
-
+        print(f"\nrule against rule at eta {eta:g}, set-up by set-up (mean of the paired differences, t 95 %)")
+        for new, old in (("fig9_zero_slip", "fig9_statistics"), ("fig9_decco_code", "fig9_zero_slip")):
+            if new not in rules or old not in rules:
+                continue
+            a, b = rules[new], rules[old]
+            twins = sorted(set(a) & set(b))
+            if len(twins) != len(a) or len(twins) != len(b):
+                raise SystemExit(f"{new} and {old} do not hold the same set-ups at eta {eta:g} ({len(a)}, {len(b)}, {len(twins)} in both)")
+            print(f"{RULES[new]} minus {RULES[old]}:")
+            paired = {}
+            for kind in ("none", *KINDS, "all"):
+                names = [name for name in twins if kind == "all" or a[name]["spin_kind"] == kind]
+                differences = paired[kind] = np.array([float(a[name][METRIC]) - float(b[name][METRIC]) for name in names])
+                half = t_half_width(differences)  # Student's t at every n (the 39 too), as docs/validation.md quotes them
+                print(f"  {kind:14s} n {differences.size:2d}  {differences.mean():+.4f}  ({differences.mean() - half:+.4f} to "
+                      f"{differences.mean() + half:+.4f}), std {differences.std(ddof=1):.4f}")
+            # How the rule changes a kind's effect (its difference to no spin): its paired differences
+            # against no spin's, Welch's 95 %.
+            for kind in KINDS:
+                low, high = welch_interval(paired[kind], paired["none"])
+                print(f"  {kind:14s} effect of spin, {RULES[new]} minus {RULES[old]}: "
+                      f"{paired[kind].mean() - paired['none'].mean():+.4f} ({low:+.4f} to {high:+.4f})")
+        print()
 
 if __name__ == "__main__":
     main()
