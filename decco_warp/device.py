@@ -99,7 +99,13 @@ def gpus_to_use(requested: int | None = None) -> int:
 
 
 def free_memory(device: str) -> int:
-    """Bytes free on ``device`` now: a GPU's free memory, or the host's available memory for the CPU."""
+    """Bytes free on ``device`` now: a GPU's free memory, or the host's available memory for the CPU:
+    psutil's ``available`` (the kernel's MemAvailable, which counts the file cache it can drop), not
+    Warp's CPU figure, MemFree alone, a few hundred MB on a machine whose cache holds its files."""
+    if not str(device).startswith("cuda"):
+        import psutil  # a dependency of distributed
+
+        return int(psutil.virtual_memory().available)
     init_warp()
     return int(wp.get_device(device).free_memory)
 

@@ -116,6 +116,22 @@ def test_a_job_too_large_for_the_device_is_refused_with_the_estimate_and_the_fre
     assert sorted(p.name for p in tmp_path.iterdir()) == ["big"]
 
 
+def test_the_cpu_s_free_memory_counts_the_file_cache_the_kernel_can_drop(monkeypatch):
+    """On the CPU a job is held to the host's available memory (MemAvailable), not to its free pages
+    alone: a machine whose file cache fills its memory (after a pip install, say) has a few hundred
+    MB free and gigabytes available, and the shipped demo must not be refused there."""
+    import collections
+
+    import psutil
+
+    import decco_warp.device as devices
+
+    memory = collections.namedtuple("svmem", "total available free")
+    monkeypatch.setattr(psutil, "virtual_memory", lambda: memory(24 << 30, 23 << 30, 240 << 20))
+    assert devices.free_memory("cpu") == 23 << 30
+    assert costs.check_fits(450, dw.Scheme(), "cpu", 100, "a run") is None
+
+
 def test_a_job_of_hours_on_the_cpu_says_so_and_goes_on(tmp_path, monkeypatch):
     note = costs.check_fits(50_000, dw.Scheme(gravity="tree"), "cpu", 150_000, "forming a pile")
     hours = 150_000 * costs.cpu_step_seconds(50_000, "tree") / 3600
