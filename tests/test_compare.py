@@ -359,6 +359,19 @@ def test_folders_of_two_laws_pair_across_the_law_and_name_it(tmp_path):
     assert sorted(result.varied) == ["contact_law", "restitution"] and "contact_law" not in result.pair_columns
     (line,) = [line for line in result.lines() if line.startswith("pairs:")]
     assert line.endswith("paired across restitution, contact_law (one value in each folder, another in the reference: what the folders compare)")
+    unpaired = cmp.compare(rows, "folder", "largest_mass_ratio", reference="zero_slip")  # Welch's, and the header says what parts them
+    assert sorted(unpaired.varied) == ["contact_law", "restitution"]
+    assert "the folders differ in restitution, contact_law (one value in each folder: what they compare)" in unpaired.lines()
+    # A run that does not record the law is no second value: the folders still pair across it.
+    blank = [{**row, "folder": "zero_slip", **({"contact_law": None} if row["run"].endswith("r1") else {})} for row in paper]
+    (d,) = cmp.compare(blank + [{**row, "folder": "decco_code"} for row in decco], "folder", "largest_mass_ratio",
+                       reference="zero_slip", paired=True).points[0].differences  # fmt: skip
+    assert d.pairs == 3
+    # Piles (no set-up column) are never what folders compare: runs of other piles find no twin.
+    moved = [{**row, "folder": "decco_code", "target_pile": "other"} for row in decco]
+    with pytest.raises(cmp.UnpairedRuns, match=r"folder decco_code has 0 twin\(s\).*share no value of target_pile"):
+        cmp.compare([{**row, "folder": "zero_slip", "target_pile": "target"} for row in paper] + moved, "folder", "largest_mass_ratio",
+                    reference="zero_slip", paired=True)  # fmt: skip
     mixed = [{**row, "contact_law": "paper", "restitution": 0.9} if row["run"].endswith("r0") else row for row in decco]
     write_runs(tmp_path / "mixed", mixed)
     rows = cmp.read_rows([tmp_path / "zero_slip" / "summary.csv", tmp_path / "mixed" / "summary.csv"])

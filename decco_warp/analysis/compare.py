@@ -510,9 +510,9 @@ class Comparison:
     #: with ``paired``: the pairing columns that one side's runs record and the other's do not (older
     #: summaries lack some), so that twins were not matched on them
     unrecorded: list = field(default_factory=list)
-    #: with ``paired`` by folder: the pairing columns in which each folder's runs hold one value and a
-    #: group's differs from the reference's (the law, the restitution: what the campaigns compare), so
-    #: that twins were paired across them
+    #: by folder: the set-up columns in which each folder's runs hold one value and the folders differ
+    #: (the law, the restitution: what the campaigns compare); with ``paired``, twins were paired
+    #: across them
     varied: list = field(default_factory=list)
 
     @property
@@ -568,6 +568,8 @@ class Comparison:
             + ("pairs to resolve" if self.paired else "runs to resolve") + ": per group, for "
             + (f"a difference of {self.resolve:g}" if self.resolve is not None else "the difference seen") + f" ({sided})",
         ]
+        if self.varied and not self.paired:
+            text.insert(3, f"the folders differ in {', '.join(self.varied)} (one value in each folder: what they compare)")
         if self.paired:
             twins = sum(d.pairs or 0 for p in self.points for d in p.differences)
             text.insert(3, f"pairs: {twins} twins; " + (f"{len(self.unpaired)} run(s) without a twin left out: {', '.join(self.unpaired)}"
@@ -631,20 +633,32 @@ def _check_columns(rows: list[dict], columns: dict[str, str]) -> None:
             raise UnknownColumn(f"{option} {column}: no such column{sheet}; the runs have: {', '.join(sorted(known))}")
 
 
+def folder_columns(rows: list[dict], by: str, at: str | None) -> list[str]:
+    """By folder, the set-up columns (not ``at``) that the rows differ in while each folder's runs
+    hold one value (a missing one aside): what the folders compare (a campaign rerun under another
+    law or restitution), not a mix of set-ups; none by any other column."""
+    if by != FOLDER:
+        return []
+    held: dict = {}
+    for row in rows:
+        for column in SETUP_COLUMNS:
+            held.setdefault(column, {}).setdefault(row.get(FOLDER), set()).add(value_key(row.get(column)))
+    columns = []
+    for column, folders in held.items():
+        values = [v - {None} for v in folders.values()]
+        if column != at and len(set().union(*values)) > 1 and all(len(v) <= 1 for v in values):
+            columns.append(column)
+    return columns
+
+
 def _check_setups(point, rows: list[dict], by: str, at: str | None) -> None:
-    """Refuse rows at one point that differ in a set-up column other than ``by`` and ``at``; by
-    folder, one in which each folder's runs hold one value is what the folders compare (a campaign
-    rerun under another law), not a mix."""
+    """Refuse rows at one point that differ in a set-up column other than ``by`` and ``at``, and
+    other than what folders compare (:func:`folder_columns`)."""
+    compared = folder_columns(rows, by, at)
     for column in SETUP_COLUMNS:
-        if column in (by, at):
+        if column in (by, at) or column in compared:
             continue
         seen = sorted({value_key(row.get(column)) for row in rows} - {None}, key=_order)
-        if len(seen) > 1 and by == FOLDER:
-            held: dict = {}
-            for row in rows:
-                held.setdefault(row.get(FOLDER), set()).add(value_key(row.get(column)))
-            if all(len(values - {None}) <= 1 for values in held.values()):
-                continue
         if len(seen) > 1:
             where = f" at {at} {label(point)}" if at else ""
             raise MixedSetups(
@@ -734,6 +748,8 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
     result, unpaired, unrecorded, varied = [], [], [], []
     for at_key in sorted(points, key=lambda k: _order(k) if k is not None else (0, 0.0, "")):
         point = points[at_key]
+        if against is None:
+            varied += folder_columns([row for members in point.values() for row in members], by, at)
         if not allow_mixed:  # the rows compared with each other: all at the point, or each group's against a value
             for members in ([row for members in point.values() for row in members],) if against is None else point.values():
                 _check_setups(at_key, members, by, at)
@@ -828,9 +844,9 @@ def _paired_differences(point: dict, at_key, by: str, at: str | None, metric: st
         recorded = [{c for c in every if any(value_key(row.get(c)) is not None for row in side)} for side in (point[g], point[reference])]
         unrecorded += [c for c in every if c in recorded[0] ^ recorded[1]]
         columns = [c for c in every if c not in recorded[0] ^ recorded[1]]
-        if by == FOLDER:
-            values = [[{value_key(row.get(c)) for row in side} for side in (point[g], point[reference])] for c in columns]
-            across = [c for c, (mine, theirs) in zip(columns, values) if len(mine) == len(theirs) == 1 and mine != theirs and c != "run"]
+        if by == FOLDER:  # the set-up columns that part the two folders, each holding one value: paired across
+            values = [[{value_key(row.get(c)) for row in side} - {None} for side in (point[g], point[reference])] for c in columns]
+            across = [c for c, (mine, theirs) in zip(columns, values) if c in SETUP_COLUMNS and len(mine) == len(theirs) == 1 and mine != theirs]
             varied += across
             columns = [c for c in columns if c not in across]
         twins, rest = pair_runs(point[g], point[reference], columns)
