@@ -16,7 +16,7 @@ import warp as wp
 
 from .errors import InputError
 from .kernels.channels import LEDGER_CHANNELS
-from .kernels.contacts import CANDIDATES, PairHistory, commit_springs
+from .kernels.contacts import CANDIDATES, PairHistory, copy_springs
 from .kernels.integrate import Work
 from .kernels.pair import ContactModel
 from .params import Params
@@ -154,10 +154,10 @@ class ContactHistory:
 
     def settle(self, flipped: bool) -> None:
         """Turn the roles to ``flipped`` (a recorded graph's), the current rows copied into the other
-        buffer if they are the other way round (one launch of ``commit_springs``): the same rows,
+        buffer if they are the other way round (one launch of ``copy_springs``): the same rows,
         the same bits, in the buffer the graph reads."""
         if self.kept and self.flipped != flipped:
-            wp.launch(commit_springs, dim=(self.count, self.width), inputs=[self.current], outputs=[self.next], device=self.device)
+            wp.launch(copy_springs, dim=(self.count, self.width), inputs=[self.current], outputs=[self.next], device=self.device)
             self.flipped = flipped
 
     def overflows(self, first: int = 0, end: int | None = None) -> int:

@@ -68,7 +68,7 @@ def unpack_depth(record: int) -> tuple[float, int]:
 # Both particles of a pair keep a copy: each evaluates the pair from its lower index with the same
 # arguments (kernels/pair.py ssdem_contact), so the two copies stay the same bits, and no thread
 # writes another particle's rows.  The two sets of rows then swap roles (decco_warp/arrays.py
-# ContactHistory.commit, no launch); ``commit_springs`` copies one into the other only where a
+# ContactHistory.commit, no launch); ``copy_springs`` copies one into the other only where a
 # recorded graph needs the rows back in the buffer it was recorded with (ContactHistory.settle).
 
 
@@ -145,9 +145,9 @@ def touches(i: int, j: int, radius_in: wp.array(dtype=wp.float64), position_in: 
 
 
 @wp.kernel
-def commit_springs(
+def copy_springs(
     # In:
-    next_in: PairHistory,
+    history_in: PairHistory,
     # Out:
     history_out: PairHistory,
 ):
@@ -155,15 +155,15 @@ def commit_springs(
     (particles, rows)), so that neighbouring threads copy neighbouring rows of one particle (one
     thread a particle walking its rows read and wrote memory a row's width apart: 8x the time)."""
     i, row = wp.tid()
-    count = next_in.count[i]
+    count = history_in.count[i]
     if row == 0:
         history_out.count[i] = count
     if row < int(count):
-        history_out.partner[i, row] = next_in.partner[i, row]
-        history_out.spring[i, row] = next_in.spring[i, row]
-        history_out.normal[i, row] = next_in.normal[i, row]
-        history_out.rolling[i, row] = next_in.rolling[i, row]
-        history_out.twist[i, row] = next_in.twist[i, row]
+        history_out.partner[i, row] = history_in.partner[i, row]
+        history_out.spring[i, row] = history_in.spring[i, row]
+        history_out.normal[i, row] = history_in.normal[i, row]
+        history_out.rolling[i, row] = history_in.rolling[i, row]
+        history_out.twist[i, row] = history_in.twist[i, row]
 
 
 @functools.cache

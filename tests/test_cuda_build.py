@@ -28,7 +28,7 @@ SCRIPT = textwrap.dedent(
         # Gravity on its own clock: the sweep and gather without candidates.
         kernels += [(newton.pair_gravity_newton(2, precision, 0, False), 32), (newton.gather_newton(precision, False), 256)]
     kernels += [(contacts.contact_pass(law, 8, 4, accumulate), 32) for law in ("paper", "paper-printed-rolling") for accumulate in (True, False)]
-    kernels += [(contacts.contact_pass("ssdem", 1, 32, accumulate), 32) for accumulate in (True, False)] + [(contacts.commit_springs, 256)]
+    kernels += [(contacts.contact_pass("ssdem", 1, 32, accumulate), 32) for accumulate in (True, False)] + [(contacts.copy_springs, 256)]
     kernels += [(neighbours.build_neighbour_list, 256)]  # (integrate's module holds kick_outer and kick_drift_inner)
     kernels += [(bodies.pack_bodies, 256), (integrate.kick_drift, 256), (observables.pair_observables, 256), (observables.pair_observables_tiled(128), 128),
                 (observables.candidate_observables, 256), (tree.tree_gravity("mixed"), 256), (tree.tree_gravity("float64"), 256), (tree.tree_potential, 256),
