@@ -449,3 +449,34 @@ def test_lone_seeds_by_each_seeds_reach_are_those_of_the_shells_over_every_parti
     monkeypatch.setattr(finder, "_SCAN_BELOW", 10**9)
     assert [c.members.tolist() for c in dw.find_clusters(state, min_members=20)] == screened
     assert screened and len(screened[0]) >= pile.n  # the remnant is found
+
+
+@pytest.mark.parametrize("seed, values", [(0, 40), (1, 40), (2, 1)])
+def test_seeds_come_in_the_order_of_argmax_over_the_particles_that_may_still_seed(seed, values):
+    """The finder's seed queue hands out, one by one, what np.argmax of the density over the
+    particles that may still seed gives (ties to the lowest index), in batches smaller than the
+    ties (densities of a few values): with particles struck off between draws as short groups
+    strike theirs, and the densities changed (reset) as a cluster's are taken off."""
+    from decco_warp.analysis import clusters as finder
+
+    rng = np.random.default_rng(seed)
+    n = 3000
+    density = rng.integers(0, values, size=n).astype(float)  # ~75 particles a value, or one for all: ties across every batch edge
+    may_seed = rng.random(n) < 0.9
+    reference = may_seed.copy()
+    queue = finder._SeedQueue(may_seed, density)
+    drawn = 0
+    while True:
+        got = queue.next()
+        candidates = np.flatnonzero(reference)
+        want = int(candidates[np.argmax(density[candidates])]) if candidates.size else None
+        assert got == want
+        if got is None:
+            break
+        drawn += 1
+        struck = np.unique(np.concatenate([[got], rng.integers(0, n, size=rng.integers(0, 4))]))
+        may_seed[struck] = reference[struck] = False
+        if drawn % 97 == 0 and values > 1:  # a cluster taken: the densities change
+            density -= rng.integers(0, 3, size=n)
+            queue.reset()
+    assert drawn > 100 and not reference.any()

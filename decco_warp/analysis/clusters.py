@@ -141,23 +141,34 @@ def find_clusters(state: State, min_members: int = 50, G: float = G_CGS, device:
     # The density of the particles left: computed once, then each cluster's share is taken off.
     density = smoothed_density(x, m, sigmas, device=device)
     left = np.ones(n, dtype=bool)  # free: in no cluster yet
+    free_count = n
     may_seed = np.ones(n, dtype=bool)  # free and never in a group that fell short
     if min_members > 1:  # a particle whose group is itself alone falls short wherever it is met
         may_seed &= ~_alone(x, v, m, radii, contacts, G, trees)
     clusters: list[Cluster] = []
     free = _FreeParticles(x, v, left, trees)
-    while left.sum() >= min_members and may_seed.any():
-        seeds = np.flatnonzero(may_seed)
-        member = np.zeros(n, dtype=bool)
-        member[seeds[int(np.argmax(density[seeds]))]] = True
+    seeds = _SeedQueue(may_seed, density)
+    # The group being grown, as flags (reset after each group: a debris frame tries thousands of
+    # short ones, each in O(its size) rather than O(N)) and as its sorted indices.
+    member = np.zeros(n, dtype=bool)
+    while free_count >= min_members:
+        seed = seeds.next()
+        if seed is None:
+            break
+        member[seed] = True
+        indices = np.array([seed])
+        frontier = indices
         while True:
-            _grow_by_contact(member, left, contacts)
-            if not _bind_by_escape_speed(member, left, x, v, m, G, free):
+            indices = _grow_by_contact(member, left, contacts, indices, frontier)
+            before = indices
+            indices = _bind_by_escape_speed(member, left, x, v, m, G, free, indices)
+            if indices.size == before.size:
                 break
-        if member.sum() < min_members:
-            may_seed &= ~member  # free to join a later cluster, never a seed again
+            frontier = np.setdiff1d(indices, before, assume_unique=True)
+        member[indices] = False
+        if indices.size < min_members:
+            may_seed[indices] = False  # free to join a later cluster, never a seed again
             continue
-        indices = np.flatnonzero(member)
         mass = float(m[indices].sum())
         clusters.append(
             Cluster(
@@ -167,15 +178,57 @@ def find_clusters(state: State, min_members: int = 50, G: float = G_CGS, device:
                 velocity=(m[indices, None] * v[indices]).sum(axis=0) / mass,
             )
         )
-        left &= ~member
-        may_seed &= ~member
-        if left.sum() < free.indices.size // 2:  # the trees may hold taken particles (screened out); not too many
+        left[indices] = False
+        may_seed[indices] = False
+        free_count -= indices.size
+        if free_count < free.indices.size // 2:  # the trees may hold taken particles (screened out); not too many
             free = _FreeParticles(x, v, left)
         rest = np.flatnonzero(left)
         if rest.size:
             density[rest] -= smoothed_density(x[indices], m[indices], sigmas[indices], at=x[rest], device=device)
+            seeds.reset()
     clusters.sort(key=lambda c: (-c.mass, c.members[0]))
     return clusters
+
+
+class _SeedQueue:
+    """The particles that may seed a cluster, highest density first, ties by lowest index (as
+    np.argmax over them picks): the seed of each group in turn.  Taken in batches of the BATCH
+    densest, so that a run of short groups costs O(N) a batch rather than a seed; :meth:`reset` once
+    the densities change (a cluster taken off them).  ``may_seed`` and ``density`` are the caller's,
+    read as they are when a batch is drawn (a particle that may no longer seed is skipped)."""
+
+    BATCH = 256
+
+    def __init__(self, may_seed: np.ndarray, density: np.ndarray):
+        self.may_seed, self.density = may_seed, density
+        self.reset()
+
+    def reset(self) -> None:
+        self.below = math.inf  # the next batch: densities under this one
+        self.batch: list[int] = []
+        self.at = 0
+
+    def next(self) -> int | None:
+        """The next seed, or None when no particle may seed."""
+        while True:
+            while self.at < len(self.batch):
+                seed = self.batch[self.at]
+                self.at += 1
+                if self.may_seed[seed]:
+                    return seed
+            candidates = np.flatnonzero(self.may_seed)
+            candidates = candidates[self.density[candidates] < self.below]
+            if candidates.size == 0:
+                return None
+            values = self.density[candidates]
+            if candidates.size > self.BATCH:  # the BATCH densest, and every one equal to the last of them
+                cut = np.partition(values, candidates.size - self.BATCH)[candidates.size - self.BATCH]
+                keep = values >= cut
+                candidates, values = candidates[keep], values[keep]
+            order = np.lexsort((candidates, -values))
+            self.batch, self.at = candidates[order].tolist(), 0
+            self.below = float(values.min())
 
 
 class _Trees:
@@ -338,34 +391,39 @@ _NEAR_COUNT = 64
 _WIDEN = 1.0 + 1e-6
 
 
-def _grow_by_contact(member: np.ndarray, left: np.ndarray, contacts: sparse.csr_matrix) -> None:
-    """Step 2: add every unassigned particle touching a member, until none is added.  Each pass
-    looks at the last pass's newcomers' contacts only (O(their contacts), not O(N))."""
-    frontier = np.flatnonzero(member)
+def _grow_by_contact(member: np.ndarray, left: np.ndarray, contacts: sparse.csr_matrix, group: np.ndarray,
+                     frontier: np.ndarray) -> np.ndarray:  # fmt: skip
+    """Step 2: add every unassigned particle touching a member, until none is added; ``group``: the
+    members' sorted indices (flagged in ``member``), ``frontier``: those whose contacts are not yet
+    looked at.  Each pass looks at the last pass's newcomers' contacts only (O(their contacts), not
+    O(N)).  Returns the group's sorted indices."""
     indptr, indices = contacts.indptr, contacts.indices
+    added = []
     while frontier.size:
         starts, ends = indptr[frontier], indptr[frontier + 1]
         lengths = ends - starts
         total = int(lengths.sum())
         if total == 0:
-            return
+            break
         # Every newcomer's contacts, their CSR ranges laid end to end.
         offsets = np.repeat(starts - np.cumsum(lengths) + lengths, lengths) + np.arange(total)
         reached = indices[offsets]
         reached = np.unique(reached[left[reached] & ~member[reached]])
         member[reached] = True
+        added.append(reached)
         frontier = reached
+    return np.union1d(group, np.concatenate(added)) if added else group
 
 
-def _bind_by_escape_speed(member, left, x, v, m, G, free: _FreeParticles | None = None) -> bool:
+def _bind_by_escape_speed(member, left, x, v, m, G, free: _FreeParticles | None, group: np.ndarray) -> np.ndarray:
     """Step 3: add every unassigned particle below the escape speed, until none is added.
-    ``free``: the particles of ``left`` with their trees, to screen a small group's candidates.
+    ``free``: the particles of ``left`` with their trees, to screen a small group's candidates;
+    ``group``: the members' sorted indices (flagged in ``member``).
 
-    Returns whether anyone joined.
+    Returns the group's sorted indices (the same array where nobody joined).
     """
-    joined = False
     while True:
-        idx = np.flatnonzero(member)
+        idx = group  # sorted, as np.flatnonzero(member): the sums below in the same order
         mass = m[idx].sum()
         com = (m[idx, None] * x[idx]).sum(axis=0) / mass
         velocity = (m[idx, None] * v[idx]).sum(axis=0) / mass
@@ -375,12 +433,12 @@ def _bind_by_escape_speed(member, left, x, v, m, G, free: _FreeParticles | None 
         else:
             candidates = screened[left[screened] & ~member[screened]]
         if candidates.size == 0:
-            return joined
+            return group
         distance = np.linalg.norm(x[candidates] - com, axis=1)
         speed2 = ((v[candidates] - velocity) ** 2).sum(axis=1)
         with np.errstate(divide="ignore"):
             bound = speed2 < 2.0 * G * mass / distance
         if not bound.any():
-            return joined
+            return group
         member[candidates[bound]] = True
-        joined = True
+        group = np.union1d(group, candidates[bound])
