@@ -651,10 +651,9 @@ def folder_columns(rows: list[dict], by: str, at: str | None) -> list[str]:
     return columns
 
 
-def _check_setups(point, rows: list[dict], by: str, at: str | None) -> None:
+def _check_setups(point, rows: list[dict], by: str, at: str | None, compared=()) -> None:
     """Refuse rows at one point that differ in a set-up column other than ``by`` and ``at``, and
-    other than what folders compare (:func:`folder_columns`)."""
-    compared = folder_columns(rows, by, at)
+    other than ``compared``, what the folders compare (:func:`folder_columns` of the rows)."""
     for column in SETUP_COLUMNS:
         if column in (by, at) or column in compared:
             continue
@@ -748,11 +747,12 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
     result, unpaired, unrecorded, varied = [], [], [], []
     for at_key in sorted(points, key=lambda k: _order(k) if k is not None else (0, 0.0, "")):
         point = points[at_key]
-        if against is None:
-            varied += folder_columns([row for members in point.values() for row in members], by, at)
+        everyone = [row for members in point.values() for row in members]
+        compared = folder_columns(everyone, by, at) if against is None else []  # against a value, a group is one folder
+        varied += compared
         if not allow_mixed:  # the rows compared with each other: all at the point, or each group's against a value
-            for members in ([row for members in point.values() for row in members],) if against is None else point.values():
-                _check_setups(at_key, members, by, at)
+            for members in (everyone,) if against is None else point.values():
+                _check_setups(at_key, members, by, at, compared)
         if against is None:
             order = sorted(point, key=lambda g: (g != reference, _order(g)))  # the reference first
             stats_of = {g: _group(g, point[g], metric, resamples, confidence) for g in order}
@@ -844,11 +844,9 @@ def _paired_differences(point: dict, at_key, by: str, at: str | None, metric: st
         recorded = [{c for c in every if any(value_key(row.get(c)) is not None for row in side)} for side in (point[g], point[reference])]
         unrecorded += [c for c in every if c in recorded[0] ^ recorded[1]]
         columns = [c for c in every if c not in recorded[0] ^ recorded[1]]
-        if by == FOLDER:  # the set-up columns that part the two folders, each holding one value: paired across
-            values = [[{value_key(row.get(c)) for row in side} - {None} for side in (point[g], point[reference])] for c in columns]
-            across = [c for c, (mine, theirs) in zip(columns, values) if c in SETUP_COLUMNS and len(mine) == len(theirs) == 1 and mine != theirs]
-            varied += across
-            columns = [c for c in columns if c not in across]
+        across = folder_columns(point[g] + point[reference], by, at)  # what the two folders compare: paired across
+        varied += across
+        columns = [c for c in columns if c not in across]
         twins, rest = pair_runs(point[g], point[reference], columns)
         named = [f"{row.get('run', '?')} ({by} {label(value_key(row[by]))})" for row in rest]
         if len(twins) < 2:
