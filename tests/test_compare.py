@@ -372,6 +372,16 @@ def test_folders_of_two_laws_pair_across_the_law_and_name_it(tmp_path):
     with pytest.raises(cmp.UnpairedRuns, match=r"folder decco_code has 0 twin\(s\).*share no value of target_pile"):
         cmp.compare([{**row, "folder": "zero_slip", "target_pile": "target"} for row in paper] + moved, "folder", "largest_mass_ratio",
                     reference="zero_slip", paired=True)  # fmt: skip
+    # Folders that each differ from the reference in their own columns: the pairs line names each's.
+    cor = fake_rows({"none": [0.49, 0.59, 0.52]}, contact_law="paper", restitution=0.894)
+    write_runs(tmp_path / "cor", cor)
+    rows = cmp.read_rows([tmp_path / name / "summary.csv" for name in ("zero_slip", "decco_code", "cor")])
+    three = cmp.compare(rows, "folder", "largest_mass_ratio", reference="zero_slip", paired=True, per_comparison=True)
+    assert [(d.group, d.pairs) for d in three.points[0].differences] == [("cor", 3), ("decco_code", 3)]
+    assert three.paired_across == {"cor": ["restitution"], "decco_code": ["restitution", "contact_law"]}
+    (line,) = [line for line in three.lines() if line.startswith("pairs:")]
+    assert "paired across cor: restitution; decco_code: restitution, contact_law (one value in each folder" in line
+    assert result.paired_across == {"decco_code": ["restitution", "contact_law"]}  # one group: the pooled wording above
     mixed = [{**row, "contact_law": "paper", "restitution": 0.9} if row["run"].endswith("r0") else row for row in decco]
     write_runs(tmp_path / "mixed", mixed)
     rows = cmp.read_rows([tmp_path / "zero_slip" / "summary.csv", tmp_path / "mixed" / "summary.csv"])

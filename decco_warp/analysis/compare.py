@@ -514,6 +514,9 @@ class Comparison:
     #: (the law, the restitution: what the campaigns compare); with ``paired``, twins were paired
     #: across them
     varied: list = field(default_factory=list)
+    #: with ``paired``, by folder: each group's own columns of ``varied`` (its label: the columns it
+    #: was paired across with the reference), where the groups' differ
+    paired_across: dict = field(default_factory=dict)
 
     @property
     def pair_columns(self) -> list[str]:
@@ -521,6 +524,13 @@ class Comparison:
         runs share its value), and but those one side does not record (``unrecorded``) or that tell
         the folders apart (``varied``)."""
         return [c for c in pair_columns(self.by, self.at) if c not in self.unrecorded and c not in self.varied]
+
+    def _across(self) -> str:
+        """What twins were paired across: ``varied``, or group by group where the groups' differ."""
+        columns = {tuple(c) for c in self.paired_across.values()}
+        if len(columns) <= 1:
+            return ", ".join(self.varied)
+        return "; ".join(f"{group}: {', '.join(c) or 'nothing'}" for group, c in self.paired_across.items())
 
     def as_dict(self) -> dict:
         """Plain data (numbers as floats, None where none exists), for JSON."""
@@ -575,7 +585,7 @@ class Comparison:
             text.insert(3, f"pairs: {twins} twins; " + (f"{len(self.unpaired)} run(s) without a twin left out: {', '.join(self.unpaired)}"
                                                         if self.unpaired else "every run has its twin")
                         + (f"; not matched on {', '.join(self.unrecorded)} (recorded by one side's runs only)" if self.unrecorded else "")
-                        + (f"; paired across {', '.join(self.varied)} (one value in each folder, another in the reference: what the folders "
+                        + (f"; paired across {self._across()} (one value in each folder, another in the reference: what the folders "
                            "compare)" if self.varied else ""))  # fmt: skip
         pairing = ["pairs", "r"] if self.paired else []
         resolve = "pairs to resolve" if self.paired else "runs to resolve"
@@ -744,7 +754,7 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
         if reference not in groups:
             raise CompareError(f"--reference {label(reference)}: no such {by} among the runs; they have: {', '.join(map(label, groups))}")
 
-    result, unpaired, unrecorded, varied = [], [], [], []
+    result, unpaired, unrecorded, varied, across_of = [], [], [], [], {}
     for at_key in sorted(points, key=lambda k: _order(k) if k is not None else (0, 0.0, "")):
         point = points[at_key]
         everyone = [row for members in point.values() for row in members]
@@ -760,7 +770,7 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
                 differences = _differences(stats_of, reference, resolve, resamples, confidence, per_comparison) if reference in point else []
             else:
                 differences = _paired_differences(point, at_key, by, at, metric, reference, resolve, resamples, confidence, per_comparison,
-                                                  unpaired, unrecorded, varied)  # fmt: skip
+                                                  unpaired, unrecorded, varied, across_of)  # fmt: skip
         else:
             order = sorted(point, key=_order)
             stats_of = {g: _group(g, point[g], metric, resamples, confidence) for g in order}
@@ -768,7 +778,7 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
         result.append(Point(at_key, [stats_of[g] for g in order], differences))
     comparison = Comparison(metric, by, at, reference, resolve, result, len(rows), len(rows) - len(done), where, met, missing, resamples,
                             against, confidence, per_comparison, paired, list(dict.fromkeys(unpaired)), list(dict.fromkeys(unrecorded)),
-                            list(dict.fromkeys(varied)))  # fmt: skip
+                            list(dict.fromkeys(varied)), {label(g): list(dict.fromkeys(c)) for g, c in sorted(across_of.items(), key=lambda i: _order(i[0]))})  # fmt: skip
     single = comparison.single()
     if single and not allow_single:
         named = "; ".join(f"{label(g)}" + (f" at {at} {label(p)}" if at else "") for p, g in single)
@@ -823,13 +833,14 @@ def pair_runs(rows: list[dict], reference_rows: list[dict], columns) -> tuple[li
 
 
 def _paired_differences(point: dict, at_key, by: str, at: str | None, metric: str, reference, resolve: float | None, resamples: int,
-                        confidence: float, per_comparison: bool, unpaired: list, unrecorded: list, varied: list) -> list[Difference]:  # fmt: skip
+                        confidence: float, per_comparison: bool, unpaired: list, unrecorded: list, varied: list,
+                        across_of: dict) -> list[Difference]:  # fmt: skip
     """Each group's paired difference to the reference at one point (``unpaired`` gets the runs
     left without a twin, "RUN (BY VALUE)"; ``unrecorded`` the pairing columns that one side records
     and the other does not, which twins are not matched on: as the set-up check, a value missing is
     no disagreement; ``varied``, by folder, the columns that hold one value in each side and
     different ones: a campaign rerun under another law or restitution pairs with the first across
-    them)."""
+    them; ``across_of``, the same per group)."""
     if reference not in point:
         return []
     others = sorted((g for g in point if g != reference), key=_order)
@@ -846,6 +857,7 @@ def _paired_differences(point: dict, at_key, by: str, at: str | None, metric: st
         columns = [c for c in every if c not in recorded[0] ^ recorded[1]]
         across = folder_columns(point[g] + point[reference], by, at)  # what the two folders compare: paired across
         varied += across
+        across_of.setdefault(g, []).extend(across)
         columns = [c for c in columns if c not in across]
         twins, rest = pair_runs(point[g], point[reference], columns)
         named = [f"{row.get('run', '?')} ({by} {label(value_key(row[by]))})" for row in rest]
