@@ -71,3 +71,19 @@ def assert_fused_steps_equal_one_step_at_a_time(make, pieces=FUSED_PIECES):
         assert np.array_equal(got[name], values), name
     # The scene did something: contacts met and the ledger counting.
     assert want["deepest_contact"].max() > 0 and np.abs(want["work"]).max() > 0
+
+
+def straight_and_resumed(state, params, steps: int, at: int, device: str = "cpu", **options):
+    """Two simulations of ``state`` after ``steps`` steps: one stepped straight through, one
+    stopped at ``at``, made again from that snapshot and stepped on (a resumed run); ``options``
+    (precision, scheme, layout) for both. For the bit-for-bit checks of a restart."""
+    import decco_warp as dw
+
+    straight = dw.Simulation(state, params, device=device, ledger=True, allow_unstable=True, **options)
+    straight.step(steps)
+    first = dw.Simulation(state, params, device=device, ledger=True, allow_unstable=True, **options)
+    first.step(at)
+    resumed = dw.Simulation.from_snapshot(state, params, first.snapshot(), device=device, **options)
+    assert resumed.step_count == at
+    resumed.step(steps - at)
+    return straight, resumed

@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from helpers import assert_fused_steps_equal_one_step_at_a_time
+from helpers import assert_fused_steps_equal_one_step_at_a_time, straight_and_resumed
 from oracle import pair_loop_forces
 from scenes import contact_cluster
 
@@ -197,14 +197,7 @@ def test_a_restart_from_a_snapshot_is_bit_identical(precision, device):
     neighbour lists and the positions of their build from the snapshot), then stepped to 150: every
     array the next step depends on, bit for bit."""
     clump, params, scheme = _fast_clump(), dw.Params(), dw.Scheme(gravity_every=5)
-    straight = dw.Simulation(clump, params, device=device, precision=precision, ledger=True, allow_unstable=True, scheme=scheme)
-    straight.step(150)
-    first = dw.Simulation(clump, params, device=device, precision=precision, ledger=True, allow_unstable=True, scheme=scheme)
-    first.step(60)
-    snap = first.snapshot()
-    second = dw.Simulation.from_snapshot(clump, params, snap, device=device, precision=precision, scheme=scheme)
-    assert second.step_count == 60
-    second.step(90)
+    straight, second = straight_and_resumed(clump, params, 150, 60, device=device, precision=precision, scheme=scheme)
     a, b = straight.snapshot(), second.snapshot()
     for key in ("positions", "velocities", "omegas", "force", "torque", "channels", "work", "deepest_contact"):
         assert np.array_equal(a[key], b[key]), key
@@ -450,6 +443,7 @@ wp.config.kernel_cache_dir = sys.argv[1]
 sys.path.insert(0, sys.argv[2])
 import decco_warp as dw
 from decco_warp import contact_finders
+from helpers import straight_and_resumed
 from test_respa import _fast_clump
 KEYS = ("positions", "velocities", "omegas", "force", "torque", "channels", "work", "deepest_contact")
 if len(sys.argv) > 3:  # the check of the check: lists built afresh on restore, every system's lists at every build
@@ -467,12 +461,7 @@ def sheared(seed):  # the shipped pile (lists of up to ~30 neighbours) in a shea
     flow[:, 0] = contact_finders.SKIN_FRACTION * 7.5e5 * (0.2 + 0.1 * (seed % 3)) * y / np.abs(y).max()
     return replace(pile, velocities=pile.velocities + flow)
 clump = sheared(11)
-straight = dw.Simulation(clump, params, device="cpu", ledger=True, allow_unstable=True, scheme=scheme)
-straight.step(300)
-first = dw.Simulation(clump, params, device="cpu", ledger=True, allow_unstable=True, scheme=scheme)
-first.step(60)
-second = dw.Simulation.from_snapshot(clump, params, first.snapshot(), device="cpu", scheme=scheme)
-second.step(240)
+straight, second = straight_and_resumed(clump, params, 300, 60, scheme=scheme)
 a, b = straight.snapshot(), second.snapshot()
 restart = all(np.array_equal(a[key], b[key]) for key in KEYS)
 states = [_fast_clump(37, seed=0), sheared(1), _fast_clump(64, seed=2)]

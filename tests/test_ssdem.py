@@ -373,6 +373,7 @@ from decco_warp.ensemble import Ensemble
 from decco_warp.io import load_pile
 from decco_warp.kernels.contacts import CANDIDATES, contact_pass
 from decco_warp.plan import builtin_pile
+from helpers import straight_and_resumed
 from scenes import contact_cluster, crowded_sphere
 warnings.simplefilter("ignore", UserWarning)  # (the check below reads arrays between launches: no graph)
 params = dw.Params(contact_law="ssdem", mu_s=0.3, mu_r=0.05, mu_t=0.3, eps_t=0.5, restitution=0.8)
@@ -441,12 +442,7 @@ def arrays(snapshot):
     return {key: listed if key == "neighbour_list" else value for key, value in snapshot.items() if isinstance(value, np.ndarray)}
 def same(a, b):
     return a.keys() == b.keys() and all(np.array_equal(value, b[key]) for key, value in a.items())
-straight = dw.Simulation(sheared, params, device="cpu", ledger=True, allow_unstable=True, scheme=scheme)
-straight.step(100)
-first = dw.Simulation(sheared, params, device="cpu", ledger=True, allow_unstable=True, scheme=scheme)
-first.step(40)
-second = dw.Simulation.from_snapshot(sheared, params, first.snapshot(), device="cpu", scheme=scheme)
-second.step(60)
+straight, second = straight_and_resumed(sheared, params, 100, 40, scheme=scheme)
 resumed = same(arrays(straight.snapshot()), arrays(second.snapshot()))
 states = [contact_cluster(23, seed=0, speed=1e3), sheared, contact_cluster(31, seed=1, speed=1e3)]
 members = [dw.Simulation(s, params, device="cpu", ledger=True, allow_unstable=True, scheme=scheme) for s in states]
