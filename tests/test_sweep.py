@@ -143,19 +143,19 @@ def test_shipped_paper_sweeps_are_valid(name):
     settings, runs = load_sweep(PAPER / f"{name}.toml")
     assert runs and len({r["run"]["name"] for r in runs}) == len(runs)
     expected = {"fig3_validation": 63, "fig3_headon": 21, "fig3_oblique": 42, "fig8_stress": 3, "fig9_spin": 24, "realizations": 33, "spin_friction": 4,
-                "fig9_statistics": 78, "fig6_statistics": 60, "fig6_clock": 6, "contact_lanes": 3}  # fmt: skip
+                "fig9_statistics": 78, "fig6_statistics": 60, "fig6_clock": 6, "ladder_clock": 15, "contact_lanes": 3}  # fmt: skip
     if name in expected:
         assert len(runs) == expected[name]
     if name == "fig9_spin":  # two axis pairs of each kind of spin, at every eta
         kinds = [spin_kind(SPIN_AXES[r["collision"]["target_spin_axis"]], SPIN_AXES[r["collision"]["projectile_spin_axis"]]) for r in runs]
         assert sorted(set(kinds)) == ["anti-parallel", "parallel", "perpendicular"] and all(kinds.count(k) == 8 for k in set(kinds))
-    if name == "fig6_clock":  # fig6_statistics' own eta 12 set-ups (realizations 0 to 2), on the other clock
+    if name in ("fig6_clock", "ladder_clock"):  # fig6_statistics' own set-ups, on another clock
         stats = {r["run"]["name"]: r for r in load_sweep(PAPER / "fig6_statistics.toml")[1]}
         for run in runs:
             twin = stats[run["run"]["name"]]
             assert run["collision"] == twin["collision"] and run["piles"] == twin["piles"]
             assert {k: v for k, v in run["params"].items() if k != "gravity_every"} == {k: v for k, v in twin["params"].items() if k != "gravity_every"}
-            assert (run["params"]["gravity_every"], twin["params"]["gravity_every"]) == (1, 10)
+            assert (run["params"]["gravity_every"], twin["params"]["gravity_every"]) == ({"fig6_clock": 1, "ladder_clock": 50}[name], 10)
     if name in ("fig3_oblique", "realizations"):  # the same folder and names as the head-on runs they join
         headon = {r["run"]["name"]: r for r in load_sweep(Path(__file__).parent.parent / "runs" / "paper" / "fig3_headon.toml")[1]}
         assert {r["run"]["out"] for r in runs} == {r["run"]["out"] for r in headon.values()}
