@@ -1054,20 +1054,30 @@ def threshold(
         None, "--where", metavar="COLUMN=VALUE[,VALUE...]", help="Keep only the runs with one of these values in COLUMN (repeatable), e.g. --where theta_deg=0."
     ),
     confidence: float = typer.Option(0.95, "--confidence", metavar="LEVEL", help="Level of the intervals (two-sided)."),
+    against: Optional[List[Path]] = typer.Option(
+        None, "--against", metavar="PATH", help="Also each Q*_RD over that of these runs (folders as PATHS; repeatable), with its interval."
+    ),
 ) -> None:
     """The catastrophic disruption threshold Q*_RD per mass ratio (the Q_R at which the largest
     remnant holds half the total mass, from a line through the runs in LS12's linear regime) with
-    its interval, and LS12's c* and mu_bar fitted to the thresholds of two or more mass ratios."""
+    its interval, and LS12's c* and mu_bar fitted to the thresholds of two or more mass ratios;
+    with --against, each threshold over another set's (friction off over on, R = 4 over R = 1)."""
     from .analysis.compare import parse_where, read_rows, select
-    from .analysis.threshold import report, thresholds
+    from .analysis.threshold import report, report_ratios, thresholds
     from .checks import InputError
+
+    def found_in(folders):
+        rows, _ = select(read_rows(folders), parse_where(where or []))
+        rows = [row for row in rows if row.get("status", "ok") in (None, "ok") or str(row.get("status")).startswith("skipped")]
+        return thresholds(rows, confidence)
 
     try:
         if not 0 < confidence < 1:
             raise InputError(f"--confidence must be in (0, 1); got {confidence}")
-        rows, _ = select(read_rows(paths), parse_where(where or []))
-        rows = [row for row in rows if row.get("status", "ok") in (None, "ok") or str(row.get("status")).startswith("skipped")]
-        lines = report(thresholds(rows, confidence))
+        found = found_in(paths)
+        lines = report(found)
+        if against:
+            lines += report_ratios(found, found_in(against), " ".join(map(str, against)))
     except InputError as error:  # CompareError is one
         fail(str(error))
     for line in lines:

@@ -76,6 +76,28 @@ def test_the_interval_covers_the_true_threshold_as_often_as_it_says():
     assert 0.925 <= hits / trials <= 0.97
 
 
+def test_a_ratio_of_two_sets_thresholds_covers_the_true_ratio_as_often_as_it_says():
+    """One set of runs on the law with c* = 3.3 (friction off, say) over another with c* = 5, each
+    15 runs (three energies, five realizations, scatter 0.03): the ratio is the thresholds' ratio,
+    and over 500 such pairs its 95 % interval holds the true 0.66 in 92 % to 97.5 % of them. Runs
+    exactly on the law give the ratio with no width."""
+    from dataclasses import replace
+
+    softer = replace(scaling.SMALL_BODIES, c_star=3.3)
+    hits, trials = 0, 500
+    for seed in range(trials):
+        rows_a, q_a = _law_rows(0.25, [0.6, 1.0, 1.4], scatter=0.03, seed=seed, per_energy=5, law=softer)
+        rows_b, q_b = _law_rows(0.25, [0.6, 1.0, 1.4], scatter=0.03, seed=10_000 + seed, per_energy=5)
+        a, b = threshold.thresholds(rows_a)[0.25], threshold.thresholds(rows_b)[0.25]
+        r = threshold.threshold_ratio(a, b)
+        assert r.ratio == pytest.approx(a.q_star / b.q_star, rel=1e-12) and r.low < r.ratio < r.high
+        hits += r.low <= q_a / q_b <= r.high
+    assert q_a / q_b == pytest.approx(0.66, rel=1e-9)
+    assert 0.92 <= hits / trials <= 0.975
+    exact = threshold.threshold_ratio(*(threshold.thresholds(_law_rows(0.25, [0.6, 1.0, 1.4], law=law)[0])[0.25] for law in (softer, scaling.SMALL_BODIES)))
+    assert (exact.ratio, exact.low, exact.high) == pytest.approx((0.66, 0.66, 0.66), rel=1e-9)  # the lines' round-off alone
+
+
 def test_law_constants_recover_c_star_and_mu_bar_from_the_laws_thresholds():
     """Thresholds made by the law's own formula for c* = 4.2, mu_bar = 0.45 (two and three mass
     ratios) give those constants back; equal masses alone give c* and no mu_bar; one unequal ratio
@@ -155,6 +177,18 @@ def test_the_threshold_command_prints_each_ratio_and_the_constants(tmp_path):
         value, low, high = (float(v) for v in line.split(":")[1].replace("(", "").replace("),", "").replace(" to ", " ").split()[:3])
         assert low <= q_star <= high and value == pytest.approx(q_star, rel=0.05)
     assert "c* = " in lines[-1] and "mu_bar = " in lines[-1]
+    # --against: each ratio's threshold over another set's (here the 1/4 runs alone: 1/10 has none there).
+    quarter = tmp_path / "quarter"
+    quarter.mkdir()
+    for folder in tmp_path.glob("m0.25_*"):
+        folder.rename(quarter / folder.name)
+    result = cli_here("threshold", str(tmp_path), str(quarter), "--against", str(quarter))
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert lines[-3].startswith(f"over the Q*_RD of {quarter} (95 % intervals")
+    assert lines[-2] == "  mass ratio 0.1: not among its thresholds"
+    ratio, low, high = (float(v) for v in lines[-1].split(":")[1].replace("(", "").replace(")", "").replace(" to ", " ").split())
+    assert lines[-1].startswith("  mass ratio 0.25:") and ratio == 1.0 and low < 1.0 < high
     (tmp_path / "summary.csv").write_text("run,mass_ratio,speed,largest_mass_ratio\nx,0.25,1e5,0.5\n")
     result = cli_here("threshold", str(tmp_path / "summary.csv"))
     assert result.returncode == 2 and "summary.json and its sweep's summary.csv hold them" in result.stderr and len(result.stderr.strip().splitlines()) == 1

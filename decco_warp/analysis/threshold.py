@@ -14,10 +14,12 @@ shape holds can be read off.
         print(ratio, threshold.q_star, threshold.low, threshold.high)
     fit = law_constants(list(thresholds(rows).values()))
     fit.c_star, fit.mu_bar
+    threshold_ratio(found[0.25], other[0.25])               # one set's Q*_RD over another's
 
 Intervals: Q*_RD's is Fieller's interval of the line's crossing (exact for a straight line with
 normal scatter of one size; the runs' realizations are the scatter), c* and mu_bar's come from the
-thresholds' own errors (the delta method) through the law's log-linear form.  Pure NumPy and SciPy.
+thresholds' own errors (the delta method) through the law's log-linear form, and a ratio of two
+sets' thresholds (friction off over on, R = 4 over R = 1) from theirs on its log.  Pure NumPy and SciPy.
 """
 
 from __future__ import annotations
@@ -213,6 +215,46 @@ def law_constants(found: list[Threshold], G: float = G_CGS, confidence: float = 
         math.exp(ln_c), math.exp(ln_c - ln_c_half), math.exp(ln_c + ln_c_half),
         float(_mu_bar(k)), float(mu_ends[0]), float(mu_ends[1]), len(found), confidence,
     )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class ThresholdRatio:
+    """One set of runs' Q*_RD over another's, at one mass ratio, with its interval."""
+
+    mass_ratio: float
+    ratio: float
+    low: float
+    high: float
+    dof: float
+    """Degrees of freedom of its t quantile (Welch-Satterthwaite's, from each line's runs - 2)."""
+    confidence: float = CONFIDENCE
+
+
+def threshold_ratio(found: Threshold, reference: Threshold, confidence: float = CONFIDENCE) -> ThresholdRatio:
+    """``found``'s Q*_RD over ``reference``'s, the two from independent runs: the delta method on
+    the ratio's log (each threshold's standard error over its value, added in quadrature), with
+    Student's t at Welch-Satterthwaite's degrees of freedom.  Twins (runs of one set-up in both
+    sets) correlate, which this interval ignores: for them it is wide."""
+    a, b = (found.std / found.q_star) ** 2, (reference.std / reference.q_star) ** 2
+    ratio = found.q_star / reference.q_star
+    if a + b == 0.0:  # both lines through their runs exactly
+        return ThresholdRatio(found.mass_ratio, ratio, ratio, ratio, math.inf, confidence)
+    dof = (a + b) ** 2 / (a**2 / (found.runs - 2) + b**2 / (reference.runs - 2))
+    half = stats.t.ppf(0.5 + confidence / 2, dof) * math.sqrt(a + b)
+    return ThresholdRatio(found.mass_ratio, ratio, ratio * math.exp(-half), ratio * math.exp(half), float(dof), confidence)
+
+
+def report_ratios(found: dict[float, Threshold], reference: dict[float, Threshold], against: str) -> list[str]:
+    """Each mass ratio's Q*_RD over ``reference``'s (the runs of ``against``), as lines for a terminal."""
+    level = f"{100 * next(iter(found.values())).confidence:g} %" if found else ""
+    lines = [f"over the Q*_RD of {against} ({level} intervals: the delta method on the log, the two sets of runs independent):"]
+    for ratio, t in found.items():
+        if ratio not in reference:
+            lines.append(f"  mass ratio {ratio:g}: not among its thresholds")
+            continue
+        r = threshold_ratio(t, reference[ratio], t.confidence)
+        lines.append(f"  mass ratio {ratio:g}: {r.ratio:.3f} ({r.low:.3f} to {r.high:.3f})")
+    return lines
 
 
 def _mu_bar(k: float) -> float:
