@@ -14,7 +14,7 @@ shape holds can be read off.
         print(ratio, threshold.q_star, threshold.low, threshold.high)
     fit = law_constants(list(thresholds(rows).values()))
     fit.c_star, fit.mu_bar
-    threshold_ratio(found[0.25], other[0.25])               # one set's Q*_RD over another's
+    threshold_ratio(thresholds(rows)[0.25], thresholds(other_rows)[0.25]).ratio   # one set's Q*_RD over another's
 
 Intervals: Q*_RD's is Fieller's interval of the line's crossing (exact for a straight line with
 normal scatter of one size; the runs' realizations are the scatter), c* and mu_bar's come from the
