@@ -770,7 +770,7 @@ def compare(rows: list[dict], by: str, metric: str, at: str | None = None, refer
                 differences = _differences(stats_of, reference, resolve, resamples, confidence, per_comparison) if reference in point else []
             else:
                 differences = _paired_differences(point, at_key, by, at, metric, reference, resolve, resamples, confidence, per_comparison,
-                                                  unpaired, unrecorded, varied, across_of)  # fmt: skip
+                                                  unpaired, unrecorded, across_of)  # fmt: skip
         else:
             order = sorted(point, key=_order)
             stats_of = {g: _group(g, point[g], metric, resamples, confidence) for g in order}
@@ -833,14 +833,14 @@ def pair_runs(rows: list[dict], reference_rows: list[dict], columns) -> tuple[li
 
 
 def _paired_differences(point: dict, at_key, by: str, at: str | None, metric: str, reference, resolve: float | None, resamples: int,
-                        confidence: float, per_comparison: bool, unpaired: list, unrecorded: list, varied: list,
+                        confidence: float, per_comparison: bool, unpaired: list, unrecorded: list,
                         across_of: dict) -> list[Difference]:  # fmt: skip
     """Each group's paired difference to the reference at one point (``unpaired`` gets the runs
     left without a twin, "RUN (BY VALUE)"; ``unrecorded`` the pairing columns that one side records
     and the other does not, which twins are not matched on: as the set-up check, a value missing is
-    no disagreement; ``varied``, by folder, the columns that hold one value in each side and
-    different ones: a campaign rerun under another law or restitution pairs with the first across
-    them; ``across_of``, the same per group)."""
+    no disagreement; ``across_of``, by folder, each group's columns that hold one value in each side
+    and different ones: a campaign rerun under another law or restitution pairs with the first
+    across them; together they are the point's :func:`folder_columns`, which compare keeps)."""
     if reference not in point:
         return []
     others = sorted((g for g in point if g != reference), key=_order)
@@ -856,7 +856,6 @@ def _paired_differences(point: dict, at_key, by: str, at: str | None, metric: st
         unrecorded += [c for c in every if c in recorded[0] ^ recorded[1]]
         columns = [c for c in every if c not in recorded[0] ^ recorded[1]]
         across = folder_columns(point[g] + point[reference], by, at)  # what the two folders compare: paired across
-        varied += across
         across_of.setdefault(g, []).extend(across)
         columns = [c for c in columns if c not in across]
         twins, rest = pair_runs(point[g], point[reference], columns)
