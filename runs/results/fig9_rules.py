@@ -1,7 +1,8 @@
 """Fig. 9 under three friction rules (docs/validation.md, "Fig. 9: spin"): the committed campaign
 made before sliding friction's zero-slip rule (fig9_statistics/, eta 3 and 6), the same set-ups
 rerun with it (fig9_zero_slip/, eta 3 and 6), and DECCO's pair forces as its code computes them
-(fig9_decco_code/, eta 6).
+(fig9_decco_code/, eta 6); then the energy-matched controls (fig9_energy_matched/: no spin at eta plus
+the spin's energy, 0.0624) against no spin and against each kind under today's rule.
 
     python runs/results/fig9_rules.py          # from the repository root, on any machine (CPU)
 
@@ -30,6 +31,9 @@ RULES = {  # folder: what made it
 KINDS = ("parallel", "perpendicular", "anti-parallel")
 ETAS = (3.0, 6.0)
 METRIC = "largest_mass_ratio"
+#: The rotational energy of the two piles at half breakup over their binding energy (docs/validation.md,
+#: "Fig. 9: spin"): fig9_energy_matched.toml's runs are at eta + this.
+SPIN_ENERGY = 0.0624
 
 
 def runs_of(folder: str, eta: float) -> dict[str, dict]:
@@ -44,6 +48,19 @@ def spin_effects(folder: str, eta: float = 6.0) -> Point:
     (figures.py draws eta 6's)."""
     (point,) = compare(read_rows([RESULTS / folder / "summary.csv"]), "spin_kind", METRIC, at="eta", where={"eta": [eta]}).points
     return point
+
+
+def energy_matched(eta: float) -> tuple[np.ndarray, np.ndarray, Point]:
+    """At ``eta``: the m_lf/m_t of no spin (fig9_zero_slip/) and of its energy-matched control (no spin
+    at eta + SPIN_ENERGY, fig9_energy_matched/), and each kind's difference to that control, Dunnett's
+    95 % (the kinds relabelled to the control's point, which they match in energy)."""
+    today = read_rows([RESULTS / "fig9_zero_slip" / "summary.csv"])
+    controls = [row for row in read_rows([RESULTS / "fig9_energy_matched" / "summary.csv"]) if abs(row["eta"] - eta - SPIN_ENERGY) < 1e-6]
+    none = np.array([row[METRIC] for row in today if abs(row["eta"] - eta) < 1e-6 and row["spin_kind"] == "none"])
+    rows = [row for row in today if abs(row["eta"] - eta) < 1e-6 and row["spin_kind"] != "none"]
+    rows += [{**row, "eta": eta, "spin_kind": "energy-matched"} for row in controls]
+    (point,) = compare(rows, "spin_kind", METRIC, at="eta", reference="energy-matched").points
+    return none, np.array([row[METRIC] for row in controls]), point
 
 
 def main() -> None:
@@ -82,6 +99,16 @@ def main() -> None:
                 print(f"  {kind:14s} effect of spin, {RULES[new]} minus {RULES[old]}: "
                       f"{paired[kind].mean() - paired['none'].mean():+.4f} ({low:+.4f} to {high:+.4f})")
         print()
+
+    for eta in ETAS:
+        none, control, point = energy_matched(eta)
+        low, high = welch_interval(control, none)
+        print(f"eta {eta:g}: no spin at eta + {SPIN_ENERGY} (n {control.size}) {control.mean():.4f} (std {control.std(ddof=1):.4f}) minus no spin "
+              f"(n {none.size}) {none.mean():.4f} (std {none.std(ddof=1):.4f}): {control.mean() - none.mean():+.4f} ({low:+.4f} to {high:+.4f}, Welch 95 %)")
+        effect = {d.group: d for d in point.differences}
+        print("  each kind minus the energy-matched control (the spin's own part; Dunnett, 95 % together): " + ", ".join(
+            f"{k} {effect[k].difference:+.4f} ({effect[k].low:+.4f} to {effect[k].high:+.4f}){' *' if effect[k].resolved else ''}" for k in KINDS))
+
 
 if __name__ == "__main__":
     main()
