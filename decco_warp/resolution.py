@@ -54,8 +54,11 @@ def pile_entry(entry: dict, resolution: float, default_radii: str) -> dict:
 def scaled_run(run: dict, resolution: float, scale_contacts: bool, defaults: dict) -> dict:
     """A raw run specification (tables) at ``resolution``: its piles those of the resolution, and with
     ``scale_contacts`` k_in and dt x f (an "auto" stays "auto": it is chosen from the set-up anyway)
-    and the step counts / f (frames at the same times); ``[run] resolution`` records R.  ``defaults``:
-    the [run], [piles] and [params] values of keys the run does not give."""
+    and the step counts / f (frames at the same times), rounded up to whole outer steps of the K
+    at the scaled dt (``gravity_every = "auto"`` an interval: more steps of the shorter dt, 16 at
+    R = 4 where 10 at R = 1; with an "auto" dt its K, and the rounding, wait for that dt:
+    spec.settle_auto); ``[run] resolution`` records R.  ``defaults``: the [run], [piles] and [params]
+    values of keys the run does not give."""
     f = length_factor(resolution)
     run = {table: dict(values) for table, values in run.items()}
     for which in ("target", "projectile"):
@@ -66,7 +69,7 @@ def scaled_run(run: dict, resolution: float, scale_contacts: bool, defaults: dic
             value = params.get(key, defaults["params"][key])
             if value != "auto":
                 params[key] = float(value) * f
-        outer = step_multiple_of({**defaults["params"], **params})
+        outer = step_multiple_of({**defaults["params"], **params}) or 1  # None: K of an "auto" dt, settled with it
         table = run.setdefault("run", {})
         for key in ("steps", "output_every", "checkpoint_every"):
             if key == "steps" and "duration" in table:

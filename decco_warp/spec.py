@@ -19,7 +19,9 @@ which it implies unless dt is given) depend on the collision: they stay "auto",
 with ``duration`` kept, until :func:`settle_auto` fills them in from the set-up
 (decco_warp/plan.py does, once per run).  With ``gravity_every = K`` > 1 every step count (steps,
 output_every, checkpoint_every) is a whole number of outer steps, a multiple of K (:func:`check_clock`);
-a duration becomes steps rounded up to one.
+a duration becomes steps rounded up to one.  ``gravity_every = "auto"`` is an interval of gravity,
+K = the steps of dt nearest it (scheme.auto_gravity_every): resolved here where dt is a number,
+settled with an "auto" dt otherwise.
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from .collision import DEFAULT_THETA_DEG, ETA_POTENTIALS, SPIN_AXES, spin_axis
-from .scheme import GRAVITY_CHOICES, PRECISIONS, SCHEME_KEYS, SCHEME_RANGES, Scheme, auto_gravity_every, choose_gravity
+from .scheme import GRAVITY_CHOICES, GRAVITY_INTERVAL_AUTO, PRECISIONS, SCHEME_KEYS, SCHEME_RANGES, Scheme, auto_gravity_every, choose_gravity
 from .layouts import LAYOUT_CHOICES
 from .params import CONTACT_LAWS, PHYSICS_RANGES, ROLLING_FRICTION_FORMS, SSDEM_CONSTANTS, Params, Range
 from .stability import DEFAULT_MAX_COMPRESSION, choose_stiffness, choose_time_step
@@ -51,9 +53,8 @@ class Key:
     check: Callable[[Any], bool]
     allowed: str
     auto: bool = False
-    """Whether the string "auto" is accepted (chosen from the set-up at run time)."""
-    auto_value: Callable[[], Any] | None = None
-    """What "auto" stands for whatever the set-up, resolved with the specification (ValueError: not yet)."""
+    """Whether the string "auto" is accepted: chosen from the set-up at run time (k_in, dt, gravity),
+    or, for gravity_every, from dt as soon as dt is a number."""
 
 
 def _positive(v):
@@ -145,7 +146,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "gravity": Key(str, _SCHEME_DEFAULT.gravity, lambda v: v in GRAVITY_CHOICES, " or ".join(GRAVITY_CHOICES)),
         "theta_open": _ranged(_SCHEME_DEFAULT.theta_open, SCHEME_RANGES["theta_open"]),
         "gravity_every": Key(
-            int, _SCHEME_DEFAULT.gravity_every, _positive, "an integer >= 1 (steps of dt per gravity evaluation)", auto_value=auto_gravity_every
+            int, _SCHEME_DEFAULT.gravity_every, _positive, 'an integer >= 1 (steps of dt per gravity evaluation) or "auto"', auto=True
         ),
         "max_compression": Key(
             float, DEFAULT_MAX_COMPRESSION, lambda v: 0 < v <= 1, "in (0, 1] (deepest overlap for k_in = \"auto\", fraction of the smallest radius)"
@@ -305,6 +306,11 @@ def resolve_spec(raw: dict | None = None, overrides: dict | None = None) -> dict
     run, collision, params = spec["run"], spec["collision"], spec["params"]
     if params["k_in"] == AUTO and "dt" not in merged.get("params", {}):
         params["dt"] = AUTO  # a spring chosen from the set-up needs its own time step
+    if params["gravity_every"] == AUTO and params["dt"] != AUTO:  # an interval: K of this dt (an "auto" dt's with it)
+        params["gravity_every"] = auto_gravity_every(params["dt"])
+        auto_clock = True
+    else:
+        auto_clock = False
     if "steps" in run and "duration" in run:
         raise SpecError("[run] give steps or duration, not both")
     if "duration" in run and params["dt"] != AUTO:
@@ -320,17 +326,22 @@ def resolve_spec(raw: dict | None = None, overrides: dict | None = None) -> dict
         Scheme(**{key: value for key, value in scheme_values(spec).items() if value != AUTO})
     except ValueError as error:
         raise SpecError(f"[params] {error}") from None
-    check_clock(spec)
+    check_clock(spec, auto_clock)
     return spec
 
 
-def check_clock(spec: dict) -> None:
-    """Refuse (SpecError, naming them) step counts that are not whole outer steps of gravity_every."""
-    every, run = spec["params"]["gravity_every"], spec["run"]
+def check_clock(spec: dict, auto: bool = False) -> None:
+    """Refuse (SpecError, naming them) step counts that are not whole outer steps of gravity_every
+    (an "auto" one not yet settled: checked once it is); ``auto``: K was chosen from dt (the line says how)."""
+    params, run = spec["params"], spec["run"]
+    every = params["gravity_every"]
+    if every == AUTO:
+        return
     bad = [f"{key} = {run[key]}" for key in ("steps", "output_every", "checkpoint_every") if key in run and run[key] % every]
     if bad:
+        how = f' ("auto": gravity every {GRAVITY_INTERVAL_AUTO:g} s at dt = {params["dt"]:g} s; a duration becomes whole outer steps)' if auto else ""
         raise SpecError(
-            f"[run] {', '.join(bad)}: with [params] gravity_every = {every}, steps, output_every and checkpoint_every "
+            f"[run] {', '.join(bad)}: with [params] gravity_every = {every}{how}, steps, output_every and checkpoint_every "
             f"must be multiples of {every} (whole outer steps)"
         )
 
@@ -347,8 +358,10 @@ def steps_of(duration: float, dt: float, every: int = 1) -> int:
 
 def settle_auto(spec: dict, state, device: str = "cpu") -> tuple[dict, list[str]]:
     """A copy of ``spec`` with "auto" k_in and dt chosen for the collision ``state`` (paper eqs. 12
-    and 17, docs/model.md), an "auto" gravity solver for its size on ``device``, and a duration
-    turned into steps; plus one line per choice made."""
+    and 17, docs/model.md), an "auto" gravity solver for its size on ``device``, an "auto"
+    gravity_every that waited for that dt chosen from it (its step counts rounded up to whole outer
+    steps: they could not be given as multiples of a K not yet known), and a duration turned into
+    steps; plus one line per choice made."""
     spec = {table: dict(values) for table, values in spec.items()}
     params, run = spec["params"], spec["run"]
     notes = []
@@ -367,6 +380,15 @@ def settle_auto(spec: dict, state, device: str = "cpu") -> tuple[dict, list[str]
     if params["dt"] == AUTO:
         params["dt"] = choose_time_step(state, params["k_in"])
         notes.append(f'dt = "auto": {params["dt"]:.3g} s, eq. 17 with the required margin for k_in = {params["k_in"]:.3g} dyne/cm')
+    if params["gravity_every"] == AUTO:
+        every = params["gravity_every"] = auto_gravity_every(params["dt"])
+        notes.append(f'gravity_every = "auto": {every}, gravity every {every * params["dt"]:.3g} s '
+                     f'(the steps of {params["dt"]:.3g} s nearest {GRAVITY_INTERVAL_AUTO:g} s)')  # fmt: skip
+        for key in ("steps", "output_every", "checkpoint_every"):
+            if key in run and run[key] % every:
+                rounded = every * math.ceil(run[key] / every)
+                notes.append(f"{key} {run[key]}: {rounded}, whole outer steps of gravity_every = {every}")
+                run[key] = rounded
     if "duration" in run:
         duration = run.pop("duration")
         run["steps"] = steps_of(duration, params["dt"], params["gravity_every"])
@@ -385,11 +407,6 @@ def _checked(table: str, key: str, value, rule: Key):
     where = f"[{table}] {key} = {value!r}"
     if rule.auto and value == AUTO:
         return value
-    if rule.auto_value is not None and value == AUTO:
-        try:
-            return rule.auto_value()
-        except ValueError as error:
-            raise SpecError(f"{where}: {error}") from None
     if rule.kind is bool:
         ok = isinstance(value, bool)
     elif rule.kind is int:

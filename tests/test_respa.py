@@ -341,26 +341,31 @@ def test_a_bad_clock_in_a_specification_is_one_clear_line(tmp_path, params, run,
 
 
 def test_auto_gravity_every_is_the_k_of_the_equivalence_table_and_the_spec_records_it(tmp_path):
-    """gravity_every = "auto" resolves to GRAVITY_EVERY_AUTO (an integer > 1: the table of
-    docs/benchmarks.md supports K up to 50), the resolved spec holding the number, and a duration
-    becomes whole outer steps of it."""
-    from decco_warp.scheme import GRAVITY_EVERY_AUTO
+    """gravity_every = "auto" at the paper's dt resolves to K = 10 (GRAVITY_INTERVAL_AUTO / 0.04 s: the
+    table of docs/benchmarks.md supports K up to 50), the resolved spec holding the number, and a
+    duration becomes whole outer steps of it."""
+    from decco_warp.scheme import GRAVITY_INTERVAL_AUTO
 
-    spec = _spec(tmp_path, "auto", {"gravity_every": "auto"}, steps=None, duration=1.0, output_every=GRAVITY_EVERY_AUTO, checkpoint_every=GRAVITY_EVERY_AUTO)
-    assert isinstance(GRAVITY_EVERY_AUTO, int) and 1 < GRAVITY_EVERY_AUTO <= 50
-    assert spec["params"]["gravity_every"] == GRAVITY_EVERY_AUTO
-    assert spec["run"]["steps"] == GRAVITY_EVERY_AUTO * math.ceil(1.0 / 0.04 / GRAVITY_EVERY_AUTO)
+    spec = _spec(tmp_path, "auto", {"gravity_every": "auto"}, steps=None, duration=1.0, output_every=10, checkpoint_every=10)
+    assert GRAVITY_INTERVAL_AUTO == 0.4
+    assert spec["params"]["gravity_every"] == 10
+    assert spec["run"]["steps"] == 10 * math.ceil(1.0 / 0.04 / 10)
 
 
 def test_the_scheme_answers_for_its_clock():
     """Code outside scheme.py learns K from the Scheme: its step multiple, its number of clocks, and
-    the K of a specification's [params] table as given ("auto", absent)."""
-    from decco_warp.scheme import GRAVITY_EVERY_AUTO, Scheme, step_multiple_of
+    the K of a specification's [params] table as given ("auto" by its dt, absent)."""
+    from decco_warp.scheme import Scheme, step_multiple_of
 
     assert (Scheme().step_multiple, Scheme().clocks) == (1, 1)
     assert (Scheme(gravity_every=5).step_multiple, Scheme(gravity_every=5).clocks) == (5, 2)
     assert step_multiple_of({}) == 1 and step_multiple_of({"gravity_every": 20}) == 20
-    assert step_multiple_of({"gravity_every": "auto"}) == GRAVITY_EVERY_AUTO
+    assert step_multiple_of({"gravity_every": "auto"}) == 10  # Params' dt, the paper's 0.04 s
+    assert step_multiple_of({"gravity_every": "auto", "dt": 0.02}) == 20
+    # An "auto" dt (given, or implied by k_in = "auto"): K is settled with it.
+    assert step_multiple_of({"gravity_every": "auto", "dt": "auto"}) is None
+    assert step_multiple_of({"gravity_every": "auto", "k_in": "auto"}) is None
+    assert step_multiple_of({"gravity_every": "auto", "k_in": "auto", "dt": 0.04}) == 10
 
 
 def test_a_duration_becomes_whole_outer_steps():
