@@ -387,7 +387,7 @@ def settle_auto(spec: dict, state, device: str = "cpu") -> tuple[dict, list[str]
         for key in ("steps", "output_every", "checkpoint_every"):
             if key in run and run[key] % every:
                 rounded = every * math.ceil(run[key] / every)
-                notes.append(f"{key} {run[key]}: {rounded}, whole outer steps of gravity_every = {every}")
+                notes.append(f"{key} {run[key]} rounded up to {rounded}: whole outer steps of gravity_every = {every}")
                 run[key] = rounded
     if "duration" in run:
         duration = run.pop("duration")
