@@ -368,6 +368,117 @@ def test_the_scheme_answers_for_its_clock():
     assert step_multiple_of({"gravity_every": "auto", "k_in": "auto", "dt": 0.04}) == 10
 
 
+def test_auto_gravity_every_is_an_interval_k_of_dt():
+    """gravity_every = "auto" holds gravity every GRAVITY_INTERVAL_AUTO seconds: K is the whole number
+    of steps of dt nearest it, at least 1 (halves up).  Round-off: the paper's dt gives 10, and the
+    dts that resolution.scaled_run makes at R = 4 and R = 16 (0.04 x R^(-1/3), as it computes them)
+    give 16 and 25."""
+    from decco_warp.errors import InputError
+    from decco_warp.resolution import length_factor
+    from decco_warp.scheme import GRAVITY_INTERVAL_AUTO, auto_gravity_every
+
+    assert GRAVITY_INTERVAL_AUTO == 0.4
+    assert auto_gravity_every(0.04) == 10 and auto_gravity_every(0.4 / 10) == 10
+    assert auto_gravity_every(float(0.04) * length_factor(4)) == 16  # 15.87 steps of 0.0252 s
+    assert auto_gravity_every(float(0.04) * length_factor(16)) == 25  # 25.20 steps of 0.0159 s
+    assert auto_gravity_every(0.04 * 4 ** (-1 / 3)) == 16 and auto_gravity_every(0.04 * 16 ** (-1 / 3)) == 25
+    assert [auto_gravity_every(dt) for dt in (0.02, 0.01, 0.08, 0.16, 0.4, 1.0, 100.0)] == [20, 40, 5, 3, 1, 1, 1]  # 0.16: 2.5 up
+    for bad in (0.0, -0.04, float("nan"), float("inf"), "auto", True):
+        with pytest.raises(InputError, match='gravity_every = "auto" needs a time step > 0'):
+            auto_gravity_every(bad)
+
+
+def test_a_specification_resolves_auto_gravity_every_by_its_dt(tmp_path):
+    """resolve_spec takes K from the final dt: the file's, an override's (the command line's), a
+    sweep grid's; the paper's dt keeps 10; and with an "auto" dt (k_in = "auto") K stays "auto" with
+    it, unchecked, until the set-up settles both (test_an_auto_dt_settles_its_auto_clock_with_it)."""
+    from decco_warp import spec as specs
+    from decco_warp.sweep import load_sweep
+
+    def clock(params, overrides=None, **run):
+        spec = specs.resolve_spec({"params": {"gravity_every": "auto", **params}, "run": run}, overrides)
+        return spec["params"]["gravity_every"], spec["run"].get("steps")
+
+    assert clock({}, steps=50_000) == (10, 50_000)  # the paper's dt: as before
+    assert clock({"dt": 0.04}, duration=1.0) == (10, 30)
+    assert clock({"dt": 0.02}, steps=100, output_every=20, checkpoint_every=100) == (20, 100)
+    assert clock({"dt": 0.02}, duration=1.0, output_every=20, checkpoint_every=100) == (20, 60)  # 50 steps, up to 3 outer steps
+    assert clock({"dt": 0.04}, {"params": {"dt": 0.02}}, steps=100, output_every=20, checkpoint_every=100) == (20, 100)  # the override's dt
+    assert clock({"dt": 0.02}, {"params": {"gravity_every": 4}}, steps=100, output_every=20, checkpoint_every=100) == (4, 100)
+    # A step count that is no whole outer step of an "auto" K: one line, saying where K came from.
+    with pytest.raises(specs.SpecError, match=r'\[run\] steps = 50: with \[params\] gravity_every = 20 \("auto": gravity every 0.4 s at dt = 0.02 s') as error:
+        clock({"dt": 0.02}, steps=50, output_every=20, checkpoint_every=100)
+    assert "\n" not in str(error.value)
+    # An "auto" dt: K waits for it, and so does the check of the step counts.
+    spec = specs.resolve_spec({"params": {"gravity_every": "auto", "k_in": "auto"}, "run": {"steps": 1009, "output_every": 101}})
+    assert (spec["params"]["dt"], spec["params"]["gravity_every"], spec["run"]["steps"]) == ("auto", "auto", 1009)
+    assert specs.resolve_spec(spec) == spec
+    # A sweep over dt: each run's K from its own dt.
+    path = tmp_path / "s.toml"
+    path.write_text(f'[sweep]\nout = "{tmp_path}"\n[sweep.grid]\n"params.dt" = [0.04, 0.02, 0.01]\n[params]\ngravity_every = "auto"\n'
+                    '[run]\nduration = 100.0\noutput_every = 40\ncheckpoint_every = 400\n')  # fmt: skip
+    runs = load_sweep(path)[1]
+    assert [(r["params"]["gravity_every"], r["run"]["steps"]) for r in runs] == [(10, 2500), (20, 5000), (40, 10000)]
+
+
+def test_an_auto_dt_settles_its_auto_clock_with_it(tmp_path):
+    """k_in = "auto" (and so dt = "auto") with gravity_every = "auto": the plan settles dt from the
+    set-up, then K from that dt, and rounds the step counts up to whole outer steps of it (they
+    could not be given as multiples of a K not yet known), saying so; the plan's scheme and its cost
+    are of that K."""
+    from decco_warp import spec as specs
+    from decco_warp.costs import run_cost
+    from decco_warp.plan import plan_start
+    from decco_warp.scheme import auto_gravity_every
+
+    given = {"steps": 1009, "output_every": 101, "checkpoint_every": 503}
+    spec = specs.resolve_spec({"run": {"out": str(tmp_path), "device": "cpu", **given}, "params": {"k_in": "auto", "gravity_every": "auto"}})
+    plan = plan_start(spec)
+    every = plan.scheme.step_multiple
+    assert every == auto_gravity_every(plan.params.dt) == plan.spec["params"]["gravity_every"] > 1
+    notes = "\n".join(plan.notes)
+    assert f'gravity_every = "auto": {every}, gravity every {every * plan.params.dt:.3g} s' in notes
+    for key, value in given.items():
+        settled = plan.spec["run"][key]
+        assert settled % every == 0 and value <= settled < value + every, key
+        assert (f"{key} {value} rounded up to {settled}: whole outer steps of gravity_every = {every}" in notes) == (settled != value), key
+    assert plan.steps == plan.spec["run"]["steps"] != 1009  # 1009 is prime: a K > 1 rounds it
+    assert f"at gravity every {every} steps" in run_cost(plan.state.n, plan.scheme, plan.device, plan.steps)
+    assert specs.resolve_spec(plan.spec) == plan.spec  # spec.toml records the settled K: a resume keeps it
+
+
+def test_the_command_line_resolves_auto_gravity_every_by_dt(tmp_path):
+    """``simulate --gravity-every auto``: K = 10 at the paper's dt, 20 at --dt 0.02 (the plan's clock
+    and its cost), and a step count that is no whole outer step of it refused in one line."""
+    from helpers import cli
+
+    common = ("--gravity-every", "auto", "--output-every", "20", "--checkpoint-every", "100", "--out", str(tmp_path), "--device", "cpu")
+    result = cli("simulate", "--check", "--steps", "100", *common)
+    assert result.returncode == 0, result.stderr
+    assert "100 steps (4 s), gravity every 10 steps" in result.stdout and "steps at gravity every 10 steps" in result.stdout
+    result = cli("simulate", "--check", "--dt", "0.02", "--steps", "100", *common)
+    assert result.returncode == 0, result.stderr
+    assert "100 steps (2 s), gravity every 20 steps" in result.stdout and "steps at gravity every 20 steps" in result.stdout
+    result = cli("simulate", "--dt", "0.02", "--steps", "50", *common)
+    assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert '[run] steps = 50: with [params] gravity_every = 20 ("auto": gravity every 0.4 s at dt = 0.02 s' in result.stderr
+
+
+def test_a_run_of_auto_gravity_every_resumes_at_the_k_it_started_with(tmp_path):
+    """A run at gravity_every = "auto" and dt = 0.02 s records K = 20 in spec.toml; resumed, it
+    steps on at 20 (the resolved K, not one chosen again) and refuses a total that is no whole outer step."""
+    from decco_warp import spec as specs
+    from decco_warp.run import prepare_resume, resume_run, start_run
+
+    run = {"name": "auto", "out": str(tmp_path), "device": "cpu", "steps": 40, "output_every": 20, "checkpoint_every": 20}
+    result = start_run(specs.resolve_spec({"run": run, "params": {"gravity_every": "auto", "dt": 0.02}}))
+    assert specs.load_spec_file(result.run_dir / "spec.toml")["params"]["gravity_every"] == 20
+    resume_run(result.run_dir, steps=80)
+    assert specs.load_spec_file(result.run_dir / "spec.toml")["run"]["steps"] == 80
+    with pytest.raises(specs.SpecError, match=r"\[run\] steps = 90: with \[params\] gravity_every = 20,"):
+        prepare_resume(result.run_dir, steps=90)
+
+
 def test_a_duration_becomes_whole_outer_steps():
     """A duration that is not a whole number of outer steps rounds up to the next one."""
     from decco_warp import spec as specs
