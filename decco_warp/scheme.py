@@ -56,9 +56,9 @@ def choose_gravity(n: int, device: str) -> str:
 #: a fifth of the largest K measured.  At R = 4 with the contacts scaled (25 000 particles, dt =
 #: 0.04 x 4^(-1/3) = 0.0252 s) the same 0.4 s is K = 16: eight twin runs at K = 16 against K = 10
 #: (the 1/4 head-on collision at eta 3, 6, 9 and 12, two realizations each, the same seeds:
-#: runs/paper/throughput_r4_k16.toml against throughput_r4.toml) differ in m_lf/m_t by +0.0015
+#: runs/results/throughput_r4_k16/ against throughput_r4/) differ in m_lf/m_t by +0.0015
 #: pooled over the pairs (95 %: -0.013 to +0.016), every twin within 0.035 (the realization SD at
-#: eta 12: 0.035), and the whole runs step 1.26x as fast (812.7 s against 1024.9 s for the eight
+#: eta 12: 0.035), and the whole runs step 1.26x as fast (812.7 s against 1 024.9 s for the eight
 #: stepped together on one H100).
 GRAVITY_INTERVAL_AUTO = 0.4
 
