@@ -143,7 +143,8 @@ def test_shipped_paper_sweeps_are_valid(name):
     settings, runs = load_sweep(PAPER / f"{name}.toml")
     assert runs and len({r["run"]["name"] for r in runs}) == len(runs)
     expected = {"fig3_validation": 63, "fig3_headon": 21, "fig3_oblique": 42, "fig8_stress": 3, "fig9_spin": 24, "realizations": 33, "spin_friction": 4,
-                "fig9_statistics": 78, "fig6_statistics": 60, "fig6_clock": 6, "ladder_clock": 15, "contact_lanes": 3}  # fmt: skip
+                "fig9_statistics": 78, "fig6_statistics": 60, "fig6_clock": 6, "ladder_clock": 15, "contact_lanes": 3,
+                "fig3_headon_r4": 45}  # fmt: skip
     if name in expected:
         assert len(runs) == expected[name]
     if name == "fig9_spin":  # two axis pairs of each kind of spin, at every eta
