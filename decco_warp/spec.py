@@ -350,10 +350,14 @@ def check_clock(spec: dict, auto: bool = False) -> None:
 AUTO = "auto"
 
 
+def whole_outer_steps(steps: int, every: int) -> int:
+    """``steps`` rounded up to a multiple of ``every`` (whole outer steps of gravity_every)."""
+    return every * math.ceil(steps / every)
+
+
 def steps_of(duration: float, dt: float, every: int = 1) -> int:
     """The steps of dt that cover ``duration``, rounded up to whole outer steps of ``every``."""
-    steps = max(1, math.ceil(duration / dt - 1e-9))
-    return every * math.ceil(steps / every)
+    return whole_outer_steps(max(1, math.ceil(duration / dt - 1e-9)), every)
 
 
 def settle_auto(spec: dict, state, device: str = "cpu") -> tuple[dict, list[str]]:
@@ -386,7 +390,7 @@ def settle_auto(spec: dict, state, device: str = "cpu") -> tuple[dict, list[str]
                      f'(the steps of {params["dt"]:.3g} s nearest {GRAVITY_INTERVAL_AUTO:g} s)')  # fmt: skip
         for key in ("steps", "output_every", "checkpoint_every"):
             if key in run and run[key] % every:
-                rounded = every * math.ceil(run[key] / every)
+                rounded = whole_outer_steps(run[key], every)
                 notes.append(f"{key} {run[key]} rounded up to {rounded}: whole outer steps of gravity_every = {every}")
                 run[key] = rounded
     if "duration" in run:
