@@ -25,7 +25,8 @@ from .arrays import ModelArrays, StateArrays
 from .errors import InputError
 from .gravity_solvers import GravitySolver, empty_candidates, registrar
 from .kernels.contacts import CANDIDATES
-from .kernels.neighbours import GRID_CELLS, build_neighbour_list, cell_keys, cell_ranges, lists_built
+from .kernels.neighbours import (GRID_CELLS, STENCIL, build_neighbour_list, cell_keys, cell_neighbours, cell_ranges, lists_built,
+                                 sort_neighbours)
 from .kernels.pair import NEIGHBOUR_LIST_MARGIN, host_reach
 from .layouts import particle_block
 
@@ -139,9 +140,16 @@ class NeighbourList(ContactFinder):
     (:meth:`arrays`), so that a restart goes on with the same lists.  The grid's cell tables take
     8 bytes per cell, GRID_CELLS^3 cells per system (2 MiB).  Its lists are ``width`` wide (the
     model's candidate_width: wider for a wide size range, so that a large grain among many small
-    ones keeps its list; the build sorts each row in place)."""
+    ones keeps its list; the build sorts each row in place).
+
+    ``scan``: how a build looks in the cells, "by cell" (a thread per particle and cell of its 27,
+    then a thread per list entry putting each row in order: kernels/neighbours.py ``cell_neighbours``,
+    ``sort_neighbours``) or "by particle" (a thread per particle walking its 27 cells in turn:
+    ``build_neighbour_list``, the tests' yardstick); the same lists bit for bit.  "by cell" keeps
+    (27 + width) int32 a particle more: each cell's count and the neighbours as met."""
 
     name = "neighbour-list"
+    scan = "by cell"
     graph_conditionals = True  # the rebuild: wp.capture_if
     current = True  # every drift checks the lists against the positions
 
@@ -174,6 +182,11 @@ class NeighbourList(ContactFinder):
         # Radii and positions in key order: a cell's particles side by side for the build's scans.
         self.sorted_radius = wp.zeros(count, dtype=wp.float64, device=device)
         self.sorted_position = wp.zeros(count, dtype=wp.vec3d, device=device)
+        # A build by cell: per cell of the stencil and particle (in key order) its neighbours there, and
+        # per particle (in key order) its neighbours as met (a row of the lists' width).
+        by_cell = self.scan == "by cell"
+        self.cell_counts = wp.zeros((STENCIL, count) if by_cell else (0, 0), dtype=wp.int32, device=device)
+        self.found = wp.zeros((count, width) if by_cell else (0, 0), dtype=wp.int32, device=device)
 
     def build(self, state: StateArrays, everything: bool = False) -> None:
         """List the neighbours of every particle of a stale system (``everything``: of every system) at
@@ -193,15 +206,20 @@ class NeighbourList(ContactFinder):
             device=m.device,
             block_dim=particle_block(),
         )
-        wp.launch(
-            build_neighbour_list,
-            dim=m.count,
-            inputs=[self.system, wp.float64(self.skin), width, self.order, self.cell_start, self.cell_end, self.sorted_radius,
-                    self.sorted_position, self.stale_system, everything],
-            outputs=[self.reference, self.candidate_count, self.candidates],
-            device=m.device,
-            block_dim=particle_block(),
-        )  # fmt: skip
+        cells = [self.system, wp.float64(self.skin), width, self.order, self.cell_start, self.cell_end, self.sorted_radius,
+                 self.sorted_position, self.stale_system, everything]  # fmt: skip
+        if self.scan == "by particle":
+            wp.launch(build_neighbour_list, dim=m.count, inputs=cells, outputs=[self.reference, self.candidate_count, self.candidates],
+                      device=m.device, block_dim=particle_block())  # fmt: skip
+        else:
+            # Count each cell's neighbours, write them after the cells before, then each row in increasing j.
+            for write in (False, True):
+                wp.launch(cell_neighbours, dim=(STENCIL, m.count), inputs=[*cells, write],
+                          outputs=[self.cell_counts, self.found, self.reference, self.candidate_count], device=m.device,
+                          block_dim=particle_block())  # fmt: skip
+            wp.launch(sort_neighbours, dim=(m.count, self.found.shape[1]),
+                      inputs=[self.system, self.order, self.stale_system, everything, self.found, self.candidate_count],
+                      outputs=[self.candidates], device=m.device, block_dim=particle_block())  # fmt: skip
         wp.launch(lists_built, dim=len(m.systems), inputs=[everything], outputs=[self.stale, self.stale_system, self.build_count], device=m.device)
 
     def find(self, state: StateArrays) -> None:

@@ -18,6 +18,14 @@ for a listed pair that does not touch).  With its lanes, which superset of the t
 holds sets the rounding of the sums: the lists are part of the state (snapshots keep them), and a
 build lists only the particles of the systems whose particles moved (``stale_system``), so that each
 system of an ensemble keeps the lists it would keep alone.
+
+Two builds give the same lists, bit for bit (tests/test_respa.py): ``build_neighbour_list``, a thread
+a particle walking its 27 cells one after another (~550 distance tests in a row a particle of the
+paper's piles: at 6 250 particles a fraction of a wave of threads, each waiting on memory in turn),
+and the default, a thread per particle and cell: ``cell_neighbours`` counts each cell's neighbours,
+then, given the counts of the cells before, writes them in the order the walk of one thread meets
+them, and ``sort_neighbours`` puts each row in increasing j (each entry's rank among its row's).  A
+list that overflows keeps, as the walk does, the first ``width`` met, in increasing j.
 """
 
 import warp as wp
@@ -45,6 +53,16 @@ def cell_key(cell: wp.vec3i, system: int) -> int:
 @wp.func
 def cell_of(x: wp.vec3d, cell_width: wp.float64) -> wp.vec3i:
     return wp.vec3i(int(wp.floor(x[0] / cell_width)), int(wp.floor(x[1] / cell_width)), int(wp.floor(x[2] / cell_width)))
+
+
+#: The cells a build looks in around a particle's own: 3 x 3 x 3.
+STENCIL = 27
+
+
+@wp.func
+def stencil_cell(own: wp.vec3i, neighbour: int) -> wp.vec3i:
+    """The ``neighbour``-th of the STENCIL cells around ``own``, in the order a list's build walks them."""
+    return own + wp.vec3i(neighbour % 3 - 1, (neighbour // 3) % 3 - 1, neighbour // 9 - 1)
 
 
 @wp.kernel
@@ -122,9 +140,8 @@ def build_neighbour_list(
     margin = wp.float64(NEIGHBOUR_LIST_MARGIN)
     own = cell_of(x, cell_width)
     noted = int(0)
-    for neighbour in range(27):  # the 3 x 3 x 3 cells around its own
-        cell = own + wp.vec3i(neighbour % 3 - 1, (neighbour // 3) % 3 - 1, neighbour // 9 - 1)
-        key = cell_key(cell, system)
+    for neighbour in range(wp.static(STENCIL)):  # the 3 x 3 x 3 cells around its own
+        key = cell_key(stencil_cell(own, neighbour), system)
         for m in range(int(start_in[key]), int(end_in[key])):
             if m != k:
                 r = sorted_position_in[m] - x
@@ -151,3 +168,113 @@ def lists_built(
     stale_system_inout[system] = 0
     if system == 0:
         stale_out[0] = 0
+
+
+# --- The build a thread per particle and cell (NeighbourList's default) ----------------------------
+
+
+@wp.func
+def neighbours_in_cell(
+    k: int,  # the particle, in key order
+    x: wp.vec3d,
+    radius: wp.float64,
+    skin: wp.float64,
+    key: int,  # the cell's key
+    order_in: wp.array(dtype=wp.int32),
+    start_in: wp.array(dtype=wp.int32),
+    end_in: wp.array(dtype=wp.int32),
+    sorted_radius_in: wp.array(dtype=wp.float64),
+    sorted_position_in: wp.array(dtype=wp.vec3d),
+    write: bool,
+    slot: int,  # with ``write``: where in k's row of ``found_out`` the first goes
+    found_out: wp.array2d(dtype=wp.int32),
+) -> int:
+    """The particles of a cell within reach of k (``build_neighbour_list``'s test, the same
+    operations), in key order: their count; with ``write`` each written into k's row from ``slot``
+    on (past its width only counted)."""
+    margin = wp.float64(NEIGHBOUR_LIST_MARGIN)
+    hits = int(0)
+    for m in range(int(start_in[key]), int(end_in[key])):
+        if m != k:
+            r = sorted_position_in[m] - x
+            if within_reach(wp.dot(r, r), reach(radius, sorted_radius_in[m], skin, margin), wp.float64(1.0)):
+                if write and slot + hits < found_out.shape[1]:
+                    found_out[k, slot + hits] = order_in[m]
+                hits += 1
+    return hits
+
+
+@wp.kernel
+def cell_neighbours(
+    # Model:
+    system_in: wp.array(dtype=wp.int32),  # per particle: its system
+    skin: wp.float64,
+    cell_width: wp.float64,
+    # In:
+    order_in: wp.array(dtype=wp.int32),  # the particles sorted by cell key (cell_keys, then the sort)
+    start_in: wp.array(dtype=wp.int32),  # per key, its run in order_in (cell_ranges)
+    end_in: wp.array(dtype=wp.int32),
+    sorted_radius_in: wp.array(dtype=wp.float64),  # radii and positions in key order (cell_ranges)
+    sorted_position_in: wp.array(dtype=wp.vec3d),
+    stale_system_in: wp.array(dtype=wp.int32),  # per system: whether its list is to be built
+    everything: bool,  # build every system's list, stale or not
+    write: bool,  # False: count each cell's neighbours; True (after): write them
+    # Out:
+    counts_inout: wp.array2d(dtype=wp.int32),  # (STENCIL, N): per cell of the stencil and particle in key order, its neighbours there
+    found_out: wp.array2d(dtype=wp.int32),  # (N, width) per particle in key order: its neighbours as a walk of its cells meets them
+    reference_out: wp.array(dtype=wp.vec3d),  # the positions of this build
+    candidate_count_out: wp.array(dtype=wp.int32),  # neighbours met (past the list's width: an overflow)
+):
+    """Launched over (STENCIL, N), twice: thread (c, k) looks in the c-th cell around the k-th
+    particle in key order (threads side by side look in the same cell for neighbouring particles).
+    The first launch counts; the second writes them after those of the cells before, so that a row
+    holds what ``build_neighbour_list``'s walk notes, in the order it meets them."""
+    neighbour, k = wp.tid()
+    i = int(order_in[k])
+    system = int(system_in[i])
+    if not everything and stale_system_in[system] == 0:
+        return
+    x = sorted_position_in[k]
+    key = cell_key(stencil_cell(cell_of(x, cell_width), neighbour), system)
+    slot = int(0)
+    if write:
+        for before in range(neighbour):
+            slot += int(counts_inout[before, k])
+    hits = neighbours_in_cell(k, x, sorted_radius_in[k], skin, key, order_in, start_in, end_in, sorted_radius_in, sorted_position_in,
+                              write, slot, found_out)  # fmt: skip
+    if not write:
+        counts_inout[neighbour, k] = wp.int32(hits)
+    elif neighbour == wp.static(STENCIL - 1):
+        candidate_count_out[i] = wp.int32(slot + hits)
+        reference_out[i] = x
+
+
+@wp.kernel
+def sort_neighbours(
+    # Model:
+    system_in: wp.array(dtype=wp.int32),  # per particle: its system
+    # In:
+    order_in: wp.array(dtype=wp.int32),  # the particles sorted by cell key
+    stale_system_in: wp.array(dtype=wp.int32),
+    everything: bool,
+    found_in: wp.array2d(dtype=wp.int32),  # (cell_neighbours) per particle in key order: its neighbours as met
+    candidate_count_in: wp.array(dtype=wp.int32),  # (cell_neighbours) per particle: its neighbours met
+    # Out:
+    candidates_out: wp.array2d(dtype=wp.int32),  # the first of them (as many as its columns), in increasing j
+):
+    """Launched over (N, width): thread (k, s) puts the s-th neighbour met of the k-th particle in key
+    order at its rank among the row's (a particle is met once, so the ranks are distinct).  Only the
+    columns below the count are written, as ``note_candidate`` writes them."""
+    k, s = wp.tid()
+    i = int(order_in[k])
+    if not everything and stale_system_in[int(system_in[i])] == 0:
+        return
+    noted = wp.min(int(candidate_count_in[i]), found_in.shape[1])
+    if s >= noted:
+        return
+    j = found_in[k, s]
+    rank = int(0)
+    for t in range(noted):
+        if found_in[k, t] < j:
+            rank += 1
+    candidates_out[i, rank] = j

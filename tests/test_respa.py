@@ -135,6 +135,62 @@ def test_the_neighbour_list_holds_every_touching_pair_and_is_rebuilt_past_half_t
     assert slow.neighbour_list_builds() == 1
 
 
+def _sheared_pile(seed):
+    """The shipped pile (lists of up to ~30 neighbours) in a shear flow: its layers slide past each
+    other, so that its lists are rebuilt every few steps."""
+    from decco_warp.io import load_pile
+    from decco_warp.plan import builtin_pile
+
+    pile = load_pile(builtin_pile("target"))
+    y = pile.positions[:, 1] - pile.positions[:, 1].mean()
+    flow = np.zeros_like(pile.velocities)
+    flow[:, 0] = SKIN_FRACTION * 7.5e5 * (0.2 + 0.1 * (seed % 3)) * y / np.abs(y).max()
+    return replace(pile, velocities=pile.velocities + flow)
+
+
+def _list_build_scenes():
+    """name: (state, systems): a fast clump (rebuilt again and again), the sheared pile (long lists),
+    a sphere crowded past its list's width (an overflow), and the three as an ensemble, whose systems
+    go stale at different steps (builds of some systems' lists only)."""
+    from decco_warp.kernels.contacts import CANDIDATES
+    from scenes import crowded_sphere
+
+    parts = [_fast_clump(37, seed=0), _sheared_pile(1), crowded_sphere(CANDIDATES + 6)]
+    joined = dw.State.from_arrays(*[np.concatenate([getattr(s, name) for s in parts])
+                                    for name in ("positions", "velocities", "omegas", "radii", "masses")])  # fmt: skip
+    return {"clump": (parts[0], None), "sheared": (parts[1], None), "crowded": (parts[2], None), "ensemble": (joined, [s.n for s in parts])}
+
+
+@pytest.mark.parametrize("scene", ["clump", "sheared", "crowded", "ensemble"])
+def test_a_list_build_by_cell_lists_what_a_build_by_particle_lists(scene, monkeypatch):
+    """NeighbourList.scan "by cell" (the default: a thread per particle and cell, then each row put in
+    order) and "by particle" (a thread per particle walking its 27 cells) build the same lists: after
+    100 steps of K = 5, with lists rebuilt along the way (in the ensemble, some systems' alone), the
+    whole candidate array (columns past a row's count too, and an overflowing row's first ``width``
+    met), the counts, the positions of the builds and every array of the state are bit for bit the same."""
+    from decco_warp import contact_finders
+
+    state, systems = _list_build_scenes()[scene]
+    ends = {}
+    for scan in ("by particle", "by cell"):
+        monkeypatch.setattr(contact_finders.NeighbourList, "scan", scan)
+        sim = dw.Simulation(state, dw.Params(), device="cpu", ledger=True, allow_unstable=True, systems=systems, scheme=dw.Scheme(gravity_every=5))
+        builds = [sim.neighbour_list_builds(k) for k in range(len(systems or [0]))]
+        sim.step(100)
+        finder = sim.engine.path.finder
+        ends[scan] = (sim.snapshot(), finder.candidates.numpy().copy(), [sim.neighbour_list_builds(k) - b for k, b in enumerate(builds)])
+    (want, want_rows, want_builds), (got, got_rows, got_builds) = ends["by particle"], ends["by cell"]
+    assert np.array_equal(got_rows, want_rows)
+    for key, values in want.items():
+        if isinstance(values, np.ndarray):
+            assert np.array_equal(got[key], values), key
+    assert got_builds == want_builds and max(want_builds) >= 1
+    if scene == "crowded":
+        assert sim.candidate_overflows() >= 1
+    if scene == "ensemble":
+        assert len(set(want_builds)) > 1  # some builds listed some systems alone
+
+
 @pytest.mark.parametrize("precision", ["mixed", "float64"])
 def test_forces_on_two_clocks_are_gravity_plus_the_listed_contacts_even_past_a_full_list(precision):
     """A 22.5 km sphere touched by more small ones than a list holds: its list overflows (counted,
