@@ -17,6 +17,7 @@ from .arrays import PAIR_OBSERVABLES
 from .gravity_tree import walk_parts
 from .kernels.channels import LEDGER_CHANNELS, WORK_CHANNELS
 from .kernels.contacts import CANDIDATES
+from .kernels.neighbours import STENCIL
 from .layouts import newton_scratch_bytes
 from .params import G_CGS
 from .scheme import Scheme
@@ -146,6 +147,8 @@ def memory_estimate(
     per += i32 * (1 + candidate_width)  # the contact candidates of the Newton layout, the tree or the neighbour list
     per += 3 * vec3d + f64 + 5 * i32  # gravity on its own clock: gravity, the list's build positions, the build's sorted
     # positions and radii; system, cell keys and order (2 N)
+    if scheme.clocks > 1:  # the list's build by cell (contact_finders.NeighbourList.scan): each cell's count, the neighbours as met
+        per += i32 * (STENCIL + candidate_width)
     per += len(PAIR_OBSERVABLES) * f64  # a frame's pair observables
     if contact_history:  # count; per row partner, spring, normal, rolling, twist; twice (current and next)
         per += 2 * (i32 + candidate_width * (i32 + 3 * vec3d + f64)) + 2 * f64  # (and the springs' energies of a frame)
