@@ -163,8 +163,8 @@ def _list_build_scenes():
 
 @pytest.mark.parametrize("scene", ["clump", "sheared", "crowded", "ensemble"])
 def test_a_list_build_by_cell_lists_what_a_build_by_particle_lists(scene, monkeypatch):
-    """NeighbourList.scan "by cell" (the default: a thread per particle and cell, then each row put in
-    order) and "by particle" (a thread per particle walking its 27 cells) build the same lists: after
+    """NeighbourList.scan "by cell" (a GPU's default: a thread per particle and cell, then each row put
+    in order) and "by particle" (the CPU's: a thread per particle walking its 27 cells) build the same lists: after
     100 steps of K = 5, with lists rebuilt along the way (in the ensemble, some systems' alone), the
     whole candidate array (columns past a row's count too, and an overflowing row's first ``width``
     met), the counts, the positions of the builds and every array of the state are bit for bit the same."""
@@ -178,6 +178,7 @@ def test_a_list_build_by_cell_lists_what_a_build_by_particle_lists(scene, monkey
         builds = [sim.neighbour_list_builds(k) for k in range(len(systems or [0]))]
         sim.step(100)
         finder = sim.engine.path.finder
+        assert finder.scan == scan
         ends[scan] = (sim.snapshot(), finder.candidates.numpy().copy(), [sim.neighbour_list_builds(k) - b for k, b in enumerate(builds)])
     (want, want_rows, want_builds), (got, got_rows, got_builds) = ends["by particle"], ends["by cell"]
     assert np.array_equal(got_rows, want_rows)
