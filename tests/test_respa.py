@@ -162,7 +162,7 @@ def _list_build_scenes():
 
 
 @pytest.mark.parametrize("scene", ["clump", "sheared", "crowded", "ensemble"])
-def test_a_list_build_by_cell_lists_what_a_build_by_particle_lists(scene, monkeypatch):
+def test_a_list_build_by_cell_lists_what_a_build_by_particle_lists(scene, device, monkeypatch):
     """NeighbourList.scan "by cell" (a GPU's default: a thread per particle and cell, then each row put
     in order) and "by particle" (the CPU's: a thread per particle walking its 27 cells) build the same lists: after
     100 steps of K = 5, with lists rebuilt along the way (in the ensemble, some systems' alone), the
@@ -174,7 +174,7 @@ def test_a_list_build_by_cell_lists_what_a_build_by_particle_lists(scene, monkey
     ends = {}
     for scan in ("by particle", "by cell"):
         monkeypatch.setattr(contact_finders.NeighbourList, "scan", scan)
-        sim = dw.Simulation(state, dw.Params(), device="cpu", ledger=True, allow_unstable=True, systems=systems, scheme=dw.Scheme(gravity_every=5))
+        sim = dw.Simulation(state, dw.Params(), device=device, ledger=True, allow_unstable=True, systems=systems, scheme=dw.Scheme(gravity_every=5))
         builds = [sim.neighbour_list_builds(k) for k in range(len(systems or [0]))]
         sim.step(100)
         finder = sim.engine.path.finder
