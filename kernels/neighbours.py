@@ -20,7 +20,7 @@ build lists only the particles of the systems whose particles moved (``stale_sys
 system of an ensemble keeps the lists it would keep alone.
 
 Two builds give the same lists, bit for bit (tests/test_respa.py): ``build_neighbour_list``, a thread
-a particle walking its 27 cells one after another (~550 distance tests in a row a particle of the
+a particle walking its 27 cells one after another (~320 distance tests in a row a particle of the
 paper's piles: at 6 250 particles a fraction of a wave of threads, each waiting on memory in turn),
 and the default, a thread per particle and cell: ``cell_neighbours`` counts each cell's neighbours,
 then, given the counts of the cells before, writes them in the order the walk of one thread meets
