@@ -22,7 +22,7 @@ system of an ensemble keeps the lists it would keep alone.
 Two builds give the same lists, bit for bit (tests/test_respa.py): ``build_neighbour_list``, a thread
 a particle walking its 27 cells one after another (~320 distance tests in a row a particle of the
 paper's piles: at 6 250 particles a fraction of a wave of threads, each waiting on memory in turn),
-and the default, a thread per particle and cell: ``cell_neighbours`` counts each cell's neighbours,
+and, a GPU's default, a thread per particle and cell: ``cell_neighbours`` counts each cell's neighbours,
 then, given the counts of the cells before, writes them in the order the walk of one thread meets
 them, and ``sort_neighbours`` puts each row in increasing j (each entry's rank among its row's).  A
 list that overflows keeps, as the walk does, the first ``width`` met, in increasing j.
