@@ -156,6 +156,10 @@ class Engine:
         pair = np.array(sorted((i, j - first)) if records[i] > 0 else (-1, -1), dtype=np.int64)
         return {"deepest_overlap": depth, "deepest_overlap_pair": pair}
 
+    def deepest_contact_records(self, first: int = 0, end: int | None = None) -> np.ndarray:
+        """The deepest-contact records of particles [first, end) as they stand (kept, unlike :meth:`take_deepest_contact`)."""
+        return self.state.deepest_contact[first : self.count if end is None else end].numpy().copy()
+
     def read(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Positions, velocities and angular velocities copied to the host."""
         s = self.state

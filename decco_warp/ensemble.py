@@ -93,6 +93,9 @@ class Ensemble:
     def work(self) -> np.ndarray:
         return self._at_step("work", self.sim.work)
 
+    def snapshot(self) -> dict:
+        return self._at_step("snapshot", self.sim.engine.snapshot)
+
 
 #: The per-particle arrays of a snapshot, joined along the particles in an ensemble.
 _ARRAYS = ("positions", "velocities", "omegas", "force", "torque", "channels", "work", "deepest_contact")
@@ -216,10 +219,14 @@ class SystemView:
         return self._ensemble.sim.neighbour_list_builds(self.system)
 
     def snapshot(self) -> dict:
-        """This system's part of the ensemble's snapshot: what a Simulation stepped alone would give."""
-        whole = self._ensemble.sim.engine.snapshot()
-        snap = {key: whole[key][self.first : self.end].copy() for key in _ARRAYS}
-        snap["deepest_contact"] = _partners_moved(snap["deepest_contact"], -self.first)
+        """This system's part of the ensemble's snapshot: what a Simulation stepped alone would give.
+        The ensemble's is copied from the device once a step for all its systems (each copy is every
+        system's particles: taken per system it made an ensemble of 8's checkpoint 8 copies), all but
+        the deepest-contact records, which a system's frame starts afresh between two systems' turns."""
+        whole = self._ensemble.snapshot()
+        snap = {key: whole[key][self.first : self.end].copy() for key in _ARRAYS if key != "deepest_contact"}
+        records = self._ensemble.sim.engine.deepest_contact_records(self.first, self.end)
+        snap["deepest_contact"] = _partners_moved(records, -self.first)
         if all(key in whole for key in NEIGHBOUR_ARRAYS):
             reference, count, listed = (whole[key][self.first : self.end] for key in NEIGHBOUR_ARRAYS)
             snap.update(neighbour_arrays(reference, count, _lists_moved(count, listed, -self.first)))
