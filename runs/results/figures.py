@@ -390,7 +390,8 @@ def run_figures() -> None:
     for folder in sorted(p for p in RESULTS.iterdir() if p.is_dir()):
         found = runs(folder.name)
         for run in found:
-            draw_run(read_analysis(run["dir"] / "analysis.h5"), run["dir"])
+            if (run["dir"] / "analysis.h5").is_file():  # summary-only folders keep no per-frame series
+                draw_run(read_analysis(run["dir"] / "analysis.h5"), run["dir"])
         write_cross_run(folder, [r["summary"] for r in found])
         print(f"drew {folder.relative_to(ROOT)}: {len(found)} runs")
 
