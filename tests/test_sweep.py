@@ -157,6 +157,16 @@ def test_shipped_paper_sweeps_are_valid(name):
             assert run["collision"] == twin["collision"] and run["piles"] == twin["piles"]
             assert {k: v for k, v in run["params"].items() if k != "gravity_every"} == {k: v for k, v in twin["params"].items() if k != "gravity_every"}
             assert (run["params"]["gravity_every"], twin["params"]["gravity_every"]) == ({"fig6_clock": 1, "ladder_clock": 50}[name], 10)
+    if name == "throughput_r4_k40":  # throughput_r4_k16's eight set-ups, gravity every 1.0 s instead of 0.4 s
+        k16 = {r["run"]["name"]: r for r in load_sweep(PAPER / "throughput_r4_k16.toml")[1]}
+        assert sorted(k16) == sorted(r["run"]["name"] for r in runs) and len(runs) == 8
+        for run in runs:
+            twin = k16[run["run"]["name"]]
+            assert run["collision"] == twin["collision"] and run["piles"] == twin["piles"]
+            assert {k: v for k, v in run["params"].items() if k != "gravity_every"} == {k: v for k, v in twin["params"].items() if k != "gravity_every"}
+            assert (run["params"]["gravity_every"], twin["params"]["gravity_every"]) == (40, 16)
+            assert run["params"]["gravity_every"] * run["params"]["dt"] == pytest.approx(1.0, rel=0.01)
+            assert run["run"]["steps"] % 40 == 0 and abs(run["run"]["steps"] - twin["run"]["steps"]) < 40
     if name in ("fig3_oblique", "realizations"):  # the same folder and names as the head-on runs they join
         headon = {r["run"]["name"]: r for r in load_sweep(Path(__file__).parent.parent / "runs" / "paper" / "fig3_headon.toml")[1]}
         assert {r["run"]["out"] for r in runs} == {r["run"]["out"] for r in headon.values()}
