@@ -85,9 +85,15 @@ def points_of(summaries: list[dict], metric: str, x: str = "eta_self", shift: fl
     return [{**p, "eta": p["eta"] * shift} for p in realization_points(summaries, metric, x)]
 
 
+#: The head-on runs at R = 4 (the same bodies, 4x the particles, contacts scaled as the ladder does):
+#: Fig. 3's panels below the threshold, the ladder's 1/4 point and Q*_RD's disruptive end.
+HEADON_R4 = ("fig3_headon_r4", "resolution/x4", "qstar_rd/x4")
+
+
 def largest_fragment(x: str = "eta_self"):
     """Fig. 3 against eta in the reading ``x``: nine panels, angles by row and mass ratios by column,
-    beside the LS12 small-body law with its band and the planets' fit."""
+    beside the LS12 small-body law with its band and the planets' fit; head-on, the same collisions
+    at R = 4 beside them (drawn at 1.06 eta, so that the two sets stand apart)."""
     fig, axes = plt.subplots(3, 3, figsize=(13, 10.5), sharex=True, sharey="col")
     etas = np.geomspace(0.3, 15, 200)
     summaries = [r["summary"] for r in runs("fig3")]
@@ -102,6 +108,9 @@ def largest_fragment(x: str = "eta_self"):
                 ax.plot(etas, curves["ls12_largest_mass_ratio"], "--", color="C1", label="LS12 small bodies, c* = 5")
                 ax.plot(etas, curves["ls12_planets_largest_mass_ratio"], ":", color="0.4", label="LS12 planets, c* = 1.9")
                 draw_points(ax, points_of(mine, "largest_mass_ratio", x), "C0", "decco-warp (mean, range of realizations; hollow: not settled)")
+                finer = [r["summary"] for folder in HEADON_R4 for r in runs(folder, ratio)] if angle == 0.0 else []
+                if finer:
+                    draw_points(ax, points_of(finer, "largest_mass_ratio", x, shift=1.06), "C3", "decco-warp at R = 4: 22 000 to 40 000 particles")
             else:
                 ax.text(0.5, 0.5, "not run", transform=ax.transAxes, ha="center", color="0.5")
             ax.axhline(1.0, color="0.6", linewidth=0.6)
