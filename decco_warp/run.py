@@ -18,7 +18,7 @@ import numpy as np
 
 from . import spec as specs
 from .checks import MAX_REST_OVERLAP, InputError, check_destination
-from .diagnostics import energy_ledger, energy_scale, ledger_closure, stress_share_observables
+from .diagnostics import energy_ledger, energy_scale, ledger_closure, state_diagnostics, stress_share_observables
 from .durable import describe_write_error, pause_point, write_atomic, write_point
 from .folder import RunFolder, missing
 from .io import BackgroundFrames, FileFormatError, Trajectory, read_checkpoint, read_frame, write_checkpoint
@@ -101,13 +101,29 @@ class RunLog:
 
 # --- one frame of output -------------------------------------------------------------
 
+#: A frame due at a stop that needs nothing of it there (no checkpoint, observer or end) is made on
+#: the host while the device steps the next chunk (RunDriver.advance): its reads from the device are
+#: taken at the stop, its observables, checks and write after the next launch.  False: every frame
+#: at its stop (the same frames and log; the tests compare the two).
+FRAMES_ALONGSIDE = True
 
-def record(sim: Simulation, size_classes: int) -> tuple[dict, dict]:
-    """Particle arrays and observables of the current state, as written to the trajectory."""
-    state = sim.state
-    pairs = sim.pair_observables()
-    d = sim.diagnostics(state, pairs)
-    ledger = energy_ledger(d, sim.energy_start, sim.work())
+
+
+def take_reading(sim: Simulation) -> dict:
+    """What a frame reads of the device (each a copy to the host, the device idle between two
+    chunks): the state, the pair observables, the work, and the deepest contact since the previous
+    frame (whose record starts afresh), with the step and time; :func:`frame_of` makes the frame."""
+    return {"step": sim.step_count, "time": sim.time, "state": sim.state, "pairs": sim.pair_observables(),
+            "work": sim.work(), "deepest": sim.take_deepest_contact()}  # fmt: skip
+
+
+def frame_of(reading: dict, sim: Simulation, size_classes: int) -> tuple[dict, dict]:
+    """Particle arrays and observables of a :func:`take_reading`, as written to the trajectory: host
+    work only (``sim`` gives its constants: the ledger's start, whether the law keeps springs), so
+    that it may run while the device steps on."""
+    state, pairs = reading["state"], reading["pairs"]
+    d = state_diagnostics(state, pairs)
+    ledger = energy_ledger(d, sim.energy_start, reading["work"])
     particles = {
         "position": state.positions,
         "velocity": state.velocities,
@@ -133,6 +149,12 @@ def record(sim: Simulation, size_classes: int) -> tuple[dict, dict]:
         **stress_share_observables(pairs["max_overlap"], state.radii, state.size_class, size_classes),
     }
     return particles, observables
+
+
+def record(sim: Simulation, size_classes: int) -> tuple[dict, dict]:
+    """Particle arrays and observables of the current state, as written to the trajectory (the
+    deepest contact of the state itself: a run's frame adds the deepest since the previous frame)."""
+    return frame_of({"state": sim.state, "pairs": sim.pair_observables(), "work": sim.work()}, sim, size_classes)
 
 
 # --- start, resume ----------------------------------------------------------------------
@@ -440,11 +462,18 @@ class _Together:
     def advance(self) -> None:
         self.stepped = self.active  # the runs of this chunk (the last chunk of a run makes it done)
         self.ensemble.step(min(self.drivers[k].steps_to_next_stop() for k in self.stepped))
+        for k in self.stepped:  # the frames read at the last stop, made on the host while the device steps
+            try:
+                self.drivers[k].finish_frame()
+            except (BlowUp, OSError) as error:
+                self.outcomes[k] = self.drivers[k].failure(error)
         self.ensemble.finish()
 
     def after(self, seconds: float, stop: StopRequests) -> None:
         requested = stop.signal  # read once, so that every run stops at the same step
         for k in self.stepped:
+            if self.outcomes[k] is not None:  # its last frame failed while this chunk stepped
+                continue
             try:
                 self.drivers[k].after_steps(seconds, requested)
             except (BlowUp, OSError) as error:
@@ -553,6 +582,12 @@ class RunDriver:
         self.stepping = 0.0
         # Where the time outside stepping goes (this session): frames' observables, trajectory writes, checkpoints.
         self.outside = {"observables": 0.0, "trajectory": 0.0, "checkpoints": 0.0}
+        # A frame read from the device at a stop whose host work (its observables, checks, log line
+        # and hand-over to the writer) waits for the next chunk's launch, so that the device steps
+        # meanwhile; that work's seconds, spent while the steps ran.
+        self.pending: dict | None = None
+        self.alongside = 0.0
+        self.pending_warning: str | None = None
         self.started = _time.perf_counter()
         # Progress is reported about 200 times per run, never between graph blocks (nor outer steps).
         outer = sim.step_multiple  # steps of an outer step: every stop is a whole number of them
@@ -573,9 +608,23 @@ class RunDriver:
         return self.sim.step_count >= self.total
 
     def advance(self) -> None:
-        """Step this run alone up to its next stop (an ensemble's runs are stepped together: _Together)."""
+        """Step this run alone up to its next stop (an ensemble's runs are stepped together: _Together),
+        the last stop's frame made on the host while the device steps."""
         self.sim.step(self.steps_to_next_stop())
+        self.finish_frame()
         self.sim.finish()  # so that the steps' time is counted here, not in the frame that reads them
+
+    def finish_frame(self) -> None:
+        """The host's part of the frame read at the last stop, if it waits (:meth:`after_steps`):
+        raises BlowUp as the frame would have at its stop; nothing of it is written then."""
+        if self.pending is None:
+            return
+        reading, self.pending = self.pending, None
+        began = _time.perf_counter()
+        try:
+            _, self.pending_warning = self.make_frame(reading, alongside=True)
+        finally:
+            self.alongside += _time.perf_counter() - began
 
     def after(self, seconds: float, stop: StopRequests) -> None:
         """:meth:`after_steps`, the stop asked for read first."""
@@ -613,29 +662,19 @@ class RunDriver:
         step = sim.step_count
         pause_point("step", step)
         frame = None
-        warning = None
+        warning, self.pending_warning = self.pending_warning, None  # a frame made while the device stepped
+        observed = any(step % every == 0 or step == total for every, _ in self.observers)
+        checkpointed = step % self.checkpoint_every == 0 or step == total or stop_signal is not None
         if step % self.output_every == 0 or step == total:
             began = _time.perf_counter()
-            frame = particles, observables = record(sim, self.size_classes)
-            observables.update(deepest_since(observables, sim.take_deepest_contact()))
-            try:
-                check_sanity(step, particles)
-                check_energy(step, observables["total_energy"], self.start_energy, self.scale)
-            except BlowUp as error:
-                raise BlowUp(f"{error}; likely cause: {likely_cause(sim.stability, self.overlaps, self.record)}") from None
-            warning = self.overlaps.see(step, observables, since=self.last_frame)
-            self.last_frame = self.record.last_frame_step = step
+            reading = take_reading(sim)
             self.note_candidate_overflows(step)
-            written = _time.perf_counter()
-            self.outside["observables"] += written - began
-            self.trajectory.append(step, sim.time, particles, observables)
-            self.outside["trajectory"] += _time.perf_counter() - written
-            self.log(
-                f"frame: step {step}, t {sim.time:.6g} s, E {observables['total_energy']:.9g} erg, "
-                f"ledger closed to {ledger_closure(observables, self.start_energy, self.scale):.2g}, "
-                f"contacts {int(observables['number_of_contacts'])}, "
-                f"deepest overlap {float(observables['deepest_overlap']):.3g}"
-            )
+            self.outside["observables"] += _time.perf_counter() - began
+            if observed or checkpointed or not FRAMES_ALONGSIDE:  # its frame is needed here (a checkpoint follows its frame)
+                frame, made = self.make_frame(reading)
+                warning = made or warning
+            else:  # made on the host while the device steps the next chunk (advance)
+                self.pending = reading
         for every, observe in self.observers:
             if step % every == 0 or step == total:
                 frame = frame or record(sim, self.size_classes)  # copied to the host only when due
@@ -649,6 +688,34 @@ class RunDriver:
             self.checkpoint(step)
             self.log(f"stopped by {stop_signal} at step {step}; decco-warp resume {self.run_dir} continues")
             raise RunStopped(stop_signal, step, self.run_dir)
+
+    def make_frame(self, reading: dict, alongside: bool = False) -> tuple[tuple[dict, dict], str | None]:
+        """A frame from its reading (:func:`take_reading`): checked (BlowUp: nothing of it is written),
+        its deepest contact watched, handed to the trajectory's writer and logged; the frame and any
+        warning it raised.  ``alongside``: while the device steps (its time is counted there)."""
+        step, time, sim = reading["step"], reading["time"], self.sim
+        began = _time.perf_counter()
+        frame = particles, observables = frame_of(reading, sim, self.size_classes)
+        observables.update(deepest_since(observables, reading["deepest"]))
+        try:
+            check_sanity(step, particles)
+            check_energy(step, observables["total_energy"], self.start_energy, self.scale)
+        except BlowUp as error:
+            raise BlowUp(f"{error}; likely cause: {likely_cause(sim.stability, self.overlaps, self.record)}") from None
+        warning = self.overlaps.see(step, observables, since=self.last_frame)
+        self.last_frame = self.record.last_frame_step = step
+        written = _time.perf_counter()
+        self.trajectory.append(step, time, particles, observables)
+        if not alongside:
+            self.outside["observables"] += written - began
+            self.outside["trajectory"] += _time.perf_counter() - written
+        self.log(
+            f"frame: step {step}, t {time:.6g} s, E {observables['total_energy']:.9g} erg, "
+            f"ledger closed to {ledger_closure(observables, self.start_energy, self.scale):.2g}, "
+            f"contacts {int(observables['number_of_contacts'])}, "
+            f"deepest overlap {float(observables['deepest_overlap']):.3g}"
+        )
+        return frame, warning
 
     def note_candidate_overflows(self, step: int) -> None:
         """Say once, at a frame, that some particles met more contact candidates than their list
@@ -715,7 +782,8 @@ class RunDriver:
                 f"{self.stepping:.1f} s of it stepping ({outside:.0f} % outside: "
                 + ", ".join(f"{what} {seconds:.1f} s" for what, seconds in self.outside.items())
                 + "); "
-                f"{self.overlaps.summary()}"
+                + (f"frames made on the host while the device stepped: {self.alongside:.1f} s of the stepping; " if self.alongside > 0 else "")
+                + f"{self.overlaps.summary()}"
                 + self._list_builds()
             )
 

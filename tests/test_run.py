@@ -58,6 +58,32 @@ def test_default_simulate_writes_a_complete_run_folder(finished):
     assert f"{extra['stepping_seconds']:.1f} s of it stepping" in result.stdout
 
 
+def test_frames_made_while_the_next_steps_run_are_the_frames_made_at_their_stop(tmp_path, monkeypatch):
+    """A frame due where no checkpoint is (run.FRAMES_ALONGSIDE) is read from the device at its stop
+    and made on the host after the next chunk's launch: the trajectory is the one whose frames are
+    all made at their stop, bit for bit, and so is the log, line for line but for the times; the
+    done line says how long the host worked beside the stepping."""
+    from decco_warp import run as runs
+
+    logs = {}
+    trajectories = {}
+    for alongside in (True, False):
+        monkeypatch.setattr(runs, "FRAMES_ALONGSIDE", alongside)
+        result = start_run(_spec(tmp_path, name=f"alongside{int(alongside)}", steps=600, output_every=50, checkpoint_every=300))
+        trajectories[alongside] = dw.read_trajectory(result.run_dir / "trajectory.h5")
+        logs[alongside] = (result.run_dir / "run.log").read_text()
+    assert_same_run(trajectories[True], trajectories[False])
+    assert trajectories[True]["step"].tolist() == list(range(0, 601, 50))
+
+    def lines(text):
+        words = [re.sub(r"alongside[01]", "RUN", line.split(" ", 1)[1]) for line in text.splitlines()]
+        return [re.sub(r"[\d.]+ s\b", "T", line) for line in words if not line.startswith("done:")]
+
+    assert lines(logs[True]) == lines(logs[False])
+    assert "frames made on the host while the device stepped" in logs[True].splitlines()[-1]
+    assert "frames made on the host while the device stepped" not in logs[False]
+
+
 def test_trajectory_follows_h5md_and_round_trips(finished):
     run_dir, _ = finished
     spec = specs.resolve_spec(specs.load_spec_file(run_dir / "spec.toml"))
