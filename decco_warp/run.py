@@ -101,10 +101,11 @@ class RunLog:
 
 # --- one frame of output -------------------------------------------------------------
 
-#: A frame due at a stop that needs nothing of it there (no checkpoint, observer or end) is made on
-#: the host while the device steps the next chunk (RunDriver.advance): its reads from the device are
-#: taken at the stop, its observables, checks and write after the next launch.  False: every frame
-#: at its stop (the same frames and log; the tests compare the two).
+#: A frame or checkpoint due at a stop that needs nothing of it there (no observer, stop request or
+#: end) is made on the host while the device steps the next chunk (RunDriver.advance): its reads
+#: from the device are taken at the stop; the frame's observables, checks and write, then the
+#: checkpoint's write, after the next launch.  False: everything at its stop (the same frames,
+#: checkpoints and log; the tests compare the two).
 FRAMES_ALONGSIDE = True
 
 
@@ -464,7 +465,7 @@ class _Together:
         self.ensemble.step(min(self.drivers[k].steps_to_next_stop() for k in self.stepped))
         for k in self.stepped:  # the frames read at the last stop, made on the host while the device steps
             try:
-                self.drivers[k].finish_frame()
+                self.drivers[k].finish_stop()
             except (BlowUp, OSError) as error:
                 self.outcomes[k] = self.drivers[k].failure(error)
         self.ensemble.finish()
@@ -586,6 +587,7 @@ class RunDriver:
         # and hand-over to the writer) waits for the next chunk's launch, so that the device steps
         # meanwhile; that work's seconds, spent while the steps ran.
         self.pending: dict | None = None
+        self.pending_checkpoint: tuple | None = None
         self.alongside = 0.0
         self.pending_warning: str | None = None
         self.started = _time.perf_counter()
@@ -611,18 +613,23 @@ class RunDriver:
         """Step this run alone up to its next stop (an ensemble's runs are stepped together: _Together),
         the last stop's frame made on the host while the device steps."""
         self.sim.step(self.steps_to_next_stop())
-        self.finish_frame()
+        self.finish_stop()
         self.sim.finish()  # so that the steps' time is counted here, not in the frame that reads them
 
-    def finish_frame(self) -> None:
-        """The host's part of the frame read at the last stop, if it waits (:meth:`after_steps`):
-        raises BlowUp as the frame would have at its stop; nothing of it is written then."""
-        if self.pending is None:
-            return
+    def finish_stop(self) -> None:
+        """The host's part of the last stop, if it waits (:meth:`after_steps`): its frame, then its
+        checkpoint, from what was read of the device there.  Raises BlowUp as the frame would have at
+        its stop; nothing of it is written then, nor its checkpoint."""
         reading, self.pending = self.pending, None
+        checkpoint, self.pending_checkpoint = self.pending_checkpoint, None
+        if reading is None and checkpoint is None:
+            return
         began = _time.perf_counter()
         try:
-            _, self.pending_warning = self.make_frame(reading, alongside=True)
+            if reading is not None:
+                _, self.pending_warning = self.make_frame(reading, alongside=True)
+            if checkpoint is not None:
+                self.save_checkpoint(*checkpoint)
         finally:
             self.alongside += _time.perf_counter() - began
 
@@ -647,12 +654,17 @@ class RunDriver:
 
     def checkpoint(self, step: int) -> None:
         began = _time.perf_counter()
-        self.trajectory.flush()  # the frames up to this step are on disk before the checkpoint says so
-        self.record.wall_seconds = self.wall_before + began - self.started
-        self.record.stepping_seconds = self.stepping_before + self.stepping
-        write_checkpoint(RunFolder(self.run_dir).checkpoint, self.sim.snapshot(), self.sim.state, self.record.as_checkpoint())
-        self.log(f"checkpoint: step {step}")
+        self.save_checkpoint(step, self.sim.snapshot(), self.sim.state, began)
         self.outside["checkpoints"] += _time.perf_counter() - began
+
+    def save_checkpoint(self, step: int, snapshot: dict, state, at: float) -> None:
+        """Write the checkpoint of ``step`` from its ``snapshot`` and host ``state``, read at the stop
+        (``at``: perf_counter then), once the trajectory's frames up to it are on disk."""
+        self.trajectory.flush()  # the frames up to this step are on disk before the checkpoint says so
+        self.record.wall_seconds = self.wall_before + at - self.started
+        self.record.stepping_seconds = self.stepping_before + self.stepping
+        write_checkpoint(RunFolder(self.run_dir).checkpoint, snapshot, state, self.record.as_checkpoint())
+        self.log(f"checkpoint: step {step}")
 
     def after_steps(self, seconds: float, stop_signal: str | None = None) -> None:
         """Count ``seconds`` of stepping, then do what is due at the step reached (nothing between
@@ -663,24 +675,30 @@ class RunDriver:
         pause_point("step", step)
         frame = None
         warning, self.pending_warning = self.pending_warning, None  # a frame made while the device stepped
-        observed = any(step % every == 0 or step == total for every, _ in self.observers)
-        checkpointed = step % self.checkpoint_every == 0 or step == total or stop_signal is not None
+        # Made here: what an observer or the end needs, or a stop asked for; else on the host while
+        # the device steps the next chunk (advance), from what is read of the device now.
+        now = not FRAMES_ALONGSIDE or step == total or stop_signal is not None or any(step % every == 0 for every, _ in self.observers)
         if step % self.output_every == 0 or step == total:
             began = _time.perf_counter()
             reading = take_reading(sim)
             self.note_candidate_overflows(step)
             self.outside["observables"] += _time.perf_counter() - began
-            if observed or checkpointed or not FRAMES_ALONGSIDE:  # its frame is needed here (a checkpoint follows its frame)
+            if now:
                 frame, made = self.make_frame(reading)
                 warning = made or warning
-            else:  # made on the host while the device steps the next chunk (advance)
+            else:
                 self.pending = reading
         for every, observe in self.observers:
             if step % every == 0 or step == total:
                 frame = frame or record(sim, self.size_classes)  # copied to the host only when due
                 observe(step, sim.time, *frame)
         if step % self.checkpoint_every == 0 or step == total:
-            self.checkpoint(step)
+            if now:
+                self.checkpoint(step)
+            else:  # written after the frame of this step, if any (finish_stop)
+                began = _time.perf_counter()
+                self.pending_checkpoint = (step, sim.snapshot(), sim.state, began)
+                self.outside["checkpoints"] += _time.perf_counter() - began
         if self.progress is not None:
             elapsed = _time.perf_counter() - self.started
             self.progress(RunProgress(step, total, sim.time, self.first_step, elapsed, self.overlaps.deepest, warning))

@@ -59,20 +59,36 @@ def test_default_simulate_writes_a_complete_run_folder(finished):
 
 
 def test_frames_made_while_the_next_steps_run_are_the_frames_made_at_their_stop(tmp_path, monkeypatch):
-    """A frame due where no checkpoint is (run.FRAMES_ALONGSIDE) is read from the device at its stop
-    and made on the host after the next chunk's launch: the trajectory is the one whose frames are
-    all made at their stop, bit for bit, and so is the log, line for line but for the times; the
-    done line says how long the host worked beside the stepping."""
+    """Frames and checkpoints due where no observer, stop request or end is (run.FRAMES_ALONGSIDE)
+    are read from the device at their stop and made on the host after the next chunk's launch: the
+    trajectory is the one whose frames are all made at their stop, bit for bit, every checkpoint
+    written holds the same arrays and record (but for its wall and stepping seconds), and the log is
+    the same line for line but for the times; the done line says how long the host worked beside
+    the stepping."""
     from decco_warp import run as runs
 
-    logs = {}
-    trajectories = {}
+    logs, trajectories, checkpoints = {}, {}, {True: [], False: []}
+    real_write = runs.write_checkpoint
     for alongside in (True, False):
+
+        def keep(path, snapshot, static, extra, mine=checkpoints[alongside]):
+            named = {key: re.sub(r"alongside[01]", "RUN", value) if isinstance(value, str) else value for key, value in extra.items()}
+            mine.append((snapshot, {key: value for key, value in named.items() if key not in ("wall_seconds", "stepping_seconds")}))
+            real_write(path, snapshot, static, extra)
+
         monkeypatch.setattr(runs, "FRAMES_ALONGSIDE", alongside)
-        result = start_run(_spec(tmp_path, name=f"alongside{int(alongside)}", steps=600, output_every=50, checkpoint_every=300))
+        monkeypatch.setattr(runs, "write_checkpoint", keep)
+        result = start_run(_spec(tmp_path, name=f"alongside{int(alongside)}", steps=600, output_every=50, checkpoint_every=200))
         trajectories[alongside] = dw.read_trajectory(result.run_dir / "trajectory.h5")
         logs[alongside] = (result.run_dir / "run.log").read_text()
     assert_same_run(trajectories[True], trajectories[False])
+    assert [snap["step"] for snap, _ in checkpoints[True]] == [snap["step"] for snap, _ in checkpoints[False]] == [0, 200, 400, 600]
+    for (mine, my_record), (theirs, their_record) in zip(checkpoints[True], checkpoints[False]):
+        assert my_record.keys() == their_record.keys()
+        for key, value in their_record.items():
+            assert np.array_equal(my_record[key], value), key
+        for key, values in theirs.items():
+            assert np.array_equal(mine[key], values), key
     assert trajectories[True]["step"].tolist() == list(range(0, 601, 50))
 
     def lines(text):
