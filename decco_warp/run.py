@@ -800,7 +800,7 @@ class RunDriver:
                 f"{self.stepping:.1f} s of it stepping ({outside:.0f} % outside: "
                 + ", ".join(f"{what} {seconds:.1f} s" for what, seconds in self.outside.items())
                 + "); "
-                + (f"frames made on the host while the device stepped: {self.alongside:.1f} s of the stepping; " if self.alongside > 0 else "")
+                + (f"frames and checkpoints made on the host while the device stepped: {self.alongside:.1f} s of the stepping; " if self.alongside > 0 else "")
                 + f"{self.overlaps.summary()}"
                 + self._list_builds()
             )

@@ -96,8 +96,8 @@ def test_frames_made_while_the_next_steps_run_are_the_frames_made_at_their_stop(
         return [re.sub(r"[\d.]+ s\b", "T", line) for line in words if not line.startswith("done:")]
 
     assert lines(logs[True]) == lines(logs[False])
-    assert "frames made on the host while the device stepped" in logs[True].splitlines()[-1]
-    assert "frames made on the host while the device stepped" not in logs[False]
+    assert "frames and checkpoints made on the host while the device stepped" in logs[True].splitlines()[-1]
+    assert "made on the host while the device stepped" not in logs[False]
 
 
 def test_trajectory_follows_h5md_and_round_trips(finished):
