@@ -109,7 +109,6 @@ class RunLog:
 FRAMES_ALONGSIDE = True
 
 
-
 def take_reading(sim: Simulation) -> dict:
     """What a frame reads of the device (each a copy to the host, the device idle between two
     chunks): the state, the pair observables, the work, and the deepest contact since the previous
@@ -583,9 +582,10 @@ class RunDriver:
         self.stepping = 0.0
         # Where the time outside stepping goes (this session): frames' observables, trajectory writes, checkpoints.
         self.outside = {"observables": 0.0, "trajectory": 0.0, "checkpoints": 0.0}
-        # A frame read from the device at a stop whose host work (its observables, checks, log line
-        # and hand-over to the writer) waits for the next chunk's launch, so that the device steps
-        # meanwhile; that work's seconds, spent while the steps ran.
+        # What was read of the device at the last stop for a frame and a checkpoint whose host work
+        # (the frame's observables, checks, log line and hand-over to the writer; the checkpoint's
+        # write) waits for the next chunk's launch, so that the device steps meanwhile (FRAMES_ALONGSIDE);
+        # that work's seconds, spent while the steps ran; a warning its frame raised, for the progress line.
         self.pending: dict | None = None
         self.pending_checkpoint: tuple | None = None
         self.alongside = 0.0
