@@ -743,6 +743,22 @@ def dask_setup(worker) -> None:
     from .stops import ignore_stops
 
     ignore_stops()
+    quiet_heartbeats()
+
+
+def quiet_heartbeats() -> None:
+    """Leave out of a worker's log the traceback Dask prints for a heartbeat that found the scheduler
+    gone: as a sweep closes its cluster (at its end, or stopped by Ctrl-C) the scheduler can close
+    before a worker's last heartbeat, and a scheduler lost mid-sweep is said in words by the sweep."""
+    import logging
+
+    class _Heartbeats(logging.Filter):
+        def filter(self, record: logging.LogRecord) -> bool:
+            return "with scheduler during heartbeat" not in record.getMessage()
+
+    logger = logging.getLogger("distributed.worker")
+    if not any(type(f).__name__ == "_Heartbeats" for f in logger.filters):
+        logger.addFilter(_Heartbeats())
 
 
 def local_cluster(workers: int, gpus: int):

@@ -234,6 +234,25 @@ def test_a_stopped_sweep_keeps_its_table_and_continues(tmp_path):
     assert len(rows) == 6 and all(rows[name]["status"] == "skipped (complete)" for name in done)
 
 
+def test_a_worker_leaves_out_only_the_heartbeat_that_found_the_scheduler_gone(caplog):
+    """A local worker's log (sweep.dask_setup, quiet_heartbeats): the traceback of Dask's heartbeat
+    that found the scheduler closed, which a cluster's closing can print, is left out; the worker's
+    other errors stay, and installing it twice leaves one filter."""
+    import logging
+
+    from decco_warp.sweep import quiet_heartbeats
+
+    quiet_heartbeats()
+    quiet_heartbeats()
+    logger = logging.getLogger("distributed.worker")
+    assert sum(type(f).__name__ == "_Heartbeats" for f in logger.filters) == 1
+    with caplog.at_level(logging.ERROR, logger="distributed.worker"):
+        logger.error("Failed to communicate with scheduler during heartbeat.")
+        logger.error("Unexpected exception during heartbeat. Closing worker.")
+        logger.error("Compute Failed")
+    assert [r.getMessage() for r in caplog.records] == ["Unexpected exception during heartbeat. Closing worker.", "Compute Failed"]
+
+
 def test_ctrl_c_on_a_sweep_checkpoints_its_running_runs_and_says_what_it_kept(tmp_path):
     """Ctrl-C at a terminal signals every process of the sweep at once (its Dask workers and analysis
     processes too): the running runs write a checkpoint at the step they reached (their last periodic
