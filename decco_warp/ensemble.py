@@ -186,6 +186,11 @@ class SystemView:
         self._ensemble.finish()
 
     @property
+    def static(self) -> State:
+        """The state this system began from, for its per-particle constants (radii, masses, ...)."""
+        return self._static
+
+    @property
     def state(self) -> State:
         positions, velocities, omegas = (values[self.first : self.end].copy() for values in self._ensemble.read())
         return replace(

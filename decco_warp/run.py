@@ -654,16 +654,16 @@ class RunDriver:
 
     def checkpoint(self, step: int) -> None:
         began = _time.perf_counter()
-        self.save_checkpoint(step, self.sim.snapshot(), self.sim.state, began)
+        self.save_checkpoint(step, self.sim.snapshot(), began)
         self.outside["checkpoints"] += _time.perf_counter() - began
 
-    def save_checkpoint(self, step: int, snapshot: dict, state, at: float) -> None:
-        """Write the checkpoint of ``step`` from its ``snapshot`` and host ``state``, read at the stop
-        (``at``: perf_counter then), once the trajectory's frames up to it are on disk."""
+    def save_checkpoint(self, step: int, snapshot: dict, at: float) -> None:
+        """Write the checkpoint of ``step`` from its ``snapshot``, read at the stop (``at``:
+        perf_counter then), once the trajectory's frames up to it are on disk."""
         self.trajectory.flush()  # the frames up to this step are on disk before the checkpoint says so
         self.record.wall_seconds = self.wall_before + at - self.started
         self.record.stepping_seconds = self.stepping_before + self.stepping
-        write_checkpoint(RunFolder(self.run_dir).checkpoint, snapshot, state, self.record.as_checkpoint())
+        write_checkpoint(RunFolder(self.run_dir).checkpoint, snapshot, self.sim.static, self.record.as_checkpoint())
         self.log(f"checkpoint: step {step}")
 
     def after_steps(self, seconds: float, stop_signal: str | None = None) -> None:
@@ -697,7 +697,7 @@ class RunDriver:
                 self.checkpoint(step)
             else:  # written after the frame of this step, if any (finish_stop)
                 began = _time.perf_counter()
-                self.pending_checkpoint = (step, sim.snapshot(), sim.state, began)
+                self.pending_checkpoint = (step, sim.snapshot(), began)
                 self.outside["checkpoints"] += _time.perf_counter() - began
         if self.progress is not None:
             elapsed = _time.perf_counter() - self.started
