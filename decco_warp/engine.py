@@ -148,9 +148,8 @@ class Engine:
         ``deepest_overlap_pair`` (lower index first, counted from ``first``; -1 -1 when nothing
         touched), among particles [first, end) (one system of an ensemble); starts their new record."""
         end = self.count if end is None else end
-        part = self.state.deepest_contact[first:end]
-        records = part.numpy().copy()  # on the CPU numpy() is a view of the array zeroed next
-        part.zero_()
+        records = self.deepest_contact_records(first, end)  # a copy: on the CPU numpy() is a view of the array zeroed next
+        self.state.deepest_contact[first:end].zero_()
         i = int(np.argmax(records))
         depth, j = unpack_depth(int(records[i]))
         pair = np.array(sorted((i, j - first)) if records[i] > 0 else (-1, -1), dtype=np.int64)
