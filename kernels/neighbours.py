@@ -107,6 +107,23 @@ def cell_ranges(
     sorted_position_out[k] = position_in[i]
 
 
+@wp.func
+def listed(
+    k: int,  # the particle, in key order
+    m: int,  # another, in key order
+    x: wp.vec3d,  # k's position
+    radius: wp.float64,  # k's radius
+    skin: wp.float64,
+    sorted_radius_in: wp.array(dtype=wp.float64),
+    sorted_position_in: wp.array(dtype=wp.vec3d),
+) -> bool:
+    """Whether m belongs in k's neighbour list: another particle within reach (both builds' test)."""
+    if m == k:
+        return False
+    r = sorted_position_in[m] - x
+    return within_reach(wp.dot(r, r), reach(radius, sorted_radius_in[m], skin, wp.float64(NEIGHBOUR_LIST_MARGIN)), wp.float64(1.0))
+
+
 @wp.kernel
 def build_neighbour_list(
     # Model:
@@ -137,17 +154,14 @@ def build_neighbour_list(
         return
     x = sorted_position_in[k]
     radius = sorted_radius_in[k]
-    margin = wp.float64(NEIGHBOUR_LIST_MARGIN)
     own = cell_of(x, cell_width)
     noted = int(0)
     for neighbour in range(wp.static(STENCIL)):  # the 3 x 3 x 3 cells around its own
         key = cell_key(stencil_cell(own, neighbour), system)
         for m in range(int(start_in[key]), int(end_in[key])):
-            if m != k:
-                r = sorted_position_in[m] - x
-                # In order in i's row; past its width only counted (an overflow).
-                if within_reach(wp.dot(r, r), reach(radius, sorted_radius_in[m], skin, margin), wp.float64(1.0)):
-                    noted = note_candidate(candidates_out, i, noted, int(order_in[m]))
+            # In order in i's row; past its width only counted (an overflow).
+            if listed(k, m, x, radius, skin, sorted_radius_in, sorted_position_in):
+                noted = note_candidate(candidates_out, i, noted, int(order_in[m]))
     candidate_count_out[i] = wp.int32(noted)
     reference_out[i] = x
 
@@ -189,18 +203,14 @@ def neighbours_in_cell(
     slot: int,  # with ``write``: where in k's row of ``found_out`` the first goes
     found_out: wp.array2d(dtype=wp.int32),
 ) -> int:
-    """The particles of a cell within reach of k (``build_neighbour_list``'s test, the same
-    operations), in key order: their count; with ``write`` each written into k's row from ``slot``
-    on (past its width only counted)."""
-    margin = wp.float64(NEIGHBOUR_LIST_MARGIN)
+    """The particles of a cell within reach of k (``listed``, the walk's test), in key order: their
+    count; with ``write`` each written into k's row from ``slot`` on (past its width only counted)."""
     hits = int(0)
     for m in range(int(start_in[key]), int(end_in[key])):
-        if m != k:
-            r = sorted_position_in[m] - x
-            if within_reach(wp.dot(r, r), reach(radius, sorted_radius_in[m], skin, margin), wp.float64(1.0)):
-                if write and slot + hits < found_out.shape[1]:
-                    found_out[k, slot + hits] = order_in[m]
-                hits += 1
+        if listed(k, m, x, radius, skin, sorted_radius_in, sorted_position_in):
+            if write and slot + hits < found_out.shape[1]:
+                found_out[k, slot + hits] = order_in[m]
+            hits += 1
     return hits
 
 
