@@ -39,6 +39,7 @@ import hashlib
 import itertools
 import math
 import json
+import logging
 import multiprocessing
 import os
 import platform
@@ -746,18 +747,19 @@ def dask_setup(worker) -> None:
     quiet_heartbeats()
 
 
+class _Heartbeats(logging.Filter):
+    """Drops Dask's traceback for a worker heartbeat that found the scheduler gone (quiet_heartbeats)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "with scheduler during heartbeat" not in record.getMessage()
+
+
 def quiet_heartbeats() -> None:
     """Leave out of a worker's log the traceback Dask prints for a heartbeat that found the scheduler
     gone: as a sweep closes its cluster (at its end, or stopped by Ctrl-C) the scheduler can close
     before a worker's last heartbeat, and a scheduler lost mid-sweep is said in words by the sweep."""
-    import logging
-
-    class _Heartbeats(logging.Filter):
-        def filter(self, record: logging.LogRecord) -> bool:
-            return "with scheduler during heartbeat" not in record.getMessage()
-
     logger = logging.getLogger("distributed.worker")
-    if not any(type(f).__name__ == "_Heartbeats" for f in logger.filters):
+    if not any(isinstance(f, _Heartbeats) for f in logger.filters):
         logger.addFilter(_Heartbeats())
 
 
@@ -962,8 +964,6 @@ def run_sweep(
 def _close(client, quietly: bool) -> None:
     """Close ``client``; ``quietly`` where it lost its scheduler: Dask then logs a traceback as its
     attempts to reconnect are ended, which the sweep's own line says in words."""
-    import logging
-
     logger = logging.getLogger("distributed.client")
     level = logger.level
     if quietly:
