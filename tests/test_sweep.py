@@ -443,7 +443,8 @@ def test_shipped_large_pile_list_and_collision_are_valid():
      ("fig3_auto", ["fig3_headon_auto"], None), ("resolution/x16", ["resolution_fine"], {"resolution": 16.0}),
      ("qstar_rd/x4", ["qstar_rd"], {"resolution": 4.0}), ("throughput_r4", ["throughput_r4"], {"resolution": 4.0}), ("qstar_rd_frictionless", ["qstar_rd_frictionless"], None),
      ("qstar_rd_frictionless/x4", ["qstar_rd_frictionless"], {"resolution": 4.0}), ("qstar_rd_paper_contacts", ["qstar_rd_paper_contacts"], {"resolution": 4.0}),
-     ("throughput_r4_k16", ["throughput_r4_k16"], {"resolution": 4.0}), ("ladder_clock", ["ladder_clock"], None),
+     ("throughput_r4_k16", ["throughput_r4_k16"], {"resolution": 4.0}), ("throughput_r4_k40", ["throughput_r4_k40"], {"resolution": 4.0}),
+     ("ladder_clock", ["ladder_clock"], None),
      ("fig9_energy_matched", ["fig9_energy_matched"], None), ("fig3_headon_r4", ["fig3_headon_r4"], {"resolution": 4.0})],
 )  # fmt: skip
 def test_committed_results_are_runs_of_the_shipped_sweeps(folder, sweeps, overrides):
