@@ -48,25 +48,25 @@ def choose_gravity(n: int, device: str) -> str:
 
 #: The interval of gravity that ``gravity_every = "auto"`` stands for [s]: K is the whole number of
 #: steps of dt nearest it (:func:`auto_gravity_every`), so that what is held where the evidence is,
-#: as dt changes, is the interval, not the step count.  At the paper's dt of 0.04 s it is K = 10: on
-#: the paper's runs (the Fig. 8 collision and the equal-mass head-on ones at eta 3, 9 and 12) every K
-#: from 5 to 50 lands inside the spread of K = 1's realizations or within 0.015 of it (eta 9: K = 5
-#: and 10 above it; docs/benchmarks.md, "Equivalence before speed"), no difference resolved or
-#: growing with K; 10 takes most of the speed (whole runs ~2x at 6 250 particles, ~3x at 10 000) at
-#: a fifth of the largest K measured.  At R = 4 with the contacts scaled (25 000 particles, dt =
-#: 0.04 x 4^(-1/3) = 0.0252 s) the same 0.4 s is K = 16: eight twin runs at K = 16 against K = 10
-#: (the 1/4 head-on collision at eta 3, 6, 9 and 12, two realizations each, the same seeds:
-#: runs/results/throughput_r4_k16/ against throughput_r4/) differ in m_lf/m_t by +0.0015
-#: pooled over the pairs (95 %: -0.013 to +0.016), every twin within 0.035 (the realization SD at
-#: eta 12: 0.035), and the whole runs step 1.26x as fast (812.7 s against 1 024.9 s for the eight
-#: stepped together on one H100).
-GRAVITY_INTERVAL_AUTO = 0.4
+#: as dt changes, is the interval, not the step count.  The evidence (docs/benchmarks.md,
+#: "Equivalence before speed"; docs/validation.md, "Convergence with resolution"): at the paper's dt
+#: of 0.04 s every K from 5 to 50 (0.2 to 2 s) lands inside the spread of K = 1's realizations or
+#: within 0.015 of it on the Fig. 8 collision and the equal-mass head-on ones at eta 3, 9 and 12, no
+#: difference resolved or growing with K, and K = 50 against K = 10 on fifteen twin runs (the 1/4
+#: head-on at eta 3, 6, 9, five realizations; runs/results/ladder_clock/) moves m_lf/m_t by +0.004
+#: (95 %: -0.002 to +0.011); at R = 4 (25 000 particles, dt 0.0252 s) eight twin runs at K = 40
+#: (1.0 s) against K = 16 (0.4 s) differ by +0.0003 (-0.008 to +0.009), every twin within 0.016
+#: (runs/results/throughput_r4_k40/ against throughput_r4_k16/), and step 1.35x as fast.  1.0 s is
+#: K = 25 at the paper's dt, 40 at R = 4 and 63 at R = 16 with the contacts scaled.  (It was 0.4 s,
+#: K = 10 at the paper's dt, until the R = 4 twins tested 1.0 s; the files of runs made then pin
+#: their K.)
+GRAVITY_INTERVAL_AUTO = 1.0
 
 
 def auto_gravity_every(dt: float) -> int:
     """The K of ``gravity_every = "auto"`` at the time step ``dt`` [s]: the whole number of steps
     nearest GRAVITY_INTERVAL_AUTO / dt (a half rounds up, one short of it by round-off too), at
-    least 1.  10 at the paper's 0.04 s; 16 and 25 at R = 4 and 16 with the contacts scaled
+    least 1.  25 at the paper's 0.04 s; 40 and 63 at R = 4 and 16 with the contacts scaled
     (dt x R^(-1/3))."""
     if isinstance(dt, bool) or not isinstance(dt, numbers.Real) or not math.isfinite(dt) or dt <= 0:
         raise InputError(f'gravity_every = "auto" needs a time step > 0 to choose K from; got dt = {dt!r}')

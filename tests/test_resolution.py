@@ -80,9 +80,9 @@ def test_a_sweep_at_another_resolution_scales_piles_spring_and_step(tmp_path):
 
 
 def test_auto_gravity_every_at_another_resolution_keeps_its_interval_in_whole_outer_steps(tmp_path):
-    """gravity_every = "auto" at R = 4 with the contacts scaled: dt 0.0252 s, so K = 16 (gravity every
-    0.40 s, as 10 steps of 0.04 s at R = 1), and scaled_run rounds the step counts to whole outer
-    steps of 16; kept at the paper's dt (scale_contacts = false) it stays 10; with an "auto" dt the
+    """gravity_every = "auto" at R = 4 with the contacts scaled: dt 0.0252 s, so K = 40 (gravity every
+    1.0 s, as 25 steps of 0.04 s at R = 1), and scaled_run rounds the step counts to whole outer
+    steps of 40; kept at the paper's dt (scale_contacts = false) it stays 25; with an "auto" dt the
     rounding waits for that dt (spec.settle_auto)."""
     from decco_warp.resolution import scaled_run
 
@@ -91,17 +91,17 @@ def test_auto_gravity_every_at_another_resolution_keeps_its_interval_in_whole_ou
     given = {"piles": files, "params": {"gravity_every": "auto"}, "run": {"steps": 100_000, "output_every": 5000, "checkpoint_every": 50_000}}
     run = specs.resolve_spec(scaled_run(given, 4, True, defaults))
     f = length_factor(4)
-    assert run["params"]["gravity_every"] == 16 and run["params"]["dt"] == pytest.approx(0.04 * f, rel=1e-12)
+    assert run["params"]["gravity_every"] == 40 and run["params"]["dt"] == pytest.approx(0.04 * f, rel=1e-12)
     for key, value in given["run"].items():
-        assert run["run"][key] % 16 == 0 and run["run"][key] == 16 * math.ceil(value / f / 16), key
-    assert (run["run"]["steps"], run["run"]["output_every"]) == (158_752, 7952)
+        assert run["run"][key] % 40 == 0 and run["run"][key] == 40 * math.ceil(value / f / 40), key
+    assert (run["run"]["steps"], run["run"]["output_every"]) == (158_760, 7960)
     held = specs.resolve_spec(scaled_run(given, 4, False, defaults))
-    assert held["params"]["gravity_every"] == 10 and held["run"]["steps"] == 100_000
-    # A duration becomes whole outer steps of 16 by itself: 40 000 s, as throughput_r4's runs.
+    assert held["params"]["gravity_every"] == 25 and held["run"]["steps"] == 100_000
+    # A duration becomes whole outer steps of 40 by itself: 40 000 s, as throughput_r4_k40's runs.
     timed = specs.resolve_spec(scaled_run({**given, "run": {"duration": 40_000.0, "output_every": 5000}}, 4, True, defaults))
-    assert (timed["params"]["gravity_every"], timed["run"]["steps"]) == (16, 1_587_408) and timed["run"]["steps"] % 16 == 0
-    # R = 16: 25 steps of 0.0159 s.
-    assert specs.resolve_spec(scaled_run(given, 16, True, defaults))["params"]["gravity_every"] == 25  # piles not read here
+    assert (timed["params"]["gravity_every"], timed["run"]["steps"]) == (40, 1_587_440) and timed["run"]["steps"] % 40 == 0
+    # R = 16: 63 steps of 0.0159 s.
+    assert specs.resolve_spec(scaled_run(given, 16, True, defaults))["params"]["gravity_every"] == 63  # piles not read here
     # An "auto" dt: no K to round to yet; the spec keeps both "auto".
     auto = scaled_run({**given, "params": {"gravity_every": "auto", "dt": "auto", "k_in": "auto"}}, 4, True, defaults)
     assert auto["run"]["steps"] == math.ceil(100_000 / f) and specs.resolve_spec(auto)["params"]["gravity_every"] == "auto"
@@ -109,7 +109,7 @@ def test_auto_gravity_every_at_another_resolution_keeps_its_interval_in_whole_ou
     path = tmp_path / "s.toml"
     path.write_text(SWEEP.format(out=tmp_path, resolution=4, extra="", **files) + '[params]\ngravity_every = "auto"\n')
     for swept in load_sweep(path)[1]:
-        assert swept["params"]["gravity_every"] == 16 and all(swept["run"][key] % 16 == 0 for key in ("steps", "output_every", "checkpoint_every"))
+        assert swept["params"]["gravity_every"] == 40 and all(swept["run"][key] % 40 == 0 for key in ("steps", "output_every", "checkpoint_every"))
 
 
 def test_a_resolution_whose_piles_are_not_built_is_refused(tmp_path):

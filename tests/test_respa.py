@@ -398,15 +398,15 @@ def test_a_bad_clock_in_a_specification_is_one_clear_line(tmp_path, params, run,
 
 
 def test_auto_gravity_every_is_the_k_of_the_equivalence_table_and_the_spec_records_it(tmp_path):
-    """gravity_every = "auto" at the paper's dt resolves to K = 10 (GRAVITY_INTERVAL_AUTO / 0.04 s: the
+    """gravity_every = "auto" at the paper's dt resolves to K = 25 (GRAVITY_INTERVAL_AUTO / 0.04 s: the
     table of docs/benchmarks.md supports K up to 50), the resolved spec holding the number, and a
     duration becomes whole outer steps of it."""
     from decco_warp.scheme import GRAVITY_INTERVAL_AUTO
 
-    spec = _spec(tmp_path, "auto", {"gravity_every": "auto"}, steps=None, duration=1.0, output_every=10, checkpoint_every=10)
-    assert GRAVITY_INTERVAL_AUTO == 0.4
-    assert spec["params"]["gravity_every"] == 10
-    assert spec["run"]["steps"] == 10 * math.ceil(1.0 / 0.04 / 10)
+    spec = _spec(tmp_path, "auto", {"gravity_every": "auto"}, steps=None, duration=1.1, output_every=25, checkpoint_every=25)
+    assert GRAVITY_INTERVAL_AUTO == 1.0
+    assert spec["params"]["gravity_every"] == 25
+    assert spec["run"]["steps"] == 25 * math.ceil(1.1 / 0.04 / 25) == 50
 
 
 def test_the_scheme_answers_for_its_clock():
@@ -417,29 +417,29 @@ def test_the_scheme_answers_for_its_clock():
     assert (Scheme().step_multiple, Scheme().clocks) == (1, 1)
     assert (Scheme(gravity_every=5).step_multiple, Scheme(gravity_every=5).clocks) == (5, 2)
     assert step_multiple_of({}) == 1 and step_multiple_of({"gravity_every": 20}) == 20
-    assert step_multiple_of({"gravity_every": "auto"}) == 10  # Params' dt, the paper's 0.04 s
-    assert step_multiple_of({"gravity_every": "auto", "dt": 0.02}) == 20
+    assert step_multiple_of({"gravity_every": "auto"}) == 25  # Params' dt, the paper's 0.04 s
+    assert step_multiple_of({"gravity_every": "auto", "dt": 0.02}) == 50
     # An "auto" dt (given, or implied by k_in = "auto"): K is settled with it.
     assert step_multiple_of({"gravity_every": "auto", "dt": "auto"}) is None
     assert step_multiple_of({"gravity_every": "auto", "k_in": "auto"}) is None
-    assert step_multiple_of({"gravity_every": "auto", "k_in": "auto", "dt": 0.04}) == 10
+    assert step_multiple_of({"gravity_every": "auto", "k_in": "auto", "dt": 0.04}) == 25
 
 
 def test_auto_gravity_every_is_an_interval_k_of_dt():
     """gravity_every = "auto" holds gravity every GRAVITY_INTERVAL_AUTO seconds: K is the whole number
-    of steps of dt nearest it, at least 1 (halves up).  Round-off: the paper's dt gives 10, and the
+    of steps of dt nearest it, at least 1 (halves up).  Round-off: the paper's dt gives 25, and the
     dts that resolution.scaled_run makes at R = 4 and R = 16 (0.04 x R^(-1/3), as it computes them)
-    give 16 and 25."""
+    give 40 and 63."""
     from decco_warp.errors import InputError
     from decco_warp.resolution import length_factor
     from decco_warp.scheme import GRAVITY_INTERVAL_AUTO, auto_gravity_every
 
-    assert GRAVITY_INTERVAL_AUTO == 0.4
-    assert auto_gravity_every(0.04) == 10 and auto_gravity_every(0.4 / 10) == 10
-    assert auto_gravity_every(float(0.04) * length_factor(4)) == 16  # 15.87 steps of 0.0252 s
-    assert auto_gravity_every(float(0.04) * length_factor(16)) == 25  # 25.20 steps of 0.0159 s
-    assert auto_gravity_every(0.04 * 4 ** (-1 / 3)) == 16 and auto_gravity_every(0.04 * 16 ** (-1 / 3)) == 25
-    assert [auto_gravity_every(dt) for dt in (0.02, 0.01, 0.08, 0.16, 0.4, 1.0, 100.0)] == [20, 40, 5, 3, 1, 1, 1]  # 0.16: 2.5 up
+    assert GRAVITY_INTERVAL_AUTO == 1.0
+    assert auto_gravity_every(0.04) == 25 and auto_gravity_every(1.0 / 25) == 25
+    assert auto_gravity_every(float(0.04) * length_factor(4)) == 40  # 39.69 steps of 0.0252 s
+    assert auto_gravity_every(float(0.04) * length_factor(16)) == 63  # 63.00 steps of 0.0159 s
+    assert auto_gravity_every(0.04 * 4 ** (-1 / 3)) == 40 and auto_gravity_every(0.04 * 16 ** (-1 / 3)) == 63
+    assert [auto_gravity_every(dt) for dt in (0.02, 0.01, 0.08, 0.16, 0.4, 1.0, 100.0)] == [50, 100, 13, 6, 3, 1, 1]  # 0.08, 0.4: 12.5, 2.5 up
     for bad in (0.0, -0.04, float("nan"), float("inf"), "auto", True):
         with pytest.raises(InputError, match='gravity_every = "auto" needs a time step > 0'):
             auto_gravity_every(bad)
@@ -447,7 +447,7 @@ def test_auto_gravity_every_is_an_interval_k_of_dt():
 
 def test_a_specification_resolves_auto_gravity_every_by_its_dt(tmp_path):
     """resolve_spec takes K from the final dt: the file's, an override's (the command line's), a
-    sweep grid's; the paper's dt keeps 10; and with an "auto" dt (k_in = "auto") K stays "auto" with
+    sweep grid's; the paper's dt keeps 25; and with an "auto" dt (k_in = "auto") K stays "auto" with
     it, unchecked, until the set-up settles both (test_an_auto_dt_settles_its_auto_clock_with_it)."""
     from decco_warp import spec as specs
     from decco_warp.sweep import load_sweep
@@ -456,15 +456,15 @@ def test_a_specification_resolves_auto_gravity_every_by_its_dt(tmp_path):
         spec = specs.resolve_spec({"params": {"gravity_every": "auto", **params}, "run": run}, overrides)
         return spec["params"]["gravity_every"], spec["run"].get("steps")
 
-    assert clock({}, steps=50_000) == (10, 50_000)  # the paper's dt: as before
-    assert clock({"dt": 0.04}, duration=1.0) == (10, 30)
-    assert clock({"dt": 0.02}, steps=100, output_every=20, checkpoint_every=100) == (20, 100)
-    assert clock({"dt": 0.02}, duration=1.0, output_every=20, checkpoint_every=100) == (20, 60)  # 50 steps, up to 3 outer steps
-    assert clock({"dt": 0.04}, {"params": {"dt": 0.02}}, steps=100, output_every=20, checkpoint_every=100) == (20, 100)  # the override's dt
+    assert clock({}, steps=50_000) == (25, 50_000)  # the paper's dt
+    assert clock({"dt": 0.04}, duration=1.1, output_every=25, checkpoint_every=25) == (25, 50)  # 28 steps, up to 2 outer steps
+    assert clock({"dt": 0.02}, steps=100, output_every=50, checkpoint_every=100) == (50, 100)
+    assert clock({"dt": 0.02}, duration=1.5, output_every=50, checkpoint_every=100) == (50, 100)  # 75 steps, up to 2 outer steps
+    assert clock({"dt": 0.04}, {"params": {"dt": 0.02}}, steps=100, output_every=50, checkpoint_every=100) == (50, 100)  # the override's dt
     assert clock({"dt": 0.02}, {"params": {"gravity_every": 4}}, steps=100, output_every=20, checkpoint_every=100) == (4, 100)
     # A step count that is no whole outer step of an "auto" K: one line, saying where K came from.
-    with pytest.raises(specs.SpecError, match=r'\[run\] steps = 50: with \[params\] gravity_every = 20 \("auto": gravity every 0.4 s at dt = 0.02 s') as error:
-        clock({"dt": 0.02}, steps=50, output_every=20, checkpoint_every=100)
+    with pytest.raises(specs.SpecError, match=r'\[run\] steps = 120: with \[params\] gravity_every = 50 \("auto": gravity every 1 s at dt = 0.02 s') as error:
+        clock({"dt": 0.02}, steps=120, output_every=50, checkpoint_every=100)
     assert "\n" not in str(error.value)
     # An "auto" dt: K waits for it, and so does the check of the step counts.
     spec = specs.resolve_spec({"params": {"gravity_every": "auto", "k_in": "auto"}, "run": {"steps": 1009, "output_every": 101}})
@@ -473,9 +473,9 @@ def test_a_specification_resolves_auto_gravity_every_by_its_dt(tmp_path):
     # A sweep over dt: each run's K from its own dt.
     path = tmp_path / "s.toml"
     path.write_text(f'[sweep]\nout = "{tmp_path}"\n[sweep.grid]\n"params.dt" = [0.04, 0.02, 0.01]\n[params]\ngravity_every = "auto"\n'
-                    '[run]\nduration = 100.0\noutput_every = 40\ncheckpoint_every = 400\n')  # fmt: skip
+                    '[run]\nduration = 100.0\noutput_every = 100\ncheckpoint_every = 1000\n')  # fmt: skip
     runs = load_sweep(path)[1]
-    assert [(r["params"]["gravity_every"], r["run"]["steps"]) for r in runs] == [(10, 2500), (20, 5000), (40, 10000)]
+    assert [(r["params"]["gravity_every"], r["run"]["steps"]) for r in runs] == [(25, 2500), (50, 5000), (100, 10000)]
 
 
 def test_an_auto_dt_settles_its_auto_clock_with_it(tmp_path):
@@ -505,35 +505,35 @@ def test_an_auto_dt_settles_its_auto_clock_with_it(tmp_path):
 
 
 def test_the_command_line_resolves_auto_gravity_every_by_dt(tmp_path):
-    """``simulate --gravity-every auto``: K = 10 at the paper's dt, 20 at --dt 0.02 (the plan's clock
+    """``simulate --gravity-every auto``: K = 25 at the paper's dt, 50 at --dt 0.02 (the plan's clock
     and its cost), and a step count that is no whole outer step of it refused in one line."""
     from helpers import cli
 
-    common = ("--gravity-every", "auto", "--output-every", "20", "--checkpoint-every", "100", "--out", str(tmp_path), "--device", "cpu")
+    common = ("--gravity-every", "auto", "--output-every", "50", "--checkpoint-every", "100", "--out", str(tmp_path), "--device", "cpu")
     result = cli("simulate", "--check", "--steps", "100", *common)
     assert result.returncode == 0, result.stderr
-    assert "100 steps (4 s), gravity every 10 steps" in result.stdout and "steps at gravity every 10 steps" in result.stdout
+    assert "100 steps (4 s), gravity every 25 steps" in result.stdout and "steps at gravity every 25 steps" in result.stdout
     result = cli("simulate", "--check", "--dt", "0.02", "--steps", "100", *common)
     assert result.returncode == 0, result.stderr
-    assert "100 steps (2 s), gravity every 20 steps" in result.stdout and "steps at gravity every 20 steps" in result.stdout
-    result = cli("simulate", "--dt", "0.02", "--steps", "50", *common)
+    assert "100 steps (2 s), gravity every 50 steps" in result.stdout and "steps at gravity every 50 steps" in result.stdout
+    result = cli("simulate", "--dt", "0.02", "--steps", "120", *common)
     assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1, result.stderr
-    assert '[run] steps = 50: with [params] gravity_every = 20 ("auto": gravity every 0.4 s at dt = 0.02 s' in result.stderr
+    assert '[run] steps = 120: with [params] gravity_every = 50 ("auto": gravity every 1 s at dt = 0.02 s' in result.stderr
 
 
 def test_a_run_of_auto_gravity_every_resumes_at_the_k_it_started_with(tmp_path):
-    """A run at gravity_every = "auto" and dt = 0.02 s records K = 20 in spec.toml; resumed, it
-    steps on at 20 (the resolved K, not one chosen again) and refuses a total that is no whole outer step."""
+    """A run at gravity_every = "auto" and dt = 0.02 s records K = 50 in spec.toml; resumed, it
+    steps on at 50 (the resolved K, not one chosen again) and refuses a total that is no whole outer step."""
     from decco_warp import spec as specs
     from decco_warp.run import prepare_resume, resume_run, start_run
 
-    run = {"name": "auto", "out": str(tmp_path), "device": "cpu", "steps": 40, "output_every": 20, "checkpoint_every": 20}
+    run = {"name": "auto", "out": str(tmp_path), "device": "cpu", "steps": 50, "output_every": 50, "checkpoint_every": 50}
     result = start_run(specs.resolve_spec({"run": run, "params": {"gravity_every": "auto", "dt": 0.02}}))
-    assert specs.load_spec_file(result.run_dir / "spec.toml")["params"]["gravity_every"] == 20
-    resume_run(result.run_dir, steps=80)
-    assert specs.load_spec_file(result.run_dir / "spec.toml")["run"]["steps"] == 80
-    with pytest.raises(specs.SpecError, match=r"\[run\] steps = 90: with \[params\] gravity_every = 20,"):
-        prepare_resume(result.run_dir, steps=90)
+    assert specs.load_spec_file(result.run_dir / "spec.toml")["params"]["gravity_every"] == 50
+    resume_run(result.run_dir, steps=100)
+    assert specs.load_spec_file(result.run_dir / "spec.toml")["run"]["steps"] == 100
+    with pytest.raises(specs.SpecError, match=r"\[run\] steps = 120: with \[params\] gravity_every = 50,"):
+        prepare_resume(result.run_dir, steps=120)
 
 
 def test_a_duration_becomes_whole_outer_steps():

@@ -3,7 +3,7 @@ outside stepping (run.log's "observables" and "checkpoints"), taken apart with t
 
     python runs/results/frame_costs.py [DEVICE] [RESOLUTION]    # default cuda, 1 (the README's run)
 
-The README's paper run (1/4 at eta 3, 22 deg, gravity every 0.4 s) is set up with the run's own
+The README's paper run (1/4 at eta 3, 22 deg, gravity_every = "auto") is set up with the run's own
 plan (RESOLUTION 4: 25 000 particles from runs/paper/piles/*_x4.h5, contacts scaled as the ladder
 does), stepped 2 000 steps, and each part of run.py's frame (``record`` and what ``after_steps`` adds)
 and of a checkpoint is timed REPS times in a row; every device read is a copy to the host, so each
