@@ -10,7 +10,7 @@ import typer
 from ._version import __version__
 from .folder import RunFolder, missing
 from .params import PHYSICS_RANGES
-from .scheme import GRAVITY_INTERVAL_AUTO
+from .scheme import GRAVITY_INTERVAL_AUTO, auto_gravity_every
 from .spec import pile_defaults
 from .errors import EXIT_BLOW_UP, EXIT_INPUT, EXIT_NOT_SETTLED, EXIT_OUTPUT, EXIT_STOPPED, DeccoError  # noqa: F401
 # (The exit codes, README "When things go wrong", live in errors.py beside the errors that carry them.)
@@ -550,7 +550,7 @@ def simulate(
         None, "--gravity", help="all-pairs (exact), tree (O(N log N), for large piles) or auto (by size and device)."
     ),
     gravity_every: Optional[str] = typer.Option(
-        None, "--gravity-every", help=f"K: gravity evaluated every K steps, the contacts every step (docs/model.md, \"Gravity on its own clock\"); 1 is the paper's scheme; auto is gravity every {GRAVITY_INTERVAL_AUTO:g} s, the K nearest {GRAVITY_INTERVAL_AUTO:g} s / dt (10 at the paper's dt of 0.04 s; with --dt auto, chosen with that dt). Step counts must then be multiples of K."
+        None, "--gravity-every", help=f"K: gravity evaluated every K steps, the contacts every step (docs/model.md, \"Gravity on its own clock\"); 1 is the paper's scheme; auto is gravity every {GRAVITY_INTERVAL_AUTO:g} s, the K nearest {GRAVITY_INTERVAL_AUTO:g} s / dt ({auto_gravity_every(0.04)} at the paper's dt of 0.04 s; with --dt auto, chosen with that dt). Step counts must then be multiples of K."
     ),
     contact_law: Optional[str] = typer.Option(
         None, "--contact-law", help="paper (the paper's law as docs/model.md states it), decco-code (DECCO's pair forces as its code computes them) or ssdem (pkdgrav's soft-sphere law: a tangential spring per contact, static friction, rolling and twisting springs)."
