@@ -108,6 +108,12 @@ def cell_ranges(
 
 
 @wp.func
+def to_build(system: int, stale_system: wp.array(dtype=wp.int32), everything: bool) -> bool:
+    """Whether a build lists ``system``'s particles: every system's (``everything``), else a stale one's."""
+    return everything or stale_system[system] != 0
+
+
+@wp.func
 def listed(
     k: int,  # the particle, in key order
     m: int,  # another, in key order
@@ -150,7 +156,7 @@ def build_neighbour_list(
     k = wp.tid()
     i = int(order_in[k])
     system = int(system_in[i])
-    if not everything and stale_system_in[system] == 0:
+    if not to_build(system, stale_system_in, everything):
         return
     x = sorted_position_in[k]
     radius = sorted_radius_in[k]
@@ -177,7 +183,7 @@ def lists_built(
 ):
     """After a build (a launch of its own: the build reads the flags that this clears)."""
     system = wp.tid()
-    if everything or stale_system_inout[system] != 0:
+    if to_build(system, stale_system_inout, everything):
         builds_inout[system] = builds_inout[system] + wp.int64(1)
     stale_system_inout[system] = 0
     if system == 0:
@@ -242,7 +248,7 @@ def cell_neighbours(
     neighbour, k = wp.tid()
     i = int(order_in[k])
     system = int(system_in[i])
-    if not everything and stale_system_in[system] == 0:
+    if not to_build(system, stale_system_in, everything):
         return
     x = sorted_position_in[k]
     key = cell_key(stencil_cell(cell_of(x, cell_width), neighbour), system)
@@ -277,7 +283,7 @@ def sort_neighbours(
     columns below the count are written, as ``note_candidate`` writes them."""
     k, s = wp.tid()
     i = int(order_in[k])
-    if not everything and stale_system_in[int(system_in[i])] == 0:
+    if not to_build(int(system_in[i]), stale_system_in, everything):
         return
     noted = wp.min(int(candidate_count_in[i]), found_in.shape[1])
     if s >= noted:
