@@ -13,20 +13,13 @@ go to a temporary folder.  Each line is the median of REPS calls in milliseconds
 
 from __future__ import annotations
 
-import shutil
 import statistics
-import sys
-import tempfile
 import time
-from pathlib import Path
 
-import warp as wp
-
-from decco_warp import spec as specs
 from decco_warp.diagnostics import energy_ledger, state_diagnostics, stress_share_observables
 from decco_warp.io import Trajectory, write_checkpoint
-from decco_warp.resolution import scaled_run
-from decco_warp.run import RunLog, check_sanity, prepare_start, record
+from decco_warp.run import RunLog, check_sanity, record
+from readme_run import arguments, readme_run
 
 REPS = 20
 
@@ -43,18 +36,9 @@ def timed(name: str, call, reps: int = REPS):
 
 
 def main() -> None:
-    device = sys.argv[1] if len(sys.argv) > 1 else ("cuda" if wp.get_cuda_device_count() else "cpu")
-    resolution = float(sys.argv[2]) if len(sys.argv) > 2 else 1.0
-    scratch = Path(tempfile.mkdtemp(prefix="frame_costs_"))
-    try:
-        raw = {"run": {"name": "frame_costs", "duration": 400, "output_every": 100, "out": str(scratch), "device": device},
-               "piles": {"target": "runs/paper/piles/target5000.h5", "projectile": "runs/paper/piles/proj1250.h5"},
-               "collision": {"eta": 3.0, "theta_deg": 22.0}, "params": {"gravity_every": "auto"}}  # fmt: skip
-        if resolution != 1:  # as a sweep scales a run (decco_warp/resolution.py)
-            raw = scaled_run(raw, resolution, scale_contacts=True, defaults=specs.resolve_spec({}))
-        spec = specs.resolve_spec(raw)
-        began = time.perf_counter()
-        prepared = prepare_start(spec, overwrite=True, device=device)
+    device, resolution = arguments()
+    began = time.perf_counter()
+    with readme_run("frame_costs", device, resolution) as (prepared, scratch):
         sim = prepared.sim
         print(f"{sim.static.n} particles on {device}, gravity every {sim.step_multiple} steps; set-up {time.perf_counter() - began:.2f} s")
         sim.step(2000 // sim.step_multiple * sim.step_multiple)
@@ -85,10 +69,6 @@ def main() -> None:
         print("a checkpoint:")
         snapshot = timed("sim.snapshot: every array the next step needs", sim.snapshot)
         timed("write_checkpoint (atomic, fsync'd)", lambda: write_checkpoint(scratch / "checkpoint.h5", snapshot, sim.static, prepared.record.as_checkpoint()), reps=10)
-        if prepared.lock is not None:
-            prepared.lock.release()
-    finally:
-        shutil.rmtree(scratch, ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -14,17 +14,12 @@ from the whole by what a graph of them overlaps.  Nothing is written into runs/.
 
 from __future__ import annotations
 
-import shutil
 import statistics
-import sys
-import tempfile
 import time
 
 import warp as wp
 
-from decco_warp import spec as specs
-from decco_warp.resolution import scaled_run
-from decco_warp.run import prepare_start
+from readme_run import arguments, readme_run
 
 REPS = 100
 
@@ -54,17 +49,8 @@ def per_launch(device: str, launch, reps: int = REPS) -> float:
 
 
 def main() -> None:
-    device = sys.argv[1] if len(sys.argv) > 1 else ("cuda" if wp.get_cuda_device_count() else "cpu")
-    resolution = float(sys.argv[2]) if len(sys.argv) > 2 else 1.0
-    scratch = tempfile.mkdtemp(prefix="step_stages_")
-    try:
-        raw = {"run": {"name": "step_stages", "duration": 400, "output_every": 100, "out": scratch, "device": device},
-               "piles": {"target": "runs/paper/piles/target5000.h5", "projectile": "runs/paper/piles/proj1250.h5"},
-               "collision": {"eta": 3.0, "theta_deg": 22.0}, "params": {"gravity_every": "auto"}}  # fmt: skip
-        if resolution != 1:  # as a sweep scales a run (decco_warp/resolution.py)
-            raw = scaled_run(raw, resolution, scale_contacts=True, defaults=specs.resolve_spec({}))
-        spec = specs.resolve_spec(raw)
-        prepared = prepare_start(spec, overwrite=True, device=device)
+    device, resolution = arguments()
+    with readme_run("step_stages", device, resolution) as (prepared, _):
         sim = prepared.sim
         engine = sim.engine
         every = sim.step_multiple
@@ -111,10 +97,6 @@ def main() -> None:
         print(f"  {'a step: inner stages, builds and gravity shared':40s} {1e6 * shares:9.1f} us "
               f"(builds {1e6 * stages['list build'] * rebuilds_per_step:.1f}, gravity and outer kick {1e6 * (stages['gravity'] + stages['outer kick']) / every:.1f})")  # fmt: skip
         print(f"  {'a step, advance of an outer step / K':40s} {1e6 * whole:9.1f} us (its builds as they come)")
-        if prepared.lock is not None:
-            prepared.lock.release()
-    finally:
-        shutil.rmtree(scratch, ignore_errors=True)
 
 
 if __name__ == "__main__":
