@@ -89,13 +89,13 @@ def main() -> None:
         restore()
         nothing_stale()
         whole = per_launch(device, lambda: integrator.advance(every), reps=max(1, REPS // every)) / every
-        rebuilds_per_step = builds / steps
         for name, seconds in stages.items():
             print(f"  {name:40s} {1e6 * seconds:9.1f} us")
         inner = sum(stages[k] for k in ("kick-drift (inner, displacement check)", "list refresh, nothing stale", "contact pass"))
-        shares = inner + stages["list build"] * rebuilds_per_step + (stages["gravity"] + stages["outer kick"]) / every
-        print(f"  {'a step: inner stages, builds and gravity shared':40s} {1e6 * shares:9.1f} us "
-              f"(builds {1e6 * stages['list build'] * rebuilds_per_step:.1f}, gravity and outer kick {1e6 * (stages['gravity'] + stages['outer kick']) / every:.1f})")  # fmt: skip
+        builds_share = stages["list build"] * builds / steps  # a step's share of the builds, as often as stepping made them
+        gravity_share = (stages["gravity"] + stages["outer kick"]) / every
+        print(f"  {'a step: inner stages, builds and gravity shared':40s} {1e6 * (inner + builds_share + gravity_share):9.1f} us "
+              f"(builds {1e6 * builds_share:.1f}, gravity and outer kick {1e6 * gravity_share:.1f})")  # fmt: skip
         print(f"  {'a step, advance of an outer step / K':40s} {1e6 * whole:9.1f} us (its builds as they come)")
 
 
